@@ -1,0 +1,86 @@
+"""A benchmark domain: an MDP, the expert's true reward, and how the expert is observed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from irl._random import check_random_state
+from irl.demonstrations import Demonstration, Trajectory, observe, sample_trajectory
+from irl.mdp import TabularMDP
+from irl.observation import ObservationModel
+from irl.priors import GaussianPrior
+from irl.solvers import OptimalQSolver, boltzmann_policy
+
+__all__ = ["Domain"]
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Everything needed to generate and score IRL data on one problem.
+
+    Attributes
+    ----------
+    name : str
+    mdp : TabularMDP
+    true_theta : ndarray of shape (K,)
+        The expert's reward weights.
+    observation_model : ObservationModel
+        How the learner's sensor sees the expert's ``(s, a)``.
+    beta : float
+        Boltzmann rationality of the expert: ``pi(a|s) = softmax_a(beta * Q*(s, a))``.
+    prior : GaussianPrior
+        The prior the paper uses on this domain.
+    """
+
+    name: str
+    mdp: TabularMDP
+    true_theta: np.ndarray
+    observation_model: ObservationModel
+    beta: float
+    prior: GaussianPrior
+
+    @property
+    def state_names(self) -> list[str]:
+        return self.mdp.state_names
+
+    @property
+    def action_names(self) -> list[str]:
+        return self.mdp.action_names
+
+    @property
+    def feature_names(self) -> list[str]:
+        return self.mdp.feature_names
+
+    def expert_policy(self) -> np.ndarray:
+        """The expert's stochastic policy ``pi[s, a]`` under the true reward."""
+        Q = OptimalQSolver(self.mdp).q_values(self.true_theta)
+        return boltzmann_policy(Q, self.beta)
+
+    def optimal_policy(self) -> np.ndarray:
+        """The expert's greedy optimal policy ``policy[s] -> a``."""
+        return OptimalQSolver(self.mdp).solve(self.true_theta).policy
+
+    def sample(
+        self, n: int, length: int, occlusion: float = 0.0, seed=None,
+        observation_model: ObservationModel | None = None,
+    ) -> tuple[list[Demonstration], list[Trajectory]]:
+        """Sample ``n`` expert trajectories and observe them.
+
+        Each demonstration has ``round(occlusion * length)`` occluded steps at random positions;
+        the others are observed through ``observation_model`` (the domain's by default).
+
+        Returns
+        -------
+        demos : list of Demonstration
+            What the learner sees.
+        trajectories : list of Trajectory
+            The ground truth behind each demonstration.
+        """
+        rng = check_random_state(seed)
+        om = self.observation_model if observation_model is None else observation_model
+        policy = self.expert_policy()
+        trajectories = [sample_trajectory(self.mdp, policy, length, rng) for _ in range(n)]
+        demos = [observe(tr, om, occlusion, rng) for tr in trajectories]
+        return demos, trajectories

@@ -1,0 +1,274 @@
+"""The onion-sorting MDP: the one definition of its states, actions and features.
+
+The simulator (``robot/``), the perception pipeline (``state_abstraction/``), the recordings and
+the robot all import the encoding from here; nobody re-declares it.
+
+State factors (the paper's text; 4 x 4 x 3 = 48 states, see docs/paper-errata.md on "144"):
+
+- ``onion``: where the onion in focus is — :class:`Location` CONVEYOR, HOVER, FACE, BIN;
+- ``end_effector``: where the sorter's hand is — the same four locations;
+- ``prediction``: what the sorter knows of the onion — :class:`Prediction` GOOD, BAD, UNKNOWN.
+
+``state = (onion * 4 + end_effector) * 3 + prediction`` (row-major, ``np.ravel_multi_index``).
+
+Actions (:class:`SortAction`): CLAIM a new onion, PICK, INSPECT after picking, PLACE_ON_CONVEYOR,
+PLACE_IN_BIN. The transition rules, in the order they are checked:
+
+========================  ===============================================  =======================
+action                    applies when                                     next state
+========================  ===============================================  =======================
+CLAIM                     no onion in focus: onion in BIN, or on           (CONVEYOR, hand, UNKNOWN)
+                          CONVEYOR with a known prediction (placed back)
+PICK                      onion in focus on CONVEYOR (prediction UNKNOWN)  (HOVER, HOVER, UNKNOWN)
+INSPECT                   onion held (at HOVER or FACE)                    (FACE, FACE, pred');
+                                                                           pred' = BAD w.p. the
+                                                                           blemish rate, else GOOD,
+                                                                           if pred was UNKNOWN
+PLACE_ON_CONVEYOR         onion held                                       (CONVEYOR, CONVEYOR, pred)
+PLACE_IN_BIN              onion held                                       (BIN, BIN, pred)
+any other (s, a)          —                                                s (nothing happens)
+========================  ===============================================  =======================
+
+Features (Boolean, on ``(s, a)``): good onion placed on conveyor, bad onion placed on conveyor,
+good onion placed in bin, bad onion placed in bin, claim new onion (when no onion is in focus),
+pick if unknown. Under the true weights the expert's greedy policy is
+claim -> pick -> inspect -> bad to bin / good to conveyor -> claim.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+
+from irl.domains.base import Domain
+from irl.mdp import TabularMDP
+from irl.observation import ObservationModel, factored_observation_model
+from irl.priors import GaussianPrior
+
+__all__ = [
+    "FACTOR_SIZES",
+    "N_ACTIONS",
+    "N_STATES",
+    "FeatureName",
+    "Location",
+    "Prediction",
+    "SortAction",
+    "SortingState",
+    "decode_state",
+    "encode_state",
+    "next_state",
+    "onion_sorting",
+    "sorting_features",
+    "sorting_transitions",
+]
+
+
+class Location(IntEnum):
+    """Where the onion or the end effector is."""
+
+    CONVEYOR = 0
+    HOVER = 1
+    FACE = 2
+    BIN = 3
+
+
+class Prediction(IntEnum):
+    """The sorter's belief about the onion in focus."""
+
+    GOOD = 0
+    BAD = 1
+    UNKNOWN = 2
+
+
+class SortAction(IntEnum):
+    """The sorter's abstract actions."""
+
+    CLAIM = 0
+    PICK = 1
+    INSPECT = 2
+    PLACE_ON_CONVEYOR = 3
+    PLACE_IN_BIN = 4
+
+
+class FeatureName(IntEnum):
+    """Indices of the reward features."""
+
+    GOOD_ON_CONVEYOR = 0
+    BAD_ON_CONVEYOR = 1
+    GOOD_IN_BIN = 2
+    BAD_IN_BIN = 3
+    CLAIM_NEW_ONION = 4
+    PICK_IF_UNKNOWN = 5
+
+
+class SortingState(NamedTuple):
+    """A factored onion-sorting state."""
+
+    onion: Location
+    end_effector: Location
+    prediction: Prediction
+
+
+FACTOR_SIZES = (len(Location), len(Location), len(Prediction))
+N_STATES = int(np.prod(FACTOR_SIZES))
+N_ACTIONS = len(SortAction)
+
+
+def encode_state(state: SortingState | tuple[int, int, int]) -> int:
+    """Flat state index of ``(onion, end_effector, prediction)``."""
+    return int(np.ravel_multi_index(tuple(int(x) for x in state), FACTOR_SIZES))
+
+
+def decode_state(index: int) -> SortingState:
+    """The factored state of a flat index."""
+    if not 0 <= int(index) < N_STATES:
+        raise ValueError(f"state index must be in [0, {N_STATES}); got {index}")
+    o, e, p = np.unravel_index(int(index), FACTOR_SIZES)
+    return SortingState(Location(o), Location(e), Prediction(p))
+
+
+def _holding(s: SortingState) -> bool:
+    return s.onion in (Location.HOVER, Location.FACE)
+
+
+def _no_onion_in_focus(s: SortingState) -> bool:
+    return s.onion == Location.BIN or (
+        s.onion == Location.CONVEYOR and s.prediction != Prediction.UNKNOWN
+    )
+
+
+def _onion_in_focus_on_conveyor(s: SortingState) -> bool:
+    return s.onion == Location.CONVEYOR and s.prediction == Prediction.UNKNOWN
+
+
+def next_state(state: SortingState, action: SortAction, blemished: bool) -> SortingState:
+    """The next state when the onion in focus is (or, once claimed, will prove) ``blemished``.
+
+    This is the deterministic core of the transition model: the only randomness in the MDP is
+    the class of the onion, revealed by INSPECT. The simulator calls this with the physical
+    onion's class.
+    """
+    s = SortingState(Location(state[0]), Location(state[1]), Prediction(state[2]))
+    action = SortAction(action)
+    if action == SortAction.CLAIM and _no_onion_in_focus(s):
+        return SortingState(Location.CONVEYOR, s.end_effector, Prediction.UNKNOWN)
+    if action == SortAction.PICK and _onion_in_focus_on_conveyor(s):
+        return SortingState(Location.HOVER, Location.HOVER, s.prediction)
+    if action == SortAction.INSPECT and _holding(s):
+        pred = s.prediction
+        if pred == Prediction.UNKNOWN:
+            pred = Prediction.BAD if blemished else Prediction.GOOD
+        return SortingState(Location.FACE, Location.FACE, pred)
+    if action == SortAction.PLACE_ON_CONVEYOR and _holding(s):
+        return SortingState(Location.CONVEYOR, Location.CONVEYOR, s.prediction)
+    if action == SortAction.PLACE_IN_BIN and _holding(s):
+        return SortingState(Location.BIN, Location.BIN, s.prediction)
+    return s
+
+
+def sorting_transitions(blemish_rate: float = 0.5) -> np.ndarray:
+    """``T[s, a, s']`` of the sorting MDP; INSPECT reveals BAD with probability ``blemish_rate``."""
+    if not 0.0 <= blemish_rate <= 1.0:
+        raise ValueError(f"blemish_rate must be in [0, 1]; got {blemish_rate}")
+    T = np.zeros((N_STATES, N_ACTIONS, N_STATES))
+    for s in range(N_STATES):
+        state = decode_state(s)
+        for a in SortAction:
+            T[s, a, encode_state(next_state(state, a, blemished=True))] += blemish_rate
+            T[s, a, encode_state(next_state(state, a, blemished=False))] += 1.0 - blemish_rate
+    return T
+
+
+def sorting_features() -> np.ndarray:
+    """``phi[s, a, k]``: the six Boolean features of :class:`FeatureName`."""
+    phi = np.zeros((N_STATES, N_ACTIONS, len(FeatureName)))
+    for s in range(N_STATES):
+        st = decode_state(s)
+        if _holding(st):
+            for action, good_k, bad_k in (
+                (SortAction.PLACE_ON_CONVEYOR, FeatureName.GOOD_ON_CONVEYOR,
+                 FeatureName.BAD_ON_CONVEYOR),
+                (SortAction.PLACE_IN_BIN, FeatureName.GOOD_IN_BIN, FeatureName.BAD_IN_BIN),
+            ):
+                if st.prediction == Prediction.GOOD:
+                    phi[s, action, good_k] = 1.0
+                elif st.prediction == Prediction.BAD:
+                    phi[s, action, bad_k] = 1.0
+        if _no_onion_in_focus(st):
+            phi[s, SortAction.CLAIM, FeatureName.CLAIM_NEW_ONION] = 1.0
+        if _onion_in_focus_on_conveyor(st):
+            phi[s, SortAction.PICK, FeatureName.PICK_IF_UNKNOWN] = 1.0
+    return phi
+
+
+def state_name(index: int) -> str:
+    s = decode_state(index)
+    return f"({s.onion.name.lower()}, {s.end_effector.name.lower()}, {s.prediction.name.lower()})"
+
+
+#: The expert's weights: keep good onions on the line, bin blemished ones, keep claiming and
+#: picking. Only their direction matters to the greedy policy; their scale sets, with the paper's
+#: beta = 0.03, how decisive the Boltzmann expert is (about 0.85 on its greedy action here).
+TRUE_THETA = np.array([200.0, -200.0, -200.0, 200.0, 100.0, 100.0])
+
+
+def factor_confusion(n: int, error: float) -> np.ndarray:
+    """A confusion matrix that misreads a value w.p. ``error``, uniformly over the others."""
+    if n == 1:
+        return np.ones((1, 1))
+    return np.full((n, n), error / (n - 1)) + np.eye(n) * (1.0 - error - error / (n - 1))
+
+
+def sorting_observation_model(noise: float) -> ObservationModel:
+    """Observations of the pair with every state factor misread independently.
+
+    Each of the three factors is misread with probability ``1 - (1 - noise)^(1/3)``, so the
+    observed state is wrong with probability ``noise``; actions are observed exactly.
+    """
+    if not 0.0 <= noise < 1.0:
+        raise ValueError(f"noise must be in [0, 1); got {noise}")
+    per_factor = 1.0 - (1.0 - noise) ** (1.0 / len(FACTOR_SIZES))
+    return factored_observation_model(
+        [factor_confusion(n, per_factor) for n in FACTOR_SIZES], n_actions=N_ACTIONS
+    )
+
+
+def onion_sorting(
+    *, noise: float = 0.3, blemish_rate: float = 0.5, discount: float = 0.99, beta: float = 0.03
+) -> Domain:
+    """The onion-sorting domain of the paper (48 states, 5 actions, 6 features).
+
+    Parameters
+    ----------
+    noise : float
+        Probability that the observed state is wrong (the paper estimated about 0.3).
+    blemish_rate : float
+        Probability that a newly claimed onion is blemished.
+    discount, beta : float
+        The paper's gamma = 0.99 and Boltzmann rationality beta = 0.03.
+    """
+    initial = np.zeros(N_STATES)
+    for s in (
+        SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD),
+        SortingState(Location.BIN, Location.BIN, Prediction.BAD),
+    ):
+        initial[encode_state(s)] = 0.5
+    mdp = TabularMDP(
+        transitions=sorting_transitions(blemish_rate),
+        features=sorting_features(),
+        discount=discount,
+        initial=initial,
+        state_names=[state_name(s) for s in range(N_STATES)],
+        action_names=[a.name.lower() for a in SortAction],
+        feature_names=[f.name.lower() for f in FeatureName],
+    )
+    return Domain(
+        name="onion-sorting",
+        mdp=mdp,
+        true_theta=TRUE_THETA.copy(),
+        observation_model=sorting_observation_model(noise),
+        beta=beta,
+        prior=GaussianPrior(mean=0.0, std=100.0),
+    )

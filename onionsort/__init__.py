@@ -1,0 +1,3 @@
+"""onionsort: the command-line application around the irl library."""
+
+__version__ = "0.1.0"

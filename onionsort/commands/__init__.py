@@ -1,0 +1,10 @@
+"""The CLI's subcommands: each module exposes ``register(subparsers)``.
+
+``register`` adds one subparser and sets its ``func`` default to a callable taking the parsed
+arguments and returning an exit code. Heavy imports happen inside ``func``, never at import time,
+so ``onionsort --help`` stays fast.
+"""
+
+COMMAND_MODULES = [
+    "onionsort.commands.experiment",
+]
