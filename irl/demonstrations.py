@@ -18,6 +18,7 @@ __all__ = [
     "OCCLUDED",
     "Demonstration",
     "Trajectory",
+    "check_demonstrations",
     "observe",
     "pack_observations",
     "sample_trajectory",
@@ -112,6 +113,30 @@ class Trajectory:
 
     def __len__(self) -> int:
         return len(self.states)
+
+
+def check_demonstrations(demos, n_observations: int) -> list[Demonstration]:
+    """Validate a collection of demonstrations against an observation space.
+
+    Raises ``TypeError``/``ValueError`` naming the demonstration (and step) at fault.
+    """
+    if isinstance(demos, Demonstration):
+        raise TypeError("demos must be a sequence of Demonstration; got a single Demonstration")
+    demos = list(demos)
+    if not demos:
+        raise ValueError("demos must hold at least one Demonstration; got none")
+    for i, d in enumerate(demos):
+        if not isinstance(d, Demonstration):
+            raise TypeError(f"demos[{i}] must be a Demonstration; got {type(d).__name__}")
+        obs = d.as_array()
+        bad = np.flatnonzero(obs >= n_observations)
+        if bad.size:
+            t = int(bad[0])
+            raise ValueError(
+                f"demonstration {i}, step {t}: observation {obs[t]} is out of range for an "
+                f"observation model with {n_observations} observations"
+            )
+    return demos
 
 
 def pack_observations(demos: Sequence[Demonstration], n_observations: int) -> np.ndarray:

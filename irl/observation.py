@@ -19,6 +19,7 @@ from irl._validation import check_probability_rows
 
 __all__ = [
     "ObservationModel",
+    "check_compatible",
     "factored_observation_model",
     "identity_observation_model",
     "pair_observation_model",
@@ -117,6 +118,21 @@ class ObservationModel:
         return (
             f"ObservationModel(n_states={self.n_states}, n_actions={self.n_actions}, "
             f"n_observations={self.n_observations})"
+        )
+
+
+def check_compatible(mdp, observation_model) -> None:
+    """Raise ``ValueError`` unless the observation model was built for this MDP's (S, A)."""
+    if not isinstance(observation_model, ObservationModel):
+        raise TypeError(
+            "observation_model must be an irl.ObservationModel; got "
+            f"{type(observation_model).__name__}"
+        )
+    got = (observation_model.n_states, observation_model.n_actions)
+    want = (mdp.n_states, mdp.n_actions)
+    if got != want:
+        raise ValueError(
+            f"observation_model is for (S, A) = {got} but the MDP has (S, A) = {want}"
         )
 
 
