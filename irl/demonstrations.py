@@ -191,7 +191,7 @@ def observe(
     if not 0.0 <= occlusion <= 1.0:
         raise ValueError(f"occlusion must be in [0, 1]; got {occlusion}")
     T = len(trajectory)
-    n_hidden = int(round(occlusion * T))
+    n_hidden = round(occlusion * T)
     hidden = np.zeros(T, bool)
     hidden[rng.choice(T, size=n_hidden, replace=False)] = True
     probs = observation_model.probs

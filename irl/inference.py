@@ -4,7 +4,8 @@ Layouts: ``pi[s, a]`` or ``pi[t, s, a]``, packed observations ``obs[n, t]`` (-1 
 ``E[o, s, a]`` emission tables (last row all ones, for occluded steps), ``alpha[t, n, s, a]``.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
-``P(x_1) = p0(s_1) pi(a_1 | s_1)``, ``P(x_{t+1} | x_t) = T(s_t, a_t, s_{t+1}) pi(a_{t+1} | s_{t+1})``,
+``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
+``P(x_{t+1} | x_t) = T(s_t, a_t, s_{t+1}) pi(a_{t+1} | s_{t+1})``,
 emission ``O(o_t | s_t, a_t)`` (1 when step t is occluded). The forward-backward algorithm
 computes ``log P(o_1..T)`` and the posterior marginals ``P(s_t, a_t | o)`` exactly in
 ``O(T (nnz(T) + S A))`` per demonstration, independent of how many steps are occluded. The

@@ -114,14 +114,14 @@ class TabularMDP:
         ``values`` has shape (S,) or (S, m); the result keeps the trailing dimension.
         """
         out = self._flat @ values
-        return np.asarray(out).reshape((self.n_states, self.n_actions) + values.shape[1:])
+        return np.asarray(out).reshape((self.n_states, self.n_actions, *values.shape[1:]))
 
     def push_forward(self, mass: np.ndarray) -> np.ndarray:
         """Next-state mass ``sum_{s, a} mass[..., s, a] T[s, a, s']``, shape (..., S)."""
         lead = mass.shape[:-2]
         flat_mass = mass.reshape(-1, self.n_states * self.n_actions)
         out = (self._flat.T @ flat_mass.T).T
-        return np.asarray(out).reshape(lead + (self.n_states,))
+        return np.asarray(out).reshape((*lead, self.n_states))
 
     def next_state_distribution(self, state: int, action: int) -> np.ndarray:
         """``T[state, action, :]`` as a dense vector of shape (S,)."""
@@ -130,7 +130,7 @@ class TabularMDP:
         return row / row.sum()
 
     def policy_transitions(self, policy: np.ndarray) -> np.ndarray | sp.csr_matrix:
-        """``P_pi[s, s'] = T[s, policy[s], s']`` for a deterministic policy (sparse if the MDP is)."""
+        """``P_pi[s, s'] = T[s, policy[s], s']`` of a deterministic policy (sparse if T is)."""
         rows = np.arange(self.n_states) * self.n_actions + policy
         return self._flat[rows]
 

@@ -14,20 +14,19 @@ State factors (the paper's text; 4 x 4 x 3 = 48 states, see docs/paper-errata.md
 Actions (:class:`SortAction`): CLAIM a new onion, PICK, INSPECT after picking, PLACE_ON_CONVEYOR,
 PLACE_IN_BIN. The transition rules, in the order they are checked:
 
-========================  ===============================================  =======================
-action                    applies when                                     next state
-========================  ===============================================  =======================
-CLAIM                     no onion in focus: onion in BIN, or on           (CONVEYOR, hand, UNKNOWN)
-                          CONVEYOR with a known prediction (placed back)
-PICK                      onion in focus on CONVEYOR (prediction UNKNOWN)  (HOVER, HOVER, UNKNOWN)
-INSPECT                   onion held (at HOVER or FACE)                    (FACE, FACE, pred');
-                                                                           pred' = BAD w.p. the
-                                                                           blemish rate, else GOOD,
-                                                                           if pred was UNKNOWN
-PLACE_ON_CONVEYOR         onion held                                       (CONVEYOR, CONVEYOR, pred)
-PLACE_IN_BIN              onion held                                       (BIN, BIN, pred)
-any other (s, a)          —                                                s (nothing happens)
-========================  ===============================================  =======================
+=================  ==============================================  ==========================
+action             applies when                                    next state
+=================  ==============================================  ==========================
+CLAIM              no onion in focus: onion in BIN, or on          (CONVEYOR, hand, UNKNOWN)
+                   CONVEYOR with a known prediction (placed back)
+PICK               the onion in focus (on CONVEYOR, UNKNOWN)       (HOVER, HOVER, UNKNOWN)
+INSPECT            onion held (at HOVER or FACE)                   (FACE, FACE, pred'), pred'
+                                                                   BAD w.p. the blemish rate,
+                                                                   else GOOD, if pred UNKNOWN
+PLACE_ON_CONVEYOR  onion held                                      (CONVEYOR, CONVEYOR, pred)
+PLACE_IN_BIN       onion held                                      (BIN, BIN, pred)
+any other (s, a)                                                   s (nothing happens)
+=================  ==============================================  ==========================
 
 Features (Boolean, on ``(s, a)``): good onion placed on conveyor, bad onion placed on conveyor,
 good onion placed in bin, bad onion placed in bin, claim new onion (when no onion is in focus),

@@ -1,0 +1,74 @@
+"""Figures of the experiment sweeps (matplotlib, written as PNG)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+COLORS = {"mmap-birl": "C0", "map-birl": "C1", "hidden-data-em": "C3", "maxent": "C2"}
+
+
+def _series(results, x_attr, y_attr, method, **fixed):
+    xs = sorted({getattr(r, x_attr) for r in results
+                 if r.method == method and all(getattr(r, k) == v for k, v in fixed.items())})
+    mean, std = [], []
+    for x in xs:
+        ys = [getattr(r, y_attr) for r in results if r.method == method
+              and getattr(r, x_attr) == x and all(getattr(r, k) == v for k, v in fixed.items())]
+        mean.append(np.mean(ys))
+        std.append(np.std(ys))
+    return np.array(xs), np.array(mean), np.array(std)
+
+
+def _panel(ax, results, x_attr, y_attr, fixed, xlabel, ylabel):
+    for method in sorted({r.method for r in results}):
+        xs, m, s = _series(results, x_attr, y_attr, method, **fixed)
+        if len(xs) == 0:
+            continue
+        ax.plot(xs * 100, m, "o-", color=COLORS.get(method), label=method)
+        ax.fill_between(xs * 100, m - s, m + s, color=COLORS.get(method), alpha=0.15)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def plot_sweep(results: Sequence, out: Path, *, title: str = "") -> list[Path]:
+    """ILE vs occlusion per noise level, ILE vs noise without occlusion, and run time vs
+    occlusion; bands are +-1 standard deviation over batches. Returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    noises = sorted({r.noise for r in results if r.occlusion > 0})
+    if noises:
+        fig, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.6), squeeze=False)
+        for ax, noise in zip(axes[0], noises, strict=True):
+            _panel(ax, [r for r in results if r.occlusion > 0], "occlusion", "ile",
+                   {"noise": noise}, "occlusion (%)", "ILE")
+            ax.set_title(f"{title}: noise {noise:.0%}")
+        written.append(_save(fig, out / "ile_vs_occlusion.png", plt))
+        fig, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.6), squeeze=False)
+        for ax, noise in zip(axes[0], noises, strict=True):
+            _panel(ax, [r for r in results if r.occlusion > 0], "occlusion", "seconds",
+                   {"noise": noise}, "occlusion (%)", "fit time (s)")
+            ax.set_title(f"{title}: run time, noise {noise:.0%}")
+        written.append(_save(fig, out / "seconds_vs_occlusion.png", plt))
+    if len({r.noise for r in results if r.occlusion == 0}) > 1:
+        fig, ax = plt.subplots(figsize=(4.5, 3.6))
+        _panel(ax, [r for r in results if r.occlusion == 0], "noise", "ile", {},
+               "observation noise (%)", "ILE")
+        ax.set_title(f"{title}: no occlusion")
+        written.append(_save(fig, out / "ile_vs_noise.png", plt))
+    return written
+
+
+def _save(fig, path: Path, plt) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
