@@ -1,7 +1,8 @@
 """Exact inference over the hidden state-action sequence of observed demonstrations.
 
 Layouts: ``pi[s, a]`` or ``pi[t, s, a]``, packed observations ``obs[n, t]`` (-1 = occluded),
-``E[o, s, a]`` emission tables (last row all ones, for occluded steps), ``alpha[t, n, s, a]``.
+emission tables ``E[o, s, a] = O(o | s, a)`` with a last row of ones (for occluded steps),
+messages ``alpha[n, s, a]`` over a batch of n demonstrations.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
 ``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
@@ -73,8 +74,8 @@ def forward_backward(
     obs : ndarray of int, shape (N, T)
         Observation indices; -1 marks an occluded step.
     emissions : ndarray of shape (n_observations + 1, S, A)
-        ``E[o, s, a] = O(o | s, a)`` with a last row of ones (see
-        :meth:`irl.observation.ObservationModel.emission_table`).
+        ``E[o, s, a] = O(o | s, a)`` with a last row of ones for occluded steps
+        (:attr:`irl.observation.ObservationModel.emissions`).
     initial : ndarray of shape (S,), optional
         Initial state distribution; ``mdp.initial`` by default.
     demo_ids : sequence of int, optional
@@ -85,53 +86,62 @@ def forward_backward(
     ValueError
         If a demonstration has probability zero under the model; the message names the
         demonstration and the first step at which it becomes impossible.
+
+    Notes
+    -----
+    The emission table is observation-major, so gathering a step's emissions copies contiguous
+    blocks. Only the predicted state marginals ``(T, N, S)`` and the normalizers are stored;
+    the forward messages are recomputed during the backward pass.
     """
     obs = np.asarray(obs)
     n_demos, length = obs.shape
+    S, A = mdp.n_states, mdp.n_actions
     p0 = mdp.initial if initial is None else initial
     ids = np.arange(n_demos) if demo_ids is None else np.asarray(demo_ids)
 
-    def local(t: int) -> np.ndarray:
-        pi_t = policy if policy.ndim == 2 else policy[t]
-        return pi_t[None] * emissions[obs[:, t]]  # (N, S, A)
+    def local(t: int) -> np.ndarray:  # pi(a | s) O(o_t | s, a), shape (N, S, A)
+        e = emissions[obs[:, t]]  # contiguous rows: a copy of N blocks
+        e *= policy if policy.ndim == 2 else policy[t]
+        return e
 
-    alphas = np.empty((length, n_demos, mdp.n_states, mdp.n_actions))
-    log_norm = np.zeros(n_demos)
-    pred = np.broadcast_to(p0, (n_demos, mdp.n_states))
+    preds = np.empty((length, n_demos, S))
+    norms = np.empty((length, n_demos))
+    pred = np.repeat(p0[None, :], n_demos, axis=0)
     for t in range(length):
-        a = pred[:, :, None] * local(t)
-        c = a.sum(axis=(1, 2))
-        if np.any(c <= 0.0):
-            n = int(np.flatnonzero(c <= 0.0)[0])
-            o = int(obs[n, t])
+        alpha = local(t)
+        alpha *= pred[:, :, None]
+        c = alpha.sum(axis=(1, 2))
+        if not np.all(c > 0.0):
+            n = int(np.flatnonzero(~(c > 0.0))[0])
             raise ValueError(
-                f"demonstration {ids[n]}, step {t}: observation {o} is impossible under the "
-                "model given the steps before it (its probability is zero); check the "
-                "observation model and the demonstration"
+                f"demonstration {ids[n]}, step {t}: observation {int(obs[n, t])} is impossible "
+                "under the model given the steps before it (its probability is zero); check "
+                "the observation model and the demonstration"
             )
-        a /= c[:, None, None]
-        alphas[t] = a
-        log_norm += np.log(c)
+        preds[t], norms[t] = pred, c
         if t + 1 < length:
-            pred = mdp.push_forward(a)
+            alpha /= c[:, None, None]
+            pred = mdp.push_forward(alpha)
 
-    occupancy = alphas[-1].copy()
-    beta = np.ones((n_demos, mdp.n_states, mdp.n_actions))
-    initial_post = None
-    for t in range(length - 2, -1, -1):
-        # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
-        # rescaled so that alpha_t * beta_t, the posterior marginal of step t, sums to 1.
-        g = (local(t + 1) * beta).sum(axis=2)  # (N, S')
-        nxt = mdp.expect_next(g.T)  # (S, A, N)
-        beta = np.moveaxis(nxt, 2, 0)
-        beta /= (beta * alphas[t]).sum(axis=(1, 2))[:, None, None]
-        gamma_t = alphas[t] * beta
+s.) e_{t+1}(s., a.) beta_{t+1}(s., a.) / c_{t+1}|s') e_{t+1}(s', a') beta_{t+1}(s', a') / c_{t+1}
+    # (Rabiner scaling), so that alpha_t * beta_t is the posterior marginal of step t.
+    occupancy = np.zeros((n_demos, S, A))
+    beta = np.ones((n_demos, S, A))
+    for t in range(length - 1, -1, -1):
+        gamma_t = local(t)
+        gamma_t *= beta
+        if t > 0:
+            g = gamma_t.sum(axis=2)  # (N, S)
+        gamma_t *= (preds[t] / norms[t][:, None])[:, :, None]
         occupancy += gamma_t
-        if t == 0:
-            initial_post = gamma_t.sum(axis=2)
-    if initial_post is None:
-        initial_post = alphas[0].sum(axis=2)
-    return PosteriorStats(log_likelihood=log_norm, occupancy=occupancy, initial=initial_post)
+        if t > 0:
+            beta = np.moveaxis(mdp.expect_next(g.T), 2, 0)
+            beta /= norms[t][:, None, None]
+    return PosteriorStats(
+        log_likelihood=np.log(norms).sum(axis=0),
+        occupancy=occupancy,
+        initial=gamma_t.sum(axis=2),
+    )
 
 
 def posterior_stats(
@@ -147,7 +157,7 @@ def posterior_stats(
     ``policy`` is a stationary ``pi[s, a]``; alternatively ``policies_by_length(T)`` returns
     a ``(T, S, A)`` policy for demonstrations of length T (finite-horizon models).
     """
-    table = observation_model.emission_table()
+    emissions = observation_model.emissions
     n = len(demos)
     ll = np.empty(n)
     occ = np.empty((n, mdp.n_states, mdp.n_actions))
@@ -155,6 +165,6 @@ def posterior_stats(
     for length, idx in group_by_length(demos).items():
         packed = pack_observations([demos[i] for i in idx], observation_model.n_observations)
         pol = policy if policies_by_length is None else policies_by_length(length)
-        stats = forward_backward(mdp, pol, packed, table, demo_ids=idx)
+        stats = forward_backward(mdp, pol, packed, emissions, demo_ids=idx)
         ll[idx], occ[idx], init[idx] = stats.log_likelihood, stats.occupancy, stats.initial
     return PosteriorStats(log_likelihood=ll, occupancy=occ, initial=init)

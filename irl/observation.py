@@ -11,7 +11,7 @@ that report a state only use ``o = s``. States of a factored domain are indexed 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import reduce
+from functools import cached_property, reduce
 
 import numpy as np
 
@@ -89,10 +89,13 @@ class ObservationModel:
     def n_observations(self) -> int:
         return self.probs.shape[2]
 
-    def emission_table(self) -> np.ndarray:
-        """``O`` as ``E[o, s, a]``, with a last extra row of ones for occluded steps.
+    @cached_property
+    def emissions(self) -> np.ndarray:
+        """``E[o, s, a] = O(o | s, a)`` with an extra last row of ones, shape (n_obs + 1, S, A).
 
-        Index it with observation arrays whose occluded entries are ``-1``.
+        Observation-major, so one step's emissions are contiguous; indexing it with observation
+        arrays whose occluded entries are ``-1`` gives a factor of 1 at occluded steps. Computed
+        once per model.
         """
         table = np.ones((self.n_observations + 1, self.n_states, self.n_actions))
         table[:-1] = np.moveaxis(self.probs, 2, 0)

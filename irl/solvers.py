@@ -114,6 +114,10 @@ class OptimalQSolver:
         Maximum policy-iteration sweeps per solve.
     cache_size : int
         How many greedy policies (and their ``dQ``) to keep.
+    warm_start_sweeps : int
+        Value-iteration sweeps (one sparse product each) that pick the first policy of a solve
+        with an empty cache; they save policy-iteration sweeps (one factorization each) on
+        large MDPs.
 
     Attributes
     ----------
@@ -123,9 +127,13 @@ class OptimalQSolver:
         Solves answered from a cached optimality region.
     """
 
-    def __init__(self, mdp: TabularMDP, *, max_iter: int = 200, cache_size: int = 64) -> None:
+    def __init__(
+        self, mdp: TabularMDP, *, max_iter: int = 200, cache_size: int = 64,
+        warm_start_sweeps: int = 200,
+    ) -> None:
         self.mdp = mdp
         self.max_iter = max_iter
+        self.warm_start_sweeps = warm_start_sweeps
         self.cache_size = cache_size
         self._cache: OrderedDict[bytes, OptimalSolution] = OrderedDict()
         self.n_solves_ = 0
@@ -163,7 +171,12 @@ class OptimalQSolver:
         mdp = self.mdp
         reward = mdp.reward(theta)
         if policy is None:
-            policy = greedy_policy(reward)
+            V = np.zeros(mdp.n_states)
+            Q = reward
+            for _ in range(self.warm_start_sweeps):
+                V = Q.max(axis=1)
+                Q = reward + mdp.discount * mdp.expect_next(V)
+            policy = greedy_policy(Q)
         rows = np.arange(mdp.n_states)
         for _ in range(self.max_iter):
             dQ = solve_policy_derivatives(mdp, policy)

@@ -44,7 +44,7 @@ class _BayesianIRL:
         beta: float = 0.03,
         prior: GaussianPrior | None = None,
         optimizer: str = "lbfgs",
-        n_restarts: int = 3,
+        n_restarts: int = 1,
         max_iter: int = 200,
         tol: float = 1e-6,
         step_size: float = 0.01,
@@ -185,8 +185,10 @@ class MMAPBIRL(_BayesianIRL):
         Prior on theta; standard normal per weight by default.
     optimizer : {"lbfgs", "gradient-ascent"}
         L-BFGS-B from ``n_restarts`` starts (default), or the paper's Algorithm 1.
-    n_restarts : int, default 3
-        Starts: the prior mean (or ``init``) and ``n_restarts - 1`` draws from the prior.
+    n_restarts : int, default 1
+        Starts: the prior mean (or ``init``) and ``n_restarts - 1`` draws from the prior. On
+        the paper's domains extra starts found the same optimum in every batch we tried; raise
+        it for posteriors with several modes.
     max_iter, tol : int, float
         Per-start iteration limit and L-BFGS tolerance.
     step_size, decay, epsilon : float

@@ -35,7 +35,7 @@ def test_time_varying_policy_equals_enumeration(rng):
     demo = random_demo(rng, 4, om.n_observations)
     pis = rng.dirichlet(np.ones(mdp.n_actions), size=(4, mdp.n_states))
     packed = demo.as_array()[None]
-    stats = forward_backward(mdp, pis, packed, om.emission_table())
+    stats = forward_backward(mdp, pis, packed, om.emissions)
     ll, marg = brute_force(mdp, pis, om, demo)
     assert stats.log_likelihood[0] == pytest.approx(ll, rel=1e-10)
     np.testing.assert_allclose(stats.occupancy[0], marg.sum(axis=0), atol=1e-10)
