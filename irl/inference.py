@@ -123,8 +123,9 @@ def forward_backward(
             alpha /= c[:, None, None]
             pred = mdp.push_forward(alpha)
 
-s.) e_{t+1}(s., a.) beta_{t+1}(s., a.) / c_{t+1}|s') e_{t+1}(s', a') beta_{t+1}(s', a') / c_{t+1}
-    # (Rabiner scaling), so that alpha_t * beta_t is the posterior marginal of step t.
+    # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
+    # divided by c_{t+1} (Rabiner scaling), so that alpha_t * beta_t is the posterior
+    # marginal of step t.
     occupancy = np.zeros((n_demos, S, A))
     beta = np.ones((n_demos, S, A))
     for t in range(length - 1, -1, -1):
