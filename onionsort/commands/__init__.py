@@ -7,5 +7,4 @@ so ``onionsort --help`` stays fast.
 
 COMMAND_MODULES = [
     "onionsort.commands.experiment",
-    "onionsort.commands.record",
 ]
