@@ -61,6 +61,7 @@ __all__ = [
     "onion_sorting",
     "sorting_features",
     "sorting_transitions",
+    "transition_table_markdown",
 ]
 
 
@@ -205,6 +206,44 @@ def sorting_features() -> np.ndarray:
 def state_name(index: int) -> str:
     s = decode_state(index)
     return f"({s.onion.name.lower()}, {s.end_effector.name.lower()}, {s.prediction.name.lower()})"
+
+
+def reachable_states() -> list[int]:
+    """States reachable from the initial states, in breadth-first order."""
+    start = [
+        encode_state((Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD)),
+        encode_state((Location.BIN, Location.BIN, Prediction.BAD)),
+    ]
+    seen, frontier = list(start), list(start)
+    while frontier:
+        s = decode_state(frontier.pop(0))
+        for a in SortAction:
+            for blemished in (True, False):
+                n = encode_state(next_state(s, a, blemished))
+                if n not in seen:
+                    seen.append(n)
+                    frontier.append(n)
+    return seen
+
+
+def transition_table_markdown() -> str:
+    """The transitions and features of every reachable state, as a Markdown table."""
+    names = [f.name.lower() for f in FeatureName]
+    phi = sorting_features()
+    rows = ["| state (onion, hand, prediction) | action | next state | features |",
+            "|---|---|---|---|"]
+    for s in reachable_states():
+        st = decode_state(s)
+        for a in SortAction:
+            bad, good = next_state(st, a, True), next_state(st, a, False)
+            nxt = state_name(encode_state(bad)) if bad == good else (
+                f"{state_name(encode_state(bad))} if blemished, else "
+                f"{state_name(encode_state(good))}")
+            if bad == good == st:
+                nxt = "unchanged"
+            feats = ", ".join(names[k] for k in np.flatnonzero(phi[s, a])) or ""
+            rows.append(f"| {s} {state_name(s)} | {a.name.lower()} | {nxt} | {feats} |")
+    return "\n".join(rows)
 
 
 #: The expert's weights: keep good onions on the line, bin blemished ones, keep claiming and

@@ -80,3 +80,12 @@ def test_ile_zero_for_true_weights_positive_for_wrong_ones():
     assert 0 < irl.normalized_inverse_learning_error(dom.mdp, dom.true_theta, wrong) <= 200
     assert irl.policy_mismatch(dom.mdp, dom.true_theta, wrong) > 0
     assert irl.reward_distance(dom.true_theta, 2 * dom.true_theta) == pytest.approx(0.0)
+
+
+def test_sorting_transition_table_in_the_docs_is_current():
+    from pathlib import Path
+
+    from irl.domains.onion_sorting import transition_table_markdown
+
+    doc = (Path(__file__).parents[2] / "docs" / "onion-sorting.md").read_text()
+    assert transition_table_markdown() in doc
