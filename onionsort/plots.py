@@ -13,22 +13,25 @@ COLORS = {"mmap-birl": "C0", "map-birl": "C1", "hidden-data-em": "C3", "maxent":
 def _series(results, x_attr, y_attr, method, **fixed):
     xs = sorted({getattr(r, x_attr) for r in results
                  if r.method == method and all(getattr(r, k) == v for k, v in fixed.items())})
-    mean, std = [], []
+    mean, low, high = [], [], []
     for x in xs:
         ys = [getattr(r, y_attr) for r in results if r.method == method
               and getattr(r, x_attr) == x and all(getattr(r, k) == v for k, v in fixed.items())]
         mean.append(np.mean(ys))
-        std.append(np.std(ys))
-    return np.array(xs), np.array(mean), np.array(std)
+        low.append(np.percentile(ys, 25))
+        high.append(np.percentile(ys, 75))
+    return np.array(xs), np.array(mean), np.array(low), np.array(high)
 
 
 def _panel(ax, results, x_attr, y_attr, fixed, xlabel, ylabel):
     for method in sorted({r.method for r in results}):
-        xs, m, s = _series(results, x_attr, y_attr, method, **fixed)
+        xs, m, lo, hi = _series(results, x_attr, y_attr, method, **fixed)
         if len(xs) == 0:
             continue
         ax.plot(xs * 100, m, "o-", color=COLORS.get(method), label=method)
-        ax.fill_between(xs * 100, m - s, m + s, color=COLORS.get(method), alpha=0.15)
+        ax.fill_between(xs * 100, lo, hi, color=COLORS.get(method), alpha=0.15)
+    # ILE spans orders of magnitude between methods; symlog keeps 0 and outliers readable.
+    ax.set_yscale("symlog", linthresh=0.01 if y_attr == "ile" else 0.001)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
@@ -37,7 +40,8 @@ def _panel(ax, results, x_attr, y_attr, fixed, xlabel, ylabel):
 
 def plot_sweep(results: Sequence, out: Path, *, title: str = "") -> list[Path]:
     """ILE vs occlusion per noise level, ILE vs noise without occlusion, and run time vs
-    occlusion; bands are +-1 standard deviation over batches. Returns the files written."""
+    occlusion: lines are means over batches, bands the interquartile range. Returns the files
+    written."""
     import matplotlib
 
     matplotlib.use("Agg")
