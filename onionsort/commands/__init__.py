@@ -7,4 +7,5 @@ so ``onionsort --help`` stays fast.
 
 COMMAND_MODULES = [
     "onionsort.commands.experiment",
+    "onionsort.commands.record",
 ]

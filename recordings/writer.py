@@ -1,0 +1,245 @@
+"""Write a simulated session to MCAP, frame by frame, so an interruption loses nothing written.
+
+Every frame's messages go into their own zstd chunk that is flushed to the OS before the next
+frame is rendered (:meth:`mcap.writer.Writer.flush`). A process killed outright (SIGKILL, power
+loss after the OS wrote the pages) leaves a file without its summary whose every complete chunk
+is readable with ``recordings.open_session(path, recover=True)``; a recording stopped by an
+exception or Ctrl-C is finished normally (summary, footer) with status ``interrupted``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from irl.domains.onion_sorting import SortAction, decode_state
+from recordings.schema import (
+    CLASS_NAMES,
+    END_METADATA,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    JSON_SCHEMAS,
+    SESSION_METADATA,
+    Topic,
+    json_schema_bytes,
+)
+from robot.labels import Frame
+
+__all__ = [
+    "SessionWriter",
+    "box_annotations",
+    "calibration_message",
+    "encode_color",
+    "encode_depth",
+]
+
+logger = logging.getLogger(__name__)
+
+_PROTO_TOPICS = {
+    Topic.COLOR: CompressedImage, Topic.DEPTH: RawImage, Topic.CALIBRATION: CameraCalibration,
+    Topic.INSPECTION: CompressedImage, Topic.INSPECTION_CALIBRATION: CameraCalibration,
+    Topic.ANNOTATIONS: ImageAnnotations,
+}
+_RGBA = {0: (0.16, 0.78, 0.24, 1.0), 1: (0.9, 0.16, 0.16, 1.0)}
+
+
+def _stamp(msg, time_ns: int) -> None:
+    msg.timestamp.seconds, msg.timestamp.nanos = divmod(int(time_ns), 1_000_000_000)
+
+
+def encode_color(rgb: np.ndarray, fmt: str = "jpeg", quality: int = 90) -> bytes:
+    """Compress ``rgb`` (H, W, 3) uint8 to JPEG or PNG bytes."""
+    import cv2
+
+    if fmt not in ("jpeg", "png"):
+        raise ValueError(f"fmt must be 'jpeg' or 'png'; got {fmt!r}")
+    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if fmt == "jpeg" else []
+    ok, buf = cv2.imencode(".jpg" if fmt == "jpeg" else ".png",
+                           np.ascontiguousarray(rgb[..., ::-1]), params)
+    if not ok:
+        raise ValueError(f"could not encode an image of shape {rgb.shape} as {fmt}")
+    return buf.tobytes()
+
+
+def encode_depth(depth: np.ndarray) -> bytes:
+    """Depth (H, W) float metres as 16UC1 little-endian millimetres (0 = no reading)."""
+    mm = np.clip(np.round(np.asarray(depth, float) * 1000.0), 0, 65535).astype("<u2")
+    return mm.tobytes()
+
+
+def calibration_message(K: np.ndarray, width: int, height: int, frame_id: str,
+                        time_ns: int) -> CameraCalibration:
+    """A foxglove.CameraCalibration of an undistorted pinhole camera ``K`` (3, 3)."""
+    msg = CameraCalibration(frame_id=frame_id, width=width, height=height,
+                            distortion_model="plumb_bob")
+    _stamp(msg, time_ns)
+    msg.D.extend([0.0] * 5)
+    msg.K.extend(np.asarray(K, float).ravel().tolist())
+    msg.R.extend([1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0])
+    P = np.zeros((3, 4))
+    P[:, :3] = K
+    msg.P.extend(P.ravel().tolist())
+    return msg
+
+
+def box_annotations(boxes: list[tuple[int, int, int, int, int]], time_ns: int
+                    ) -> ImageAnnotations:
+    """foxglove.ImageAnnotations outlining ``(x_min, y_min, x_max, y_max, class_id)`` boxes."""
+    msg = ImageAnnotations()
+    for x0, y0, x1, y1, cid in boxes:
+        box = msg.points.add(type=PointsAnnotation.LINE_LOOP, thickness=1.5)
+        _stamp(box, time_ns)
+        for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1)):
+            box.points.add(x=float(x), y=float(y))
+        r, g, b, a = _RGBA[cid]
+        box.outline_color.r, box.outline_color.g, box.outline_color.b = r, g, b
+        box.outline_color.a = a
+        text = msg.texts.add(text=CLASS_NAMES[cid], font_size=9.0)
+        _stamp(text, time_ns)
+        text.position.x, text.position.y = float(x0), float(max(y0 - 2, 0))
+        text.text_color.r, text.text_color.g, text.text_color.b, text.text_color.a = r, g, b, a
+    return msg
+
+
+class SessionWriter:
+    """Writes one session's MCAP file; use as a context manager.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.mcap`` file to create (an existing file is refused unless ``overwrite``).
+    metadata : dict
+        Session description: seed, configuration, ... (stored as JSON strings in the
+        ``onionsort.session`` metadata record with the format name and version).
+    camera_K, inspection_K : ndarray of shape (3, 3)
+        Intrinsics of the main camera and of the inspection view.
+    overwrite : bool
+    """
+
+    def __init__(self, path: str | Path, metadata: dict[str, Any], camera_K: np.ndarray,
+                 inspection_K: np.ndarray, *, overwrite: bool = False) -> None:
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise FileExistsError(f"{self.path} exists; choose another --out or remove it")
+        self.metadata = dict(metadata)
+        self.camera_K, self.inspection_K = np.asarray(camera_K), np.asarray(inspection_K)
+        self.n_frames = 0
+        self.n_steps = 0
+        self._file = None
+        self._writer: Writer | None = None
+        self._channels: dict[str, int] = {}
+
+    def __enter__(self) -> SessionWriter:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = self.path.open("wb")
+        self._writer = Writer(self._file, chunk_size=4 * 1024 * 1024,
+                              compression=CompressionType.ZSTD, enable_crcs=True)
+        self._writer.start(profile="", library=f"onionsort/{self.metadata.get('software', '')}")
+        record = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
+                  "created_utc": datetime.now(UTC).isoformat(timespec="seconds")}
+        record.update({k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+                       for k, v in self.metadata.items()})
+        record["camera_K"] = json.dumps(self.camera_K.tolist())
+        record["inspection_K"] = json.dumps(self.inspection_K.tolist())
+        self._writer.add_metadata(SESSION_METADATA, record)
+        for topic, cls in _PROTO_TOPICS.items():
+            schema = self._writer.register_schema(
+                cls.DESCRIPTOR.full_name, "protobuf",
+                build_file_descriptor_set(cls).SerializeToString())
+            self._channels[topic] = self._writer.register_channel(topic, "protobuf", schema)
+        for topic, (name, schema) in JSON_SCHEMAS.items():
+            sid = self._writer.register_schema(name, "jsonschema", json_schema_bytes(schema))
+            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+        self._writer.flush()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        status = "complete" if exc_type is None else "interrupted"
+        self.close(status)
+
+    def close(self, status: str = "complete") -> None:
+        """Finish the file (summary, footer) with the end record's ``status``; idempotent."""
+        if self._writer is None:
+            return
+        try:
+            self._writer.add_metadata(END_METADATA, {
+                "status": status, "n_frames": str(self.n_frames), "n_steps": str(self.n_steps)})
+            self._writer.finish()
+        finally:
+            self._file.close()
+            self._writer, self._file = None, None
+        if status != "complete":
+            logger.warning("%s: recording %s after %d frames (%d steps); the file is finished "
+                           "and readable", self.path, status, self.n_frames, self.n_steps)
+
+    def _write(self, topic: str, payload: bytes, time_ns: int, sequence: int) -> None:
+        self._writer.add_message(self._channels[topic], log_time=time_ns, data=payload,
+                                 publish_time=time_ns, sequence=sequence)
+
+    def _write_json(self, topic: str, obj: dict, time_ns: int, sequence: int) -> None:
+        self._write(topic, json.dumps(obj, separators=(",", ":")).encode(), time_ns, sequence)
+
+    def write_frame(self, frame: Frame) -> None:
+        """Write one frame (images and ground truth) and flush it to the OS."""
+        if self._writer is None:
+            raise RuntimeError("SessionWriter must be entered (`with SessionWriter(...)`)")
+        t, i = round(frame.time_s * 1e9), frame.index
+        h, w = frame.color.shape[:2]
+        color = CompressedImage(frame_id="camera", format="jpeg", data=encode_color(frame.color))
+        _stamp(color, t)
+        self._write(Topic.COLOR, color.SerializeToString(), t, i)
+        depth = RawImage(frame_id="camera", width=w, height=h, encoding="16UC1", step=2 * w,
+                         data=encode_depth(frame.depth))
+        _stamp(depth, t)
+        self._write(Topic.DEPTH, depth.SerializeToString(), t, i)
+        self._write(Topic.CALIBRATION,
+                    calibration_message(self.camera_K, w, h, "camera", t).SerializeToString(),
+                    t, i)
+        if frame.inspection is not None:
+            ih, iw = frame.inspection.shape[:2]
+            insp = CompressedImage(frame_id="inspection", format="png",
+                                   data=encode_color(frame.inspection, "png"))
+            _stamp(insp, t)
+            self._write(Topic.INSPECTION, insp.SerializeToString(), t, i)
+            self._write(Topic.INSPECTION_CALIBRATION, calibration_message(
+                self.inspection_K, iw, ih, "inspection", t).SerializeToString(), t, i)
+        step = frame.step
+        if frame.phase == 0:
+            self._write_json(Topic.ACTION, {
+                "step": step.step, "frame": i, "state": step.state, "action": step.action,
+                "action_name": SortAction(step.action).name.lower(),
+                "next_state": step.next_state, "occluded": step.occluded}, t, step.step)
+            self.n_steps += 1
+        s = decode_state(step.state)
+        self._write_json(Topic.STATE, {
+            "frame": i, "step": step.step, "phase": frame.phase, "time_s": frame.time_s,
+            "state": step.state, "onion": s.onion.name.lower(),
+            "end_effector": s.end_effector.name.lower(), "prediction": s.prediction.name.lower(),
+            "action": step.action, "occluded": step.occluded,
+            "occluded_fraction": round(frame.occluded_fraction, 5)}, t, i)
+        self._write_json(Topic.BOXES, {"frame": i, "boxes": [
+            {"onion_id": o.onion_id, "class_id": int(o.blemished),
+             "label": CLASS_NAMES[int(o.blemished)], "x_min": o.box[0], "y_min": o.box[1],
+             "x_max": o.box[2], "y_max": o.box[3], "visible_pixels": o.visible_pixels}
+            for o in frame.onions if o.box is not None]}, t, i)
+        self._write(Topic.ANNOTATIONS, box_annotations(
+            [(*o.box, int(o.blemished)) for o in frame.onions if o.box is not None], t,
+        ).SerializeToString(), t, i)
+        self._write_json(Topic.ONIONS, {"frame": i, "onions": [
+            {"onion_id": o.onion_id, "blemished": o.blemished, "in_focus": o.in_focus,
+             "position": [round(float(x), 5) for x in o.position]}
+            for o in frame.onions]}, t, i)
+        self._writer.flush()  # one chunk per frame, handed to the OS now
+        self.n_frames += 1

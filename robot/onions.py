@@ -1,0 +1,98 @@
+"""Onions: their appearance (size, skin colour, blemishes) and their procedural textures.
+
+Good and blemished onions differ by texture: a blemished onion carries dark rot patches and
+bruises, a good one only faint veins. Both vary in radius, skin hue and brightness, so telling
+them apart from a 320x240 image is a real perception task. Textures are images ``tex[v, u, c]``
+of shape (H, W, 3), uint8 RGB.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["OnionAppearance", "onion_texture", "sample_appearance", "save_texture"]
+
+#: Skin colours (RGB, 0-255) the hue is drawn around: golden, brown, red onion.
+_SKINS = np.array([[196, 150, 72], [170, 112, 58], [150, 60, 70]], float)
+
+
+@dataclass(frozen=True)
+class OnionAppearance:
+    """How one onion looks.
+
+    Attributes
+    ----------
+    blemished : bool
+        The onion's true class.
+    radius : float
+        Radius in metres.
+    skin : ndarray of shape (3,)
+        Base skin colour, RGB in [0, 255].
+    texture_seed : int
+        Seed of the texture's pattern (veins, blemishes).
+    """
+
+    blemished: bool
+    radius: float
+    skin: np.ndarray
+    texture_seed: int
+
+
+def sample_appearance(rng: np.random.Generator, blemished: bool) -> OnionAppearance:
+    """Draw an onion's size, skin colour and texture pattern."""
+    base = _SKINS[rng.choice(len(_SKINS), p=[0.55, 0.3, 0.15])]
+    skin = np.clip(base * rng.uniform(0.8, 1.15) + rng.normal(0.0, 10.0, 3), 0, 255)
+    return OnionAppearance(
+        blemished=bool(blemished),
+        radius=float(rng.uniform(0.032, 0.045)),
+        skin=skin,
+        texture_seed=int(rng.integers(2**31)),
+    )
+
+
+def _blob(shape: tuple[int, int], center: np.ndarray, radius: float, rng) -> np.ndarray:
+    """A soft irregular blob mask in [0, 1], shape (H, W)."""
+    h, w = shape
+    v, u = np.mgrid[0:h, 0:w]
+    du = np.minimum(np.abs(u - center[0]), w - np.abs(u - center[0]))  # wraps around in u
+    dv = v - center[1]
+    angle = np.arctan2(dv, du)
+    wobble = 1.0 + 0.3 * np.sin(3 * angle + rng.uniform(0, 2 * np.pi))
+    r = np.sqrt(du**2 + dv**2) / (radius * wobble)
+    return np.clip(1.5 - r, 0.0, 1.0)
+
+
+def onion_texture(appearance: OnionAppearance, size: int = 128) -> np.ndarray:
+    """The onion's texture, shape (size, size, 3), uint8 RGB.
+
+    Veins run along ``u`` (around the onion); a blemished onion gets 3-7 dark patches of varied
+    size and darkness.
+    """
+    if size < 16:
+        raise ValueError(f"size must be >= 16; got {size}")
+    rng = np.random.default_rng(appearance.texture_seed)
+    v, u = np.mgrid[0:size, 0:size] / size
+    veins = 0.08 * np.sin(2 * np.pi * (u * rng.integers(8, 16) + 0.3 * np.sin(2 * np.pi * v)))
+    shade = 1.0 + veins[..., None] + rng.normal(0.0, 0.04, (size, size, 1))
+    tex = appearance.skin[None, None, :] * shade
+    if appearance.blemished:
+        rot = np.array([45.0, 32.0, 20.0])
+        for _ in range(int(rng.integers(3, 8))):
+            center = rng.uniform([0, 0.15 * size], [size, 0.85 * size])
+            mask = _blob((size, size), center, rng.uniform(0.08, 0.2) * size, rng)
+            darkness = rng.uniform(0.6, 0.95)
+            tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
+    return np.clip(tex, 0, 255).astype(np.uint8)
+
+
+def save_texture(texture: np.ndarray, path: Path) -> Path:
+    """Write ``texture`` (H, W, 3) RGB as a PNG that PyBullet can load; returns ``path``."""
+    import cv2
+
+    path = Path(path)
+    if not cv2.imwrite(str(path), np.ascontiguousarray(texture[..., ::-1])):
+        raise OSError(f"could not write texture {path}")
+    return path

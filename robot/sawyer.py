@@ -1,0 +1,149 @@
+"""The Sawyer arm from its official URDF: inverse kinematics, joint motion, a suction grasp.
+
+Joint vectors ``q`` have shape (7,) (``right_j0`` .. ``right_j6``); positions are world metres,
+shape (3,). The suction cup is modelled at the flange of ``right_l6``: :meth:`Sawyer.grasp`
+welds an object to it with a fixed constraint, which the physics keeps while the arm moves
+under position control (:meth:`Sawyer.move_to`).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pybullet as p
+
+from robot.assets import sawyer_urdf
+
+__all__ = ["Sawyer"]
+
+logger = logging.getLogger(__name__)
+
+#: A comfortable configuration: elbow up, flange pointing down.
+HOME = np.array([0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161])
+_DOWN = p.getQuaternionFromEuler([np.pi, 0.0, 0.0])
+_FLANGE = np.array([0.0, 0.0, 0.0])
+
+
+class Sawyer:
+    """A fixed-base Sawyer in physics client ``client``.
+
+    Parameters
+    ----------
+    client : int
+        PyBullet physics client id.
+    base_position : array of shape (3,)
+        Where the arm's base stands.
+    base_yaw : float
+        Rotation of the base about z, radians.
+
+    Raises
+    ------
+    robot.assets.AssetNotFoundError
+        If the robosuite asset package (and with it the URDF) is not installed.
+    """
+
+    def __init__(self, client: int, base_position=(0.0, 0.0, 0.0), base_yaw: float = 0.0):
+        self.client = client
+        self.body = p.loadURDF(
+            str(sawyer_urdf()), basePosition=list(base_position),
+            baseOrientation=p.getQuaternionFromEuler([0.0, 0.0, base_yaw]),
+            useFixedBase=True, physicsClientId=client,
+        )
+        self.joints = [j for j in range(p.getNumJoints(self.body, physicsClientId=client))
+                       if p.getJointInfo(self.body, j, physicsClientId=client)[2]
+                       == p.JOINT_REVOLUTE]
+        if len(self.joints) != 7:
+            raise RuntimeError(f"the Sawyer URDF must have 7 revolute joints; got "
+                               f"{len(self.joints)}")
+        self.end_link = self.joints[-1]
+        info = [p.getJointInfo(self.body, j, physicsClientId=client) for j in self.joints]
+        self.lower = np.array([i[8] for i in info])
+        self.upper = np.array([i[9] for i in info])
+        self._grasp: int | None = None
+        self.grasped: int | None = None
+        self.reset(HOME)
+
+    def reset(self, q: np.ndarray) -> None:
+        """Teleport the joints to ``q`` (7,) (no dynamics)."""
+        for j, qj in zip(self.joints, np.asarray(q, float), strict=True):
+            p.resetJointState(self.body, j, qj, 0.0, physicsClientId=self.client)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Joint positions, shape (7,)."""
+        return np.array([s[0] for s in p.getJointStates(self.body, self.joints,
+                                                        physicsClientId=self.client)])
+
+    def end_effector(self) -> tuple[np.ndarray, np.ndarray]:
+        """Flange position (3,) and orientation quaternion (4,) in the world."""
+        state = p.getLinkState(self.body, self.end_link, computeForwardKinematics=True,
+                               physicsClientId=self.client)
+        return np.array(state[4]), np.array(state[5])
+
+    def inverse_kinematics(self, position, orientation=_DOWN, *, max_iter: int = 20,
+                           tol: float = 1e-3) -> np.ndarray:
+        """Joint positions (7,) putting the flange at ``position`` (3,) with ``orientation``.
+
+        Runs PyBullet's damped-least-squares IK, re-linearising from each solution (clipped to
+        the joint limits), up to ``max_iter`` times or until the position error is below ``tol``
+        metres; warns if it does not converge (the target may be out of reach). The arm ends
+        where it started.
+        """
+        start = self.q
+        q = start
+        err = np.inf
+        for _ in range(max_iter):
+            sol = p.calculateInverseKinematics(
+                self.body, self.end_link, list(position), list(orientation),
+                maxNumIterations=200, residualThreshold=1e-6, physicsClientId=self.client,
+            )
+            q = np.clip(np.array(sol[:7]), self.lower, self.upper)
+            self.reset(q)
+            err = float(np.linalg.norm(self.end_effector()[0] - np.asarray(position)))
+            if err < tol:
+                break
+        else:
+            logger.warning("Sawyer IK did not converge: %.4f m from %s after %d iterations",
+                           err, np.round(position, 3).tolist(), max_iter)
+        self.reset(start)
+        return q
+
+    def move_to(self, position, orientation=_DOWN, *, steps: int = 240) -> float:
+        """Drive the arm to a pose under position control, stepping the physics ``steps`` times.
+
+        The joint targets follow a minimum-jerk interpolation from the current configuration to
+        the IK solution. Returns the final flange position error in metres.
+        """
+        from robot.avatar import min_jerk
+
+        q0, q1 = self.q, self.inverse_kinematics(position, orientation)
+        for k in range(1, steps + 1):
+            target = q0 + float(min_jerk(k / steps)) * (q1 - q0)
+            p.setJointMotorControlArray(
+                self.body, self.joints, p.POSITION_CONTROL, targetPositions=target.tolist(),
+                forces=[200.0] * 7, physicsClientId=self.client)
+            p.stepSimulation(physicsClientId=self.client)
+        return float(np.linalg.norm(self.end_effector()[0] - np.asarray(position)))
+
+    def grasp(self, body: int) -> None:
+        """Suction: weld ``body`` to the flange where it is now (a fixed constraint)."""
+        if self._grasp is not None:
+            raise RuntimeError(f"already holding body {self.grasped}; release it first")
+        ee_pos, ee_orn = self.end_effector()
+        obj_pos, obj_orn = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
+        inv_pos, inv_orn = p.invertTransform(ee_pos.tolist(), ee_orn.tolist())
+        rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._grasp = p.createConstraint(
+            self.body, self.end_link, body, -1, p.JOINT_FIXED, [0, 0, 0],
+            parentFramePosition=rel_pos, childFramePosition=[0, 0, 0],
+            parentFrameOrientation=rel_orn, physicsClientId=self.client,
+        )
+        p.changeConstraint(self._grasp, maxForce=500.0, physicsClientId=self.client)
+        self.grasped = body
+
+    def release(self) -> None:
+        """Switch the suction off."""
+        if self._grasp is not None:
+            p.removeConstraint(self._grasp, physicsClientId=self.client)
+        self._grasp, self.grasped = None, None

@@ -1,0 +1,305 @@
+"""A recorded sorting session: the human sorter acts on the expert's policy in the PyBullet world.
+
+At each abstract step ``t`` the sorter, in MDP state ``s_t``, draws ``a_t ~ pi[s_t, :]``,
+performs it as a smooth motion, and the world reaches
+``s_{t+1} = next_state(s_t, a_t, blemished=<the physical onion's class>)``. The step is rendered
+``frames_per_step`` times; its first frame shows ``s_t`` at rest. After every step the state read
+off the world (:func:`robot.state_map.state_of_world`) is checked against ``s_{t+1}``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import pybullet as p
+
+from irl.domains.onion_sorting import (
+    N_ACTIONS,
+    N_STATES,
+    Location,
+    Prediction,
+    SortAction,
+    SortingState,
+    decode_state,
+    encode_state,
+    next_state,
+)
+from robot.avatar import HAND_RADIUS, HumanSorter, path_point
+from robot.camera import (
+    CameraSpec,
+    Lighting,
+    boxes_from_segmentation,
+    occluded_fraction,
+    render,
+    sample_lighting,
+)
+from robot.labels import Frame, OnionLabel, StepLabel
+from robot.occluder import PasserBy, occlusion_schedule
+from robot.scene import Onion, OnionPool, build_workcell, connect
+from robot.state_map import HAND_TARGETS, PICK_SPOT, WorldSnapshot, state_of_world
+
+__all__ = ["INSPECTION_CAMERA", "SessionConfig", "SortingSession", "expert_model"]
+
+logger = logging.getLogger(__name__)
+
+INSPECTION_CAMERA = CameraSpec(
+    width=160, height=120, fov_deg=40.0, eye=(0.02, 0.08, 1.50), target=(0.02, 0.32, 1.45),
+    frame_id="inspection",
+)
+"""A close view of the place in front of the sorter's face where onions are inspected."""
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """Everything that shapes one session besides its seed.
+
+    Attributes
+    ----------
+    n_steps : int
+        Abstract steps (sorter actions) per session.
+    occlusion : float
+        Probability that the passer-by crosses the view during a step.
+    frames_per_step : int
+        Frames rendered per step (the first shows the state at rest).
+    step_duration_s : float
+        Simulated seconds per step.
+    belt_speed : float
+        Belt speed in m/s.
+    n_onions : int
+        Onions in the pool riding the belt.
+    blemish_rate : float
+        Probability that an onion is blemished.
+    texture_size : int
+        Side of each onion texture in pixels.
+    camera, inspection : CameraSpec
+        The main RGB-D camera facing the sorter, and the inspection view.
+    """
+
+    n_steps: int = 20
+    occlusion: float = 0.2
+    frames_per_step: int = 3
+    step_duration_s: float = 2.0
+    belt_speed: float = 0.03
+    n_onions: int = 8
+    blemish_rate: float = 0.5
+    texture_size: int = 64
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    inspection: CameraSpec = INSPECTION_CAMERA
+
+    def __post_init__(self) -> None:
+        if self.n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1; got {self.n_steps}")
+        if not 0.0 <= self.occlusion <= 1.0:
+            raise ValueError(f"occlusion must be in [0, 1]; got {self.occlusion}")
+        if self.frames_per_step < 1:
+            raise ValueError(f"frames_per_step must be >= 1; got {self.frames_per_step}")
+        if self.step_duration_s <= 0:
+            raise ValueError(f"step_duration_s must be > 0; got {self.step_duration_s}")
+        if not 0.0 <= self.blemish_rate <= 1.0:
+            raise ValueError(f"blemish_rate must be in [0, 1]; got {self.blemish_rate}")
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict of the configuration."""
+        return asdict(self)
+
+
+def expert_model(blemish_rate: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """The Boltzmann expert ``pi[s, a]`` (48, 5) and initial distribution (48,) of the domain."""
+    from irl.domains.onion_sorting import onion_sorting
+
+    domain = onion_sorting(blemish_rate=blemish_rate)
+    return domain.expert_policy(), np.asarray(domain.mdp.initial, float)
+
+
+def _grip_offset(onion: Onion) -> np.ndarray:
+    """Onion centre relative to the hand holding it (3,): in front of and below the palm."""
+    return -np.array([0.0, 0.6, 0.8]) * (HAND_RADIUS + 0.6 * onion.appearance.radius)
+
+
+class SortingSession:
+    """One session in its own headless PyBullet client; use as a context manager.
+
+    Parameters
+    ----------
+    config : SessionConfig
+    policy : ndarray of shape (48, 5)
+        The sorter's policy ``pi[s, a]`` (rows sum to 1).
+    initial : ndarray of shape (48,)
+        Distribution of the first state.
+    seed : int or numpy.random.SeedSequence
+        Seeds the scene's appearance, the policy's draws and the passer-by independently.
+
+    Attributes
+    ----------
+    steps : list of StepLabel
+        The steps taken so far.
+    occluded : ndarray of shape (n_steps,)
+        The passer-by's schedule.
+    lighting : Lighting
+    """
+
+    def __init__(self, config: SessionConfig, policy: np.ndarray, initial: np.ndarray,
+                 seed: int | np.random.SeedSequence) -> None:
+        policy, initial = np.asarray(policy, float), np.asarray(initial, float)
+        if policy.shape != (N_STATES, N_ACTIONS) or not np.allclose(policy.sum(1), 1.0):
+            raise ValueError(
+                f"policy must be pi[s, a] of shape ({N_STATES}, {N_ACTIONS}) with rows summing "
+                f"to 1; got shape {policy.shape}"
+            )
+        if initial.shape != (N_STATES,) or not np.isclose(initial.sum(), 1.0):
+            raise ValueError(f"initial must be a distribution of shape ({N_STATES},); got "
+                             f"shape {initial.shape}")
+        self.config, self.policy, self.initial = config, policy, initial
+        seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        scene_seq, policy_seq, occl_seq, walker_seq = seq.spawn(4)
+        self._scene_rng = np.random.default_rng(scene_seq)
+        self._policy_rng = np.random.default_rng(policy_seq)
+        self.occluded = occlusion_schedule(config.n_steps, config.occlusion,
+                                           np.random.default_rng(occl_seq))
+        self._walker_rng = np.random.default_rng(walker_seq)
+        self.steps: list[StepLabel] = []
+        self.client: int | None = None
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def __enter__(self) -> SortingSession:
+        self.client = connect()
+        rng = self._scene_rng
+        self.lighting: Lighting = sample_lighting(rng)
+        self.workcell = build_workcell(self.client, rng)
+        self.pool = OnionPool(self.client, self.config.n_onions, self.config.blemish_rate, rng,
+                              texture_size=self.config.texture_size)
+        self.sorter = HumanSorter(self.client, rng)
+        cam = self.config.camera
+        self.walker = PasserBy(self.client, self._walker_rng, cam.eye, cam.target)
+        self.focus: Onion | None = None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.client is not None:
+            p.disconnect(physicsClientId=self.client)
+            self.client = None
+
+    # -- the world ---------------------------------------------------------------------------
+    def _held_position(self, onion: Onion) -> np.ndarray:
+        return self.sorter.hand_position + _grip_offset(onion)
+
+    def _pinned(self, state: SortingState) -> bool:
+        return state.onion == Location.CONVEYOR and state.prediction == Prediction.UNKNOWN
+
+    def _claim(self) -> Onion:
+        """The next onion arriving at the sorter's station (nearest upstream of the pick spot)."""
+        on_belt = [o for o in self.pool.onions if o.place == "belt" and o is not self.focus]
+        upstream = [o for o in on_belt if PICK_SPOT[0] - 0.7 <= o.position[0] <= PICK_SPOT[0]]
+        if upstream:
+            return max(upstream, key=lambda o: o.position[0])
+        onion = min(on_belt, key=lambda o: abs(o.position[0] - PICK_SPOT[0]))
+        self.pool.put_on_belt(onion, x=PICK_SPOT[0] - 0.3)
+        return onion
+
+    def _setup(self, state: SortingState) -> None:
+        """Arrange the world to show ``state`` at rest."""
+        self.sorter.set_hand(HAND_TARGETS[state.end_effector])
+        wanted = {Prediction.GOOD: False, Prediction.BAD: True}.get(state.prediction)
+        candidates = [o for o in self.pool.onions if wanted is None or o.blemished == wanted]
+        self.focus = candidates[0] if candidates else self.pool.onions[0]
+        if state.onion in (Location.HOVER, Location.FACE):
+            if state.end_effector != state.onion:
+                raise ValueError(f"initial state {state} holds an onion away from the hand")
+            self.focus.place = "held"
+            self.pool.move(self.focus, self._held_position(self.focus))
+        elif state.onion == Location.BIN:
+            self.pool.drop_in_bin(self.focus)
+        else:
+            self.pool.put_on_belt(self.focus, x=PICK_SPOT[0], y=PICK_SPOT[1])
+
+    def _plan(self, s: SortingState, a: SortAction, s_next: SortingState) -> np.ndarray:
+        """Hand waypoints (K, 3) of action ``a`` from ``s`` to ``s_next``."""
+        hand = self.sorter.hand_position.copy()
+        if s_next == s:
+            return hand[None]
+        if a == SortAction.PICK:
+            top = self.focus.position - _grip_offset(self.focus)
+            return np.stack([hand, top, HAND_TARGETS[Location.HOVER]])
+        if a == SortAction.CLAIM:
+            return hand[None]
+        return np.stack([hand, HAND_TARGETS[s_next.end_effector]])
+
+    def _render(self, index: int, label: StepLabel, phase: int, time_s: float,
+                with_inspection: bool) -> Frame:
+        image = render(self.client, self.config.camera, self.lighting)
+        boxes = boxes_from_segmentation(image.seg, self.pool.body_ids)
+        onions = tuple(
+            OnionLabel(
+                onion_id=o.onion_id, blemished=o.blemished, position=o.position.copy(),
+                in_focus=o is self.focus,
+                box=boxes[o.body][:4] if o.body in boxes else None,
+                visible_pixels=boxes[o.body][4] if o.body in boxes else 0,
+            )
+            for o in self.pool.onions
+        )
+        inspection = (render(self.client, self.config.inspection, self.lighting).rgb
+                      if with_inspection else None)
+        return Frame(
+            index=index, step=label, phase=phase, time_s=time_s, color=image.rgb,
+            depth=image.depth, onions=onions,
+            occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
+            inspection=inspection,
+        )
+
+    # -- the run -----------------------------------------------------------------------------
+    def frames(self) -> Iterator[Frame]:
+        """Run the session, yielding its frames in order; :attr:`steps` fills as it goes."""
+        if self.client is None:
+            raise RuntimeError("SortingSession must be entered (`with SortingSession(...)`)")
+        cfg = self.config
+        dt = cfg.step_duration_s / cfg.frames_per_step
+        s = decode_state(int(self._policy_rng.choice(N_STATES, p=self.initial)))
+        self._setup(s)
+        index = 0
+        for t in range(cfg.n_steps):
+            s_idx = encode_state(s)
+            a = SortAction(int(self._policy_rng.choice(N_ACTIONS, p=self.policy[s_idx])))
+            if a == SortAction.CLAIM and next_state(s, a, False) != s:
+                self.focus = self._claim()
+            s_next = next_state(s, a, blemished=self.focus.blemished)
+            label = StepLabel(step=t, state=s_idx, action=int(a),
+                              next_state=encode_state(s_next), occluded=bool(self.occluded[t]))
+            self.steps.append(label)
+            waypoints = self._plan(s, a, s_next)
+            if self.occluded[t]:
+                self.walker.start_crossing()
+            for k in range(cfg.frames_per_step + 1):
+                phase = k / cfg.frames_per_step
+                if k > 0:  # the belt moves between frames; the focus onion waits at the gate
+                    stop_x = (self.focus.position[0] if a == SortAction.PICK else PICK_SPOT[0])
+                    stop = (self.focus, stop_x) if self._pinned(s) else None
+                    self.pool.advance(cfg.belt_speed * dt, stop=stop)
+                self.sorter.set_hand(path_point(waypoints, phase))
+                if a == SortAction.PICK and s_next != s and phase >= 0.5:
+                    self.focus.place = "held"
+                if self.focus.place == "held":
+                    self.pool.move(self.focus, self._held_position(self.focus))
+                if k == cfg.frames_per_step:
+                    break  # the step's end is the next step's first frame
+                self.walker.walk((k + 0.5) / cfg.frames_per_step if self.occluded[t] else None)
+                yield self._render(index, label, k, (t + phase) * cfg.step_duration_s,
+                                   with_inspection=k == 0)
+                index += 1
+            self._finish_step(a, s_next)
+            s = s_next
+        self.walker.walk(None)
+
+    def _finish_step(self, a: SortAction, s_next: SortingState) -> None:
+        """Release the onion where the action put it and check the world shows ``s_next``."""
+        if self.focus.place == "held" and s_next.onion == Location.CONVEYOR:
+            self.pool.put_on_belt(self.focus, x=PICK_SPOT[0], y=PICK_SPOT[1])
+        elif self.focus.place == "held" and s_next.onion == Location.BIN:
+            self.pool.drop_in_bin(self.focus)
+        world = WorldSnapshot(hand=self.sorter.hand_position, focus=self.focus.position,
+                              held=self.focus.place == "held", prediction=s_next.prediction)
+        seen = state_of_world(world)
+        if seen != s_next:
+            raise RuntimeError(f"after {a.name} the world shows {seen}, the MDP says {s_next}")

@@ -1,0 +1,77 @@
+"""What the reader gives back is what the simulator did."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from irl.demonstrations import Demonstration
+from irl.domains.onion_sorting import N_ACTIONS
+from recordings import SessionWriter, open_session, read_demonstrations
+from recordings.schema import Topic
+
+
+def test_demonstration_from_ground_truth_equals_what_the_simulator_did(recorded):
+    session = open_session(recorded.path)
+    states = [s.state for s in recorded.steps]
+    actions = [s.action for s in recorded.steps]
+    occluded = [s.occluded for s in recorded.steps]
+    expected = Demonstration.from_pairs(states, actions, N_ACTIONS, occluded=occluded)
+    assert session.demonstration() == expected
+    assert session.steps == recorded.steps
+    assert np.array_equal(session.trajectory().states, states)
+    assert session.demonstration().n_occluded == sum(occluded)
+    assert read_demonstrations([recorded.path]) == [expected]
+
+
+def test_frames_and_labels_round_trip(recorded):
+    session = open_session(recorded.path)
+    assert session.status == "complete"
+    assert session.metadata["seed"] == 4
+    assert session.metadata["config"]["n_steps"] == 12
+    assert len(session) == len(recorded.frames)
+    for got, sim in zip(session.frames(), recorded.frames, strict=True):
+        assert got.index == sim.index and got.step == sim.step.step
+        assert got.state["state"] == sim.step.state and got.state["action"] == sim.step.action
+        assert got.occluded == sim.step.occluded
+        boxes = {b["onion_id"]: (b["x_min"], b["y_min"], b["x_max"], b["y_max"], b["class_id"])
+                 for b in got.boxes}
+        expected = {o.onion_id: (*o.box, int(o.blemished)) for o in sim.onions if o.box}
+        assert boxes == expected
+        assert [o["blemished"] for o in got.onions] == [o.blemished for o in sim.onions]
+        assert np.abs(got.depth - sim.depth).max() <= 0.0005 + 1e-6
+        color = got.color
+        assert color.shape == sim.color.shape
+        assert np.abs(color.astype(int) - sim.color).mean() < 6  # JPEG
+        assert (got.inspection is not None) == (sim.inspection is not None)
+        if sim.inspection is not None:
+            assert np.array_equal(got.inspection, sim.inspection)  # PNG is lossless
+
+
+def test_file_passes_a_crc_validating_read_with_the_mcap_reader(recorded):
+    with open(recorded.path, "rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        counts = {}
+        for _, channel, message in reader.iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.message_encoding == "json":
+                json.loads(message.data)
+    n_frames, n_steps = len(recorded.frames), len(recorded.steps)
+    assert topics[Topic.COLOR] == "foxglove.CompressedImage"
+    assert topics[Topic.DEPTH] == "foxglove.RawImage"
+    assert topics[Topic.CALIBRATION] == "foxglove.CameraCalibration"
+    assert topics[Topic.ANNOTATIONS] == "foxglove.ImageAnnotations"
+    assert counts[Topic.ANNOTATIONS] == n_frames
+    assert counts[Topic.COLOR] == counts[Topic.DEPTH] == counts[Topic.STATE] == n_frames
+    assert counts[Topic.ACTION] == counts[Topic.INSPECTION] == n_steps
+    assert summary.statistics.chunk_count == n_frames  # one chunk per frame
+
+
+def test_writer_refuses_to_overwrite(recorded):
+    with pytest.raises(FileExistsError, match="exists"):
+        SessionWriter(recorded.path, {}, np.eye(3), np.eye(3))
