@@ -49,19 +49,18 @@ def plot_sweep(results: Sequence, out: Path, *, title: str = "") -> list[Path]:
 
     written = []
     noises = sorted({r.noise for r in results if r.occlusion > 0})
-    if noises:
+    occluded = [r for r in results if r.occlusion > 0]
+    for y_attr, ylabel, what, name in (
+        ("ile", "ILE", "", "ile_vs_occlusion.png"),
+        ("seconds", "fit time (s)", "run time, ", "seconds_vs_occlusion.png"),
+    ):
+        if not noises:
+            break
         fig, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.6), squeeze=False)
         for ax, noise in zip(axes[0], noises, strict=True):
-            _panel(ax, [r for r in results if r.occlusion > 0], "occlusion", "ile",
-                   {"noise": noise}, "occlusion (%)", "ILE")
-            ax.set_title(f"{title}: noise {noise:.0%}")
-        written.append(_save(fig, out / "ile_vs_occlusion.png", plt))
-        fig, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.6), squeeze=False)
-        for ax, noise in zip(axes[0], noises, strict=True):
-            _panel(ax, [r for r in results if r.occlusion > 0], "occlusion", "seconds",
-                   {"noise": noise}, "occlusion (%)", "fit time (s)")
-            ax.set_title(f"{title}: run time, noise {noise:.0%}")
-        written.append(_save(fig, out / "seconds_vs_occlusion.png", plt))
+            _panel(ax, occluded, "occlusion", y_attr, {"noise": noise}, "occlusion (%)", ylabel)
+            ax.set_title(f"{title}: {what}noise {noise:.0%}")
+        written.append(_save(fig, out / name, plt))
     if len({r.noise for r in results if r.occlusion == 0}) > 1:
         fig, ax = plt.subplots(figsize=(4.5, 3.6))
         _panel(ax, [r for r in results if r.occlusion == 0], "noise", "ile", {},
