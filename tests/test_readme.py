@@ -1,0 +1,24 @@
+"""The README's code stays true: its library example runs as written."""
+
+import doctest
+import re
+from pathlib import Path
+
+import irl
+
+ROOT = Path(__file__).parents[1]
+
+
+def test_readme_library_example_runs(capsys):
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    example = next(b for b in blocks if "irl.MMAPBIRL" in b)
+    exec(compile(example, "README.md", "exec"), {})
+    out = capsys.readouterr().out.split()
+    assert float(out[0]) >= 0.0  # the ILE
+    assert float(out[1]) < 0.0  # a log-likelihood
+
+
+def test_package_docstring_example():
+    failures, _ = doctest.testmod(irl, verbose=False)
+    assert failures == 0
