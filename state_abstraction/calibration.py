@@ -1,0 +1,202 @@
+"""Calibration: measured confusion matrices -> the observation model the learners use.
+
+Layouts: ``counts[true, predicted]``; ``C[true, predicted] = P(predicted | true)``.
+
+Perception reports, for every unoccluded frame, an estimate of each state factor of the
+onion-sorting MDP (onion location, end-effector location, prediction) and of the action. Run on
+held-out labelled frames, those estimates give one confusion matrix per factor. Assuming the
+errors of different factors are independent given the truth, their Kronecker product is the
+state confusion, and with the action's confusion it is ``O[s, a, o]`` over pair observations
+``o = s' * A + a'`` (:func:`irl.factored_observation_model`). The joint state confusion is kept
+too, so the independence assumption can be checked against the data.
+
+Frames the classifier calls occluded are not observations: they become ``None`` steps of the
+demonstration and are not counted here.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from irl.domains.onion_sorting import (
+    FACTOR_SIZES,
+    N_ACTIONS,
+    N_STATES,
+    Location,
+    Prediction,
+    SortAction,
+)
+from irl.observation import ObservationModel, factored_observation_model
+
+__all__ = [
+    "FACTORS",
+    "Calibration",
+    "ConfusionMatrix",
+    "calibrate",
+    "load_calibration",
+]
+
+#: The calibrated factors, in the order of the state encoding, then the action.
+FACTORS: dict[str, list[str]] = {
+    "onion": [x.name.lower() for x in Location],
+    "end_effector": [x.name.lower() for x in Location],
+    "prediction": [x.name.lower() for x in Prediction],
+    "action": [x.name.lower() for x in SortAction],
+}
+FORMAT = "onionsort.calibration/1"
+
+
+@dataclass(frozen=True)
+class ConfusionMatrix:
+    """Counts of (true, predicted) outcomes of one factor.
+
+    Attributes
+    ----------
+    counts : ndarray of int, shape (n, n)
+        ``counts[i, j]``: frames whose true value is i and predicted value is j.
+    labels : list of str
+    """
+
+    counts: np.ndarray
+    labels: list[str]
+
+    def __post_init__(self) -> None:
+        counts = np.asarray(self.counts)
+        n = len(self.labels)
+        if counts.shape != (n, n):
+            raise ValueError(
+                f"counts must have shape ({n}, {n}) for {n} labels; got {counts.shape}"
+            )
+        if np.any(counts < 0):
+            raise ValueError("counts must be non-negative")
+        object.__setattr__(self, "counts", counts.astype(np.int64))
+
+    def probabilities(self, smoothing: float = 1.0) -> np.ndarray:
+        """``C[true, predicted]`` with additive smoothing ``smoothing`` per cell.
+
+        Smoothing keeps every confusion possible (no observation becomes impossible because it
+        was never seen in calibration); rows without any data become uniform.
+        """
+        if smoothing < 0:
+            raise ValueError(f"smoothing must be >= 0; got {smoothing}")
+        c = self.counts + float(smoothing)
+        rows = c.sum(axis=1, keepdims=True)
+        empty = rows[:, 0] == 0
+        c[empty] = 1.0
+        return c / c.sum(axis=1, keepdims=True)
+
+    @property
+    def accuracy(self) -> float:
+        """Fraction of frames predicted correctly (NaN without data)."""
+        total = self.counts.sum()
+        return float(np.trace(self.counts) / total) if total else float("nan")
+
+
+def _counts(true: np.ndarray, pred: np.ndarray, n: int, name: str) -> np.ndarray:
+    true, pred = np.asarray(true, dtype=np.int64), np.asarray(pred, dtype=np.int64)
+    if true.shape != pred.shape or true.ndim != 1:
+        raise ValueError(
+            f"{name}: true and predicted must be 1-D of equal length; got {true.shape} and "
+            f"{pred.shape}"
+        )
+    for arr, which in ((true, "true"), (pred, "predicted")):
+        if arr.size and (arr.min() < 0 or arr.max() >= n):
+            raise ValueError(
+                f"{name}: {which} values must lie in [0, {n}); got {arr.min()}..{arr.max()}"
+            )
+    counts = np.zeros((n, n), dtype=np.int64)
+    np.add.at(counts, (true, pred), 1)
+    return counts
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Per-factor and joint confusion measured on held-out frames."""
+
+    factors: dict[str, ConfusionMatrix]
+    joint_state: ConfusionMatrix
+
+    def observation_model(self, smoothing: float = 1.0) -> ObservationModel:
+        """The learners' ``O[s, a, o]`` (48 states x 5 actions, pair observations)."""
+        mats = [self.factors[name].probabilities(smoothing)
+                for name in ("onion", "end_effector", "prediction")]
+        return factored_observation_model(mats, self.factors["action"].probabilities(smoothing))
+
+    @property
+    def state_error_rate(self) -> float:
+        """Measured fraction of frames whose whole state estimate is wrong (the paper's ~30%)."""
+        return 1.0 - self.joint_state.accuracy
+
+    def save(self, path: Path | str) -> Path:
+        """Write the counts (the smoothing is applied when the model is built) as JSON.
+
+        Written to a temporary file and renamed, so an existing file is never half-written.
+        """
+        path = Path(path)
+        doc = {
+            "format": FORMAT,
+            "n_states": N_STATES,
+            "n_actions": N_ACTIONS,
+            "factors": {k: {"labels": m.labels, "counts": m.counts.tolist()}
+                        for k, m in self.factors.items()},
+            "joint_state_counts": self.joint_state.counts.tolist(),
+            "state_error_rate": self.state_error_rate,
+            "accuracy": {k: m.accuracy for k, m in self.factors.items()},
+        }
+        tmp = path.with_name(path.name + ".partial")
+        tmp.write_text(json.dumps(doc, indent=1))
+        tmp.replace(path)
+        return path
+
+
+def calibrate(true: dict[str, Sequence[int]], predicted: dict[str, Sequence[int]]) -> Calibration:
+    """Confusion matrices from true and predicted factor values of unoccluded frames.
+
+    Parameters
+    ----------
+    true, predicted : dict of str -> sequence of int
+        One entry per factor in :data:`FACTORS` (``onion``, ``end_effector``, ``prediction``,
+        ``action``), each of length n_frames, in the encodings of ``irl.domains.onion_sorting``.
+    """
+    missing = [k for k in FACTORS if k not in true or k not in predicted]
+    if missing:
+        raise ValueError(f"true and predicted must both give the factors {list(FACTORS)}; "
+                         f"missing {missing}")
+    factors = {k: ConfusionMatrix(_counts(true[k], predicted[k], len(labels), k), labels)
+               for k, labels in FACTORS.items()}
+    state_true = np.ravel_multi_index(
+        [np.asarray(true[k]) for k in ("onion", "end_effector", "prediction")], FACTOR_SIZES)
+    state_pred = np.ravel_multi_index(
+        [np.asarray(predicted[k]) for k in ("onion", "end_effector", "prediction")], FACTOR_SIZES)
+    joint = ConfusionMatrix(_counts(state_true, state_pred, N_STATES, "state"),
+                            [str(s) for s in range(N_STATES)])
+    return Calibration(factors=factors, joint_state=joint)
+
+
+def load_calibration(path: Path | str) -> Calibration:
+    """Read a calibration written by :meth:`Calibration.save`; clear errors on bad files."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"calibration file {path} does not exist") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not a calibration file (not JSON: {exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ValueError(f"{path} is not a calibration file (format must be {FORMAT!r})")
+    if (doc.get("n_states"), doc.get("n_actions")) != (N_STATES, N_ACTIONS):
+        raise ValueError(
+            f"{path} was calibrated for an MDP with (S, A) = ({doc.get('n_states')}, "
+            f"{doc.get('n_actions')}), not the onion-sorting MDP's ({N_STATES}, {N_ACTIONS})"
+        )
+    factors = {k: ConfusionMatrix(np.array(v["counts"]), list(v["labels"]))
+               for k, v in doc["factors"].items()}
+    if set(factors) != set(FACTORS):
+        raise ValueError(f"{path}: factors must be {list(FACTORS)}; got {sorted(factors)}")
+    joint = ConfusionMatrix(np.array(doc["joint_state_counts"]), [str(s) for s in range(N_STATES)])
+    return Calibration(factors=factors, joint_state=joint)
