@@ -8,4 +8,5 @@ so ``onionsort --help`` stays fast.
 COMMAND_MODULES = [
     "onionsort.commands.experiment",
     "onionsort.commands.record",
+    "onionsort.commands.dataset",
 ]

@@ -1,0 +1,71 @@
+"""``onionsort dataset``: labelled frames on disk, split by session."""
+
+import json
+
+import numpy as np
+import pytest
+
+from irl.domains.onion_sorting import encode_state
+from onionsort.cli import main
+from onionsort.commands.dataset import split_plan
+from recordings.dataset import SPLITS, read_split
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds") / "data"
+    code = main(["dataset", "--frames", "14", "--steps-per-session", "2", "--frames-per-step",
+                 "2", "--occlusion", "0.5", "--seed", "3", "--out", str(out)])
+    assert code == 0
+    return out
+
+
+def test_dataset_has_three_disjoint_splits_of_whole_sessions(dataset):
+    meta = json.loads((dataset / "dataset.json").read_text())
+    assert meta["format"] == "onionsort.dataset/1"
+    assert sum(meta["splits"].values()) == 14
+    sessions = {}
+    for split in SPLITS:
+        recs = json.loads((dataset / split / "labels.json").read_text())
+        assert len(recs) == meta["splits"][split] > 0
+        sessions[split] = {r["session"] for r in recs}
+    assert not (sessions["train"] & sessions["val"]) and not (sessions["val"] & sessions["test"])
+    assert not (sessions["train"] & sessions["test"])
+
+
+def test_frames_and_labels_are_consistent(dataset):
+    frames = list(read_split(dataset, "train"))
+    assert frames
+    for f in frames:
+        assert f.color.shape == (240, 320, 3) and f.color.dtype == np.uint8
+        assert f.depth.shape == (240, 320) and f.depth.dtype == np.float32
+        assert np.nanmax(f.depth) < 65.6
+        r = f.record
+        assert r["state"] == encode_state((r["onion"], r["end_effector"], r["prediction"]))
+        assert len(r["boxes"]) == len(r["classes"])
+        for (x0, y0, x1, y1), c in zip(r["boxes"], r["classes"], strict=True):
+            assert 0 <= x0 < x1 <= 320 and 0 <= y0 < y1 <= 240 and c in (0, 1)
+        assert 0.0 <= r["occluded_fraction"] <= 1.0
+    assert any(f.record["boxes"] for f in frames)
+
+
+def test_existing_dataset_is_never_overwritten(dataset, capsys):
+    before = (dataset / "dataset.json").read_bytes()
+    assert main(["dataset", "--frames", "14", "--steps-per-session", "2",
+                 "--frames-per-step", "2", "--out", str(dataset)]) == 2
+    assert "already holds a dataset" in capsys.readouterr().err
+    assert (dataset / "dataset.json").read_bytes() == before
+
+
+def test_split_plan():
+    assert split_plan(20, 0.15, 0.15) == ["train"] * 14 + ["val"] * 3 + ["test"] * 3
+    assert split_plan(3, 0.15, 0.15) == ["train", "val", "test"]
+    with pytest.raises(ValueError, match="cannot fill three splits"):
+        split_plan(2, 0.15, 0.15)
+    with pytest.raises(ValueError, match="--val and --test"):
+        split_plan(10, 0.6, 0.5)
+
+
+def test_read_split_refuses_a_non_dataset(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not a dataset folder"):
+        list(read_split(tmp_path, "train"))
