@@ -9,4 +9,5 @@ COMMAND_MODULES = [
     "onionsort.commands.experiment",
     "onionsort.commands.record",
     "onionsort.commands.dataset",
+    "onionsort.commands.train",
 ]
