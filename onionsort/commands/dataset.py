@@ -17,6 +17,8 @@ import logging
 import math
 from pathlib import Path
 
+from onionsort.commands._session_args import add_session_arguments
+
 __all__ = ["register", "split_plan"]
 
 logger = logging.getLogger(__name__)
@@ -30,13 +32,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--frames", type=int, default=3000, help="frames in all (3000)")
     parser.add_argument("--out", type=Path, required=True, help="new dataset folder")
-    parser.add_argument("--seed", type=int, default=0, help="root seed (0)")
-    parser.add_argument("--occlusion", type=float, default=0.3,
-                        help="probability that a step is occluded by the passer-by (0.3)")
-    parser.add_argument("--steps-per-session", type=int, default=20,
-                        help="abstract sorting steps per session (20)")
-    parser.add_argument("--frames-per-step", type=int, default=3,
-                        help="frames rendered per step (3)")
+    add_session_arguments(parser, occlusion=0.3)
     parser.add_argument("--val", type=float, default=0.15, help="share of sessions for val")
     parser.add_argument("--test", type=float, default=0.15, help="share of sessions for test")
     parser.set_defaults(func=run)

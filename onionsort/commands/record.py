@@ -17,6 +17,8 @@ import argparse
 import logging
 from pathlib import Path
 
+from onionsort.commands._session_args import add_session_arguments
+
 __all__ = ["register"]
 
 logger = logging.getLogger(__name__)
@@ -31,13 +33,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--sessions", type=int, default=12, help="sessions to record (12)")
     parser.add_argument("--out", type=Path, required=True, help="folder for the .mcap files")
-    parser.add_argument("--occlusion", type=float, default=0.2,
-                        help="probability that a step is occluded by the passer-by (0.2)")
-    parser.add_argument("--seed", type=int, default=0, help="root seed (0)")
-    parser.add_argument("--steps-per-session", type=int, default=20,
-                        help="abstract sorting steps per session (20)")
-    parser.add_argument("--frames-per-step", type=int, default=3,
-                        help="frames rendered per step (3)")
+    add_session_arguments(parser, occlusion=0.2)
     parser.add_argument("--width", type=int, default=320, help="camera width in pixels (320)")
     parser.add_argument("--height", type=int, default=240, help="camera height in pixels (240)")
     parser.add_argument("--overwrite", action="store_true",
