@@ -75,3 +75,32 @@ def _save(fig, path: Path, plt) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def confusion_figure(calibration, path: Path) -> Path:
+    """One heat map per calibrated factor, ``P(predicted | true)`` with counts, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(calibration.factors)
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 4.0))
+    for ax, name in zip(np.atleast_1d(axes), names, strict=True):
+        m = calibration.factors[name]
+        probs = m.probabilities(0.0)
+        ax.imshow(probs, vmin=0, vmax=1, cmap="Blues")
+        for i in range(len(m.labels)):
+            for j in range(len(m.labels)):
+                ax.text(j, i, f"{probs[i, j]:.2f}\n({m.counts[i, j]})", ha="center",
+                        va="center", fontsize=7,
+                        color="white" if probs[i, j] > 0.6 else "black")
+        ax.set_xticks(range(len(m.labels)), m.labels, rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(len(m.labels)), m.labels, fontsize=8)
+        ax.set_title(f"{name} (accuracy {m.accuracy:.3f})", fontsize=10)
+        ax.set_xlabel("perceived")
+        ax.set_ylabel("true")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

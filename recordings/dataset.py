@@ -6,14 +6,21 @@ Layout of a dataset folder ``DIR``::
     DIR/<split>/color/NNNNNN.png     RGB frames (stored as PNG, BGR on disk as OpenCV writes)
     DIR/<split>/depth/NNNNNN.png     16-bit depth in millimetres
     DIR/<split>/labels.json          one record per frame (below)
+    DIR/<split>/inspection/NNNNNN.png   the inspection view (RGB), on the first frame of a step
+    DIR/<split>/inspection.json      one record per inspection image (same fields, no depth)
 
 with splits ``train``, ``val`` and ``test`` made of whole sessions (frames of one session are
 correlated, so a split never shares a session with another). A frame record holds ``color``,
 ``depth`` (paths relative to the split folder), ``boxes`` (``[x_min, y_min, x_max, y_max]`` in
-pixels, exclusive max, of the visible onions), ``classes`` (0 good, 1 blemished), the true
+pixels, exclusive max, of the onions with at least ``MIN_VISIBLE_PIXELS`` visible pixels),
+``classes`` (0 good, 1 blemished), the true
 ``state`` and its factors ``onion``, ``end_effector``, ``prediction`` (encodings of
 ``irl.domains.onion_sorting``), ``action``, ``occluded`` (the passer-by crossed during the step),
-``occluded_fraction``, ``phase`` (0 = the state at rest), ``session`` and ``frame``.
+``occluded_fraction``, ``phase`` (0 = the state at rest), ``step``, ``session`` and ``frame``.
+
+``dataset.json`` lists its ``views``: ``camera`` (the main RGB-D camera) and ``inspection`` (the
+close view where the sorter, or the robot, looks at the onion in hand; boxes there are in that
+view's pixels). The detector trains on both; the state classifier on the camera view.
 """
 
 from __future__ import annotations
@@ -29,24 +36,30 @@ import numpy as np
 from irl.domains.onion_sorting import decode_state
 from robot.labels import Frame
 
-__all__ = ["CLASSES", "SPLITS", "DatasetWriter", "LabelledFrame", "read_split"]
+__all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetWriter", "LabelledFrame", "read_split"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
 SPLITS = ("train", "val", "test")
+VIEWS = ("camera", "inspection")
+_LABELS = {"camera": "labels.json", "inspection": "inspection.json"}
+MIN_VISIBLE_PIXELS = 25
+"""Onions with fewer visible pixels (slivers behind the hand or the passer-by) get no box."""
 
 
-def frame_record(frame: Frame, session: int, name: str) -> dict:
-    """The JSON record of one frame (see the module docstring)."""
+def frame_record(frame: Frame, session: int, name: str, view: str = "camera") -> dict:
+    """The JSON record of one frame in ``view`` (see the module docstring)."""
     boxes, classes = [], []
-    for onion in frame.onions:
-        if onion.box is not None and onion.visible_pixels > 0:
+    onions = frame.onions if view == "camera" else frame.inspection_onions
+    for onion in onions:
+        if onion.box is not None and onion.visible_pixels >= MIN_VISIBLE_PIXELS:
             boxes.append([int(v) for v in onion.box])
             classes.append(int(onion.blemished))
     state = decode_state(frame.step.state)
+    images = ({"color": f"color/{name}.png", "depth": f"depth/{name}.png"} if view == "camera"
+              else {"color": f"inspection/{name}.png"})
     return {
-        "color": f"color/{name}.png",
-        "depth": f"depth/{name}.png",
+        **images,
         "boxes": boxes,
         "classes": classes,
         "state": int(frame.step.state),
@@ -57,6 +70,7 @@ def frame_record(frame: Frame, session: int, name: str) -> dict:
         "occluded": bool(frame.step.occluded),
         "occluded_fraction": float(frame.occluded_fraction),
         "phase": int(frame.phase),
+        "step": int(frame.step.step),
         "session": int(session),
         "frame": int(frame.index),
     }
@@ -73,32 +87,44 @@ class DatasetWriter:
         self.root = Path(root)
         if (self.root / "dataset.json").exists():
             raise FileExistsError(f"{self.root} already holds a dataset; choose a new --out")
-        self.metadata = {"format": FORMAT, "classes": list(CLASSES), **metadata}
-        self._records: dict[str, list[dict]] = {s: [] for s in SPLITS}
+        self.metadata = {"format": FORMAT, "classes": list(CLASSES), "views": list(VIEWS),
+                         **metadata}
+        self._records = {(s, v): [] for s in SPLITS for v in VIEWS}
         for split in SPLITS:
-            (self.root / split / "color").mkdir(parents=True, exist_ok=True)
-            (self.root / split / "depth").mkdir(parents=True, exist_ok=True)
+            for sub in ("color", "depth", "inspection"):
+                (self.root / split / sub).mkdir(parents=True, exist_ok=True)
 
     def add(self, split: str, frame: Frame, session: int) -> None:
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
-        records = self._records[split]
+        records = self._records[split, "camera"]
         name = f"{len(records):06d}"
         folder = self.root / split
-        cv2.imwrite(str(folder / "color" / f"{name}.png"),
-                    cv2.cvtColor(np.ascontiguousarray(frame.color), cv2.COLOR_RGB2BGR))
+        _write_rgb(folder / "color" / f"{name}.png", frame.color)
         depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
         cv2.imwrite(str(folder / "depth" / f"{name}.png"), depth_mm)
         records.append(frame_record(frame, session, name))
+        if frame.inspection is not None:
+            close = self._records[split, "inspection"]
+            name = f"{len(close):06d}"
+            _write_rgb(folder / "inspection" / f"{name}.png", frame.inspection)
+            close.append(frame_record(frame, session, name, view="inspection"))
 
     def flush(self, split: str | None = None) -> None:
         for s in SPLITS if split is None else (split,):
-            _write_json(self.root / s / "labels.json", self._records[s])
+            for view in VIEWS:
+                _write_json(self.root / s / _LABELS[view], self._records[s, view])
 
     def close(self) -> None:
         self.flush()
-        counts = {s: len(r) for s, r in self._records.items()}
-        _write_json(self.root / "dataset.json", {**self.metadata, "splits": counts})
+        counts = {s: len(self._records[s, "camera"]) for s in SPLITS}
+        inspection = {s: len(self._records[s, "inspection"]) for s in SPLITS}
+        _write_json(self.root / "dataset.json",
+                    {**self.metadata, "splits": counts, "inspection_splits": inspection})
+
+
+def _write_rgb(path: Path, rgb: np.ndarray) -> None:
+    cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
 
 
 def _write_json(path: Path, doc) -> None:
@@ -110,15 +136,15 @@ def _write_json(path: Path, doc) -> None:
 @dataclass(frozen=True)
 class LabelledFrame:
     """One frame of a dataset split, loaded: ``color`` (H, W, 3) uint8 RGB, ``depth`` (H, W)
-    float32 metres, and its record (see the module docstring)."""
+    float32 metres (None in the inspection view), and its record (see the module docstring)."""
 
     color: np.ndarray
-    depth: np.ndarray
+    depth: np.ndarray | None
     record: dict
 
 
-def read_split(root: Path | str, split: str) -> Iterator[LabelledFrame]:
-    """Iterate the frames of one split of a dataset folder."""
+def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[LabelledFrame]:
+    """Iterate the frames of one split of a dataset folder, in ``view`` (see :data:`VIEWS`)."""
     root = Path(root)
     meta_path = root / "dataset.json"
     if not meta_path.exists():
@@ -128,11 +154,17 @@ def read_split(root: Path | str, split: str) -> Iterator[LabelledFrame]:
         raise ValueError(f"{meta_path}: format must be {FORMAT!r}; got {meta.get('format')!r}")
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
-    records: Iterable[dict] = json.loads((root / split / "labels.json").read_text())
+    views = meta.get("views", ["camera"])
+    if view not in views:
+        raise ValueError(f"view must be one of the dataset's views {views}; got {view!r}")
+    records: Iterable[dict] = json.loads((root / split / _LABELS[view]).read_text())
     for rec in records:
         color = cv2.imread(str(root / split / rec["color"]), cv2.IMREAD_COLOR)
-        depth = cv2.imread(str(root / split / rec["depth"]), cv2.IMREAD_UNCHANGED)
-        if color is None or depth is None:
+        depth = (cv2.imread(str(root / split / rec["depth"]), cv2.IMREAD_UNCHANGED)
+                 if "depth" in rec else None)
+        if color is None or ("depth" in rec and depth is None):
             raise ValueError(f"{root / split}: frame {rec['color']} is missing or unreadable")
-        yield LabelledFrame(color=cv2.cvtColor(color, cv2.COLOR_BGR2RGB),
-                            depth=depth.astype(np.float32) / 1000.0, record=rec)
+        yield LabelledFrame(
+            color=cv2.cvtColor(color, cv2.COLOR_BGR2RGB),
+            depth=None if depth is None else depth.astype(np.float32) / 1000.0, record=rec,
+        )

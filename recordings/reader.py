@@ -22,6 +22,7 @@ from mcap.stream_reader import StreamReader
 
 from irl.demonstrations import Demonstration, Trajectory
 from irl.domains.onion_sorting import N_ACTIONS
+from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
 from recordings.schema import END_METADATA, FORMAT_NAME, SESSION_METADATA, Topic
 from robot.labels import StepLabel
 
@@ -115,6 +116,11 @@ class Session:
         The ground-truth steps, in order.
     problem : str or None
         What was wrong with a damaged file.
+    perception : dict of int -> dict
+        The ``/perception/state`` message of each perceived step (empty if the session was
+        not perceived; see :mod:`recordings.perception`).
+    perception_models : dict or None
+        The ``onionsort.perception`` record: which models perceived the session.
     """
 
     path: Path
@@ -123,6 +129,8 @@ class Session:
     steps: list[StepLabel]
     _frames: list[FrameRecord] = field(repr=False)
     problem: str | None = None
+    perception: dict[int, dict] = field(default_factory=dict, repr=False)
+    perception_models: dict | None = None
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -156,6 +164,28 @@ class Session:
         traj = self.trajectory()
         return Demonstration.from_pairs(traj.states, traj.actions, N_ACTIONS,
                                         occluded=self.occluded)
+
+    def perceived_demonstration(self) -> Demonstration:
+        """The session as perception saw it: pair observations ``o = s * 5 + a`` of the
+        perceived state and action, None exactly where the classifier said occluded.
+
+        Raises
+        ------
+        ValueError
+            If the session has no perception topics (run ``onionsort perceive`` on it), or a
+            step lacks its perception.
+        """
+        if not self.perception:
+            raise ValueError(f"{self.path} has no perception topics; run `onionsort perceive "
+                             f"{self.path}` first")
+        if not self.steps:
+            raise ValueError(f"{self.path}: the session holds no complete step")
+        missing = [s.step for s in self.steps if s.step not in self.perception]
+        if missing:
+            raise ValueError(f"{self.path}: steps {missing[:5]} have no perception (the "
+                             "session was perceived before it was complete?)")
+        obs = [self.perception[s.step]["observation"] for s in self.steps]
+        return Demonstration(obs)
 
 
 def _scan(path: Path):
@@ -208,6 +238,8 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     end: dict | None = None
     parts: dict[int, dict] = {}
     steps: dict[int, StepLabel] = {}
+    perception: dict[int, dict] = {}
+    models = None
     problem = None
     try:
         for kind, name, rec in _scan(path):
@@ -216,9 +248,15 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
                     meta = dict(rec.metadata)
                 elif name == END_METADATA:
                     end = dict(rec.metadata)
+                elif name == PERCEPTION_METADATA:
+                    models = _decode_metadata(dict(rec.metadata))
                 continue
             if meta is None:
                 break  # a session's metadata precedes every message
+            if name == PerceptionTopic.STATE:
+                msg = json.loads(rec.data)
+                perception[int(msg["step"])] = msg
+                continue
             _collect(name, rec, parts, steps)
     except Exception as exc:  # any failure to parse the rest is damage: CRC, EOF, zstd, struct
         problem = (f"{type(exc).__name__}: {exc}" if str(exc)
@@ -245,7 +283,8 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
             raise RecordingDamagedError(message + "; open it with recover=True to use them")
         logger.warning("%s", message)
     return Session(path=path, metadata=_decode_metadata(meta), status=status,
-                   steps=complete_steps, _frames=frames, problem=problem)
+                   steps=complete_steps, _frames=frames, problem=problem,
+                   perception=perception, perception_models=models)
 
 
 def _decode_metadata(meta: dict) -> dict:

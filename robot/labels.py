@@ -80,6 +80,9 @@ class Frame:
         Fraction of the main view covered by the passer-by, in [0, 1].
     inspection : ndarray of shape (h, w, 3) or None
         uint8 RGB of the inspection view (rendered on the first frame of each step).
+    inspection_onions : tuple of OnionLabel
+        The onions visible in the inspection view, with their boxes in that view; empty when
+        there is no inspection view.
     """
 
     index: int
@@ -91,3 +94,4 @@ class Frame:
     onions: tuple[OnionLabel, ...] = ()
     occluded_fraction: float = 0.0
     inspection: np.ndarray | None = field(default=None, repr=False)
+    inspection_onions: tuple[OnionLabel, ...] = ()

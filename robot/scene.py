@@ -21,11 +21,15 @@ from robot.state_map import (
     BIN_CENTER,
     BIN_HALF_EXTENT,
     BIN_TOP,
+    PICK_SPOT,
 )
 
-__all__ = ["Onion", "OnionPool", "build_workcell", "connect"]
+__all__ = ["GATE_X", "Onion", "OnionPool", "StopGate", "build_workcell", "connect"]
 
 _LANES = (-0.04, 0.08)  # y range onions ride in (reachable by the sorter)
+GATE_X = float(PICK_SPOT[0]) + 0.06
+"""Position along the belt of the stop gate that holds a claimed onion at the pick spot."""
+_QUEUE_SPACING = 0.07  # distance between onions queued behind the raised gate
 
 
 def connect() -> int:
@@ -67,7 +71,6 @@ def build_workcell(client: int, rng: np.random.Generator) -> dict[str, int]:
         ids[side] = _box(client, [BELT_HALF_LENGTH, 0.01, 0.025], [0, y, BELT_TOP + 0.005],
                          [0.6, 0.62, 0.65, 1])
     bin_rgba = [0.15, 0.35, 0.7, 1]
-    BIN_TOP / 2
     cx, cy = BIN_CENTER[:2]
     e = BIN_HALF_EXTENT
     ids["bin_floor"] = _box(client, [e, e, 0.01], [cx, cy, BIN_TOP - 0.3], bin_rgba)
@@ -79,6 +82,34 @@ def build_workcell(client: int, rng: np.random.Generator) -> dict[str, int]:
     ):
         ids[name] = _box(client, half, [cx + off[0], cy + off[1], BIN_TOP - 0.15], bin_rgba)
     return ids
+
+
+class StopGate:
+    """The pneumatic stop gate across the belt, just downstream of the pick spot.
+
+    Claiming an onion raises the gate: the claimed onion waits at the pick spot and the onions
+    behind it queue. Picking the onion (or placing it back) lowers the gate into the belt's
+    frame, out of sight. On a real line the raised gate is the visible sign that an onion has
+    been claimed; the state classifier reads it.
+    """
+
+    _HALF = (0.02, BELT_HALF_WIDTH, 0.05)
+
+    def __init__(self, client: int) -> None:
+        self.client = client
+        self.body = _box(client, list(self._HALF), self._center(False), [1.0, 0.45, 0.05, 1])
+        self.raised = False
+
+    def _center(self, raised: bool) -> list[float]:
+        z = BELT_TOP + self._HALF[2] if raised else BELT_TOP - self._HALF[2] - 0.005
+        return [GATE_X, 0.0, z]
+
+    def set(self, raised: bool) -> None:
+        """Raise or lower the gate."""
+        if raised != self.raised:
+            p.resetBasePositionAndOrientation(self.body, self._center(raised), [0, 0, 0, 1],
+                                              physicsClientId=self.client)
+            self.raised = raised
 
 
 @dataclass
@@ -150,14 +181,23 @@ class OnionPool:
         """Carry every onion on the belt ``distance`` metres downstream.
 
         An onion reaching the belt's end re-enters at its start (out of the camera's view).
-        ``stop = (onion, x)`` holds one onion at a stop gate: it rides only until ``x``.
+        ``stop = (onion, x)`` holds one onion at a raised stop gate: it rides only until ``x``,
+        and the onions upstream of it queue behind it.
         """
-        for onion in self.onions:
-            if onion.place != "belt":
-                continue
+        limit = None
+        if stop is not None:
+            held, stop_x = stop
+            x = min(held.position[0] + distance, max(stop_x, held.position[0]))
+            self.move(held, [x, held.position[1], held.position[2]])
+            limit = x - _QUEUE_SPACING
+        riding = sorted((o for o in self.onions
+                         if o.place == "belt" and (stop is None or o is not stop[0])),
+                        key=lambda o: -o.position[0])
+        for onion in riding:
             x = onion.position[0] + distance
-            if stop is not None and onion is stop[0]:
-                x = min(x, max(stop[1], onion.position[0]))
+            if limit is not None and onion.position[0] <= limit + 1e-9:
+                x = min(x, max(limit, onion.position[0]))
+                limit = x - _QUEUE_SPACING
             elif x > BELT_HALF_LENGTH - 0.05:
                 x -= 2 * BELT_HALF_LENGTH - 0.1
             self.move(onion, [x, onion.position[1], onion.position[2]])

@@ -38,7 +38,7 @@ from robot.camera import (
 )
 from robot.labels import Frame, OnionLabel, StepLabel
 from robot.occluder import PasserBy, occlusion_schedule
-from robot.scene import Onion, OnionPool, build_workcell, connect
+from robot.scene import Onion, OnionPool, StopGate, build_workcell, connect
 from robot.state_map import HAND_TARGETS, PICK_SPOT, WorldSnapshot, state_of_world
 
 __all__ = ["INSPECTION_CAMERA", "SessionConfig", "SortingSession", "expert_model"]
@@ -172,6 +172,7 @@ class SortingSession:
         self.pool = OnionPool(self.client, self.config.n_onions, self.config.blemish_rate, rng,
                               texture_size=self.config.texture_size)
         self.sorter = HumanSorter(self.client, rng)
+        self.gate = StopGate(self.client)
         cam = self.config.camera
         self.walker = PasserBy(self.client, self._walker_rng, cam.eye, cam.target)
         self.focus: Onion | None = None
@@ -230,8 +231,23 @@ class SortingSession:
     def _render(self, index: int, label: StepLabel, phase: int, time_s: float,
                 with_inspection: bool) -> Frame:
         image = render(self.client, self.config.camera, self.lighting)
-        boxes = boxes_from_segmentation(image.seg, self.pool.body_ids)
-        onions = tuple(
+        onions = self._onion_labels(image.seg)
+        inspection, inspection_onions = None, ()
+        if with_inspection:
+            close = render(self.client, self.config.inspection, self.lighting)
+            inspection = close.rgb
+            inspection_onions = tuple(o for o in self._onion_labels(close.seg) if o.box)
+        return Frame(
+            index=index, step=label, phase=phase, time_s=time_s, color=image.rgb,
+            depth=image.depth, onions=onions,
+            occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
+            inspection=inspection, inspection_onions=inspection_onions,
+        )
+
+    def _onion_labels(self, seg: np.ndarray) -> tuple[OnionLabel, ...]:
+        """Every onion of the pool, with its box in the view whose segmentation is ``seg``."""
+        boxes = boxes_from_segmentation(seg, self.pool.body_ids)
+        return tuple(
             OnionLabel(
                 onion_id=o.onion_id, blemished=o.blemished, position=o.position.copy(),
                 in_focus=o is self.focus,
@@ -239,14 +255,6 @@ class SortingSession:
                 visible_pixels=boxes[o.body][4] if o.body in boxes else 0,
             )
             for o in self.pool.onions
-        )
-        inspection = (render(self.client, self.config.inspection, self.lighting).rgb
-                      if with_inspection else None)
-        return Frame(
-            index=index, step=label, phase=phase, time_s=time_s, color=image.rgb,
-            depth=image.depth, onions=onions,
-            occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
-            inspection=inspection,
         )
 
     # -- the run -----------------------------------------------------------------------------
@@ -278,6 +286,9 @@ class SortingSession:
                     stop = (self.focus, stop_x) if self._pinned(s) else None
                     self.pool.advance(cfg.belt_speed * dt, stop=stop)
                 self.sorter.set_hand(path_point(waypoints, phase))
+                # the gate is up while a claimed onion waits: it rises as the sorter claims
+                # one and drops as the sorter reaches for it
+                self.gate.set(self._pinned(s if k == 0 else s_next))
                 if a == SortAction.PICK and s_next != s and phase >= 0.5:
                     self.focus.place = "held"
                 if self.focus.place == "held":

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -116,36 +116,71 @@ def _counts(true: np.ndarray, pred: np.ndarray, n: int, name: str) -> np.ndarray
 
 @dataclass(frozen=True)
 class Calibration:
-    """Per-factor and joint confusion measured on held-out frames."""
+    """Per-factor and joint confusion measured on held-out steps.
+
+    Attributes
+    ----------
+    factors : dict of str -> ConfusionMatrix
+        One per entry of :data:`FACTORS`.
+    joint_state : ConfusionMatrix
+        The confusion of the whole state (48 x 48).
+    pair_correct : int
+        Steps whose state and action were both right.
+    smoothing : float
+        Additive smoothing applied when the observation model is built.
+    """
 
     factors: dict[str, ConfusionMatrix]
     joint_state: ConfusionMatrix
+    pair_correct: int = 0
+    smoothing: float = 1.0
 
-    def observation_model(self, smoothing: float = 1.0) -> ObservationModel:
+    def with_smoothing(self, smoothing: float) -> Calibration:
+        """The same counts with another smoothing."""
+        if smoothing < 0:
+            raise ValueError(f"smoothing must be >= 0; got {smoothing}")
+        return replace(self, smoothing=float(smoothing))
+
+    def observation_model(self, smoothing: float | None = None) -> ObservationModel:
         """The learners' ``O[s, a, o]`` (48 states x 5 actions, pair observations)."""
+        smoothing = self.smoothing if smoothing is None else smoothing
         mats = [self.factors[name].probabilities(smoothing)
                 for name in ("onion", "end_effector", "prediction")]
         return factored_observation_model(mats, self.factors["action"].probabilities(smoothing))
 
     @property
+    def n_observed(self) -> int:
+        """Steps counted (those perception did not call occluded)."""
+        return int(self.joint_state.counts.sum())
+
+    @property
     def state_error_rate(self) -> float:
-        """Measured fraction of frames whose whole state estimate is wrong (the paper's ~30%)."""
+        """Measured fraction of steps whose whole state estimate is wrong (the paper's ~30%)."""
         return 1.0 - self.joint_state.accuracy
 
-    def save(self, path: Path | str) -> Path:
-        """Write the counts (the smoothing is applied when the model is built) as JSON.
+    @property
+    def pair_error_rate(self) -> float:
+        """Measured fraction of steps whose state or action estimate is wrong."""
+        return 1.0 - self.pair_correct / self.n_observed if self.n_observed else float("nan")
 
-        Written to a temporary file and renamed, so an existing file is never half-written.
+    def save(self, path: Path | str, extra: dict | None = None) -> Path:
+        """Write the counts and the smoothing (applied when the model is built) as JSON.
+
+        ``extra`` adds provenance (dataset, models, metrics). Written to a temporary file and
+        renamed, so an existing file is never half-written.
         """
         path = Path(path)
-        doc = {
+        doc = {**(extra or {}),
             "format": FORMAT,
             "n_states": N_STATES,
             "n_actions": N_ACTIONS,
             "factors": {k: {"labels": m.labels, "counts": m.counts.tolist()}
                         for k, m in self.factors.items()},
             "joint_state_counts": self.joint_state.counts.tolist(),
+            "pair_correct": self.pair_correct,
+            "smoothing": self.smoothing,
             "state_error_rate": self.state_error_rate,
+            "pair_error_rate": self.pair_error_rate,
             "accuracy": {k: m.accuracy for k, m in self.factors.items()},
         }
         tmp = path.with_name(path.name + ".partial")
@@ -175,7 +210,9 @@ def calibrate(true: dict[str, Sequence[int]], predicted: dict[str, Sequence[int]
         [np.asarray(predicted[k]) for k in ("onion", "end_effector", "prediction")], FACTOR_SIZES)
     joint = ConfusionMatrix(_counts(state_true, state_pred, N_STATES, "state"),
                             [str(s) for s in range(N_STATES)])
-    return Calibration(factors=factors, joint_state=joint)
+    pair_correct = int(np.sum((state_true == state_pred)
+                              & (np.asarray(true["action"]) == np.asarray(predicted["action"]))))
+    return Calibration(factors=factors, joint_state=joint, pair_correct=pair_correct)
 
 
 def load_calibration(path: Path | str) -> Calibration:
@@ -199,4 +236,6 @@ def load_calibration(path: Path | str) -> Calibration:
     if set(factors) != set(FACTORS):
         raise ValueError(f"{path}: factors must be {list(FACTORS)}; got {sorted(factors)}")
     joint = ConfusionMatrix(np.array(doc["joint_state_counts"]), [str(s) for s in range(N_STATES)])
-    return Calibration(factors=factors, joint_state=joint)
+    return Calibration(factors=factors, joint_state=joint,
+                       pair_correct=int(doc.get("pair_correct", 0)),
+                       smoothing=float(doc.get("smoothing", 1.0)))

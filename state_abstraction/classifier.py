@@ -1,19 +1,29 @@
-"""An SA-Net-style state classifier: RGB-D frame -> onion location, end-effector location, occluded.
+"""An SA-Net-style state classifier: one step's frames -> onion, end effector, action, occluded.
 
-Layouts: frames as tensors ``x[n, c, h, w]`` with channels (R, G, B, depth), colour in [0, 1]
-and depth in metres divided by ``DEPTH_SCALE``; logits ``[n, n_classes]`` per head.
+Layouts: a step is the stack of its ``frames`` RGB-D frames, as tensors ``x[n, 4 * frames, h,
+w]`` with channels (R, G, B, depth) per frame in time order, colour in [0, 1] and depth in metres
+divided by ``DEPTH_SCALE``; logits ``[n, n_classes]`` per head.
 
-One shared convolutional trunk, whose last feature map is pooled to a coarse grid (where the
-hand and the onion are matters, so the pooling keeps their layout), and one head per state
-factor plus an explicit occluded outcome. The factor losses are masked on occluded frames:
-there is nothing to read there. The prediction factor (good / bad / unknown) is not read off the
-scene; it comes from the detector's class of the inspected onion.
+A recorded step shows the state at rest in its first frame and the action's motion in the
+others, so one network reads both from the stack (early fusion): one shared convolutional trunk
+whose last feature map is pooled to a coarse grid (where the hand and the onion are matters, so
+the pooling keeps their layout), and one head per output:
+
+- ``onion``, ``end_effector``: the state's location factors;
+- ``action``: the sorter's action during the step;
+- ``waiting``: whether a claimed onion waits at the raised stop gate (the onion is on the
+  conveyor, not yet inspected); with the detector's class of the inspected onion this gives the
+  prediction factor (see :mod:`state_abstraction.perceive`);
+- ``occluded``: the explicit occluded outcome.
+
+The factor losses are masked on occluded steps: there is nothing to read there.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -22,22 +32,27 @@ import numpy as np
 import torch
 from torch import nn
 
-from irl.domains.onion_sorting import Location
+from irl.domains.onion_sorting import Location, Prediction, SortAction
 
-__all__ = ["ClassifierConfig", "StateClassifier", "load_frames", "train_classifier"]
+__all__ = ["HEADS", "ClassifierConfig", "StateClassifier", "load_steps", "step_input",
+           "train_classifier"]
 
 logger = logging.getLogger(__name__)
 
 DEPTH_SCALE = 5.0
-HEADS = {"onion": len(Location), "end_effector": len(Location), "occluded": 2}
+HEADS = {"onion": len(Location), "end_effector": len(Location), "action": len(SortAction),
+         "waiting": 2, "occluded": 2}
+#: Heads that are read only on unoccluded steps.
+FACTOR_HEADS = ("onion", "end_effector", "action", "waiting")
 
 
 @dataclass(frozen=True)
 class ClassifierConfig:
-    """Input size and training hyperparameters."""
+    """Input size and training hyperparameters; ``frames`` is the number of frames per step."""
 
     width: int = 160
     height: int = 120
+    frames: int = 3
     channels: int = 32
     epochs: int = 12
     batch_size: int = 32
@@ -62,8 +77,9 @@ class StateClassifier(nn.Module):
         super().__init__()
         self.config = config
         c = config.channels
-        self.trunk = nn.Sequential(_block(4, c), _block(c, 2 * c), _block(2 * c, 2 * c),
-                                   _block(2 * c, 4 * c), nn.AdaptiveAvgPool2d((3, 4)),
+        self.trunk = nn.Sequential(_block(4 * config.frames, c), _block(c, 2 * c),
+                                   _block(2 * c, 2 * c), _block(2 * c, 4 * c),
+                                   nn.AdaptiveAvgPool2d((3, 4)),
                                    nn.Flatten(), nn.Dropout(0.2))
         self.heads = nn.ModuleDict({k: nn.Linear(4 * c * 12, n) for k, n in HEADS.items()})
 
@@ -72,10 +88,15 @@ class StateClassifier(nn.Module):
         return {k: head(z) for k, head in self.heads.items()}
 
     @torch.no_grad()
-    def predict(self, x: torch.Tensor) -> dict[str, np.ndarray]:
-        """Class probabilities per head, ``{head: [n, n_classes]}``."""
+    def predict(self, x: torch.Tensor | np.ndarray, batch_size: int = 64
+                ) -> dict[str, np.ndarray]:
+        """Class probabilities per head, ``{head: [n, n_classes]}``, of steps ``x``."""
         self.eval()
-        return {k: torch.softmax(v, dim=1).numpy() for k, v in self(x).items()}
+        x = torch.as_tensor(x)
+        chunks = [{k: torch.softmax(v, dim=1).numpy()
+                   for k, v in self(x[i:i + batch_size].float()).items()}
+                  for i in range(0, len(x), batch_size)]
+        return {k: np.concatenate([c[k] for c in chunks]) for k in HEADS}
 
     def save(self, path: Path | str) -> Path:
         path = Path(path)
@@ -95,26 +116,56 @@ class StateClassifier(nn.Module):
         return model.eval()
 
 
-def to_input(color: np.ndarray, depth: np.ndarray, config: ClassifierConfig) -> np.ndarray:
-    """One frame as a float32 array (4, h, w) at the classifier's input size."""
+def frame_input(color: np.ndarray, depth: np.ndarray, config: ClassifierConfig) -> np.ndarray:
+    """One frame as float32 (4, h, w) at the classifier's input size."""
     size = (config.width, config.height)
     rgb = cv2.resize(color, size, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
     d = cv2.resize(np.nan_to_num(depth), size, interpolation=cv2.INTER_NEAREST)
     return np.concatenate([rgb.transpose(2, 0, 1), (d / DEPTH_SCALE)[None]], axis=0)
 
 
-def load_frames(root: Path | str, split: str, config: ClassifierConfig):
-    """Inputs ``x[n, 4, h, w]`` and targets ``{head: [n]}`` of a dataset split."""
+def step_input(colors, depths, config: ClassifierConfig) -> np.ndarray:
+    """One step's frames (in time order) as float32 (4 * frames, h, w)."""
+    if len(colors) != config.frames or len(depths) != config.frames:
+        raise ValueError(f"a step must have {config.frames} frames for this classifier; got "
+                         f"{len(colors)} colour and {len(depths)} depth images")
+    return np.concatenate([frame_input(c, d, config) for c, d in zip(colors, depths,
+                                                                       strict=True)])
+
+
+def waiting(onion: int, prediction: int) -> int:
+    """1 if a claimed onion waits at the gate (on the conveyor, not inspected), else 0."""
+    return int(onion == Location.CONVEYOR and prediction == Prediction.UNKNOWN)
+
+
+def load_steps(root: Path | str, split: str, config: ClassifierConfig):
+    """Inputs ``x[n, 4 * frames, h, w]`` (float16) and targets ``{head: [n]}`` of a split.
+
+    Frames are grouped into steps by ``(session, step)``; a step cut short at the end of the
+    dataset is left out.
+    """
     from recordings.dataset import read_split
 
-    xs, ys = [], {k: [] for k in HEADS}
+    steps: dict[tuple[int, int], list] = defaultdict(list)
     for frame in read_split(root, split):
-        xs.append(to_input(frame.color, frame.depth, config))
-        for k in ("onion", "end_effector"):
-            ys[k].append(frame.record[k])
-        ys["occluded"].append(int(frame.record["occluded"]))
+        rec = frame.record
+        key = (rec["session"], rec.get("step", (rec["frame"] - rec["phase"]) // config.frames))
+        steps[key].append(frame)
+    xs, ys = [], {k: [] for k in HEADS}
+    for frames in steps.values():
+        frames.sort(key=lambda f: f.record["phase"])
+        if len(frames) != config.frames:
+            continue
+        rec = frames[0].record
+        xs.append(step_input([f.color for f in frames], [f.depth for f in frames], config)
+                  .astype(np.float16))
+        for k in ("onion", "end_effector", "action"):
+            ys[k].append(rec[k])
+        ys["waiting"].append(waiting(rec["onion"], rec["prediction"]))
+        ys["occluded"].append(int(rec["occluded"]))
     if not xs:
-        raise ValueError(f"split {split!r} of {root} holds no frames")
+        raise ValueError(f"split {split!r} of {root} holds no complete step of "
+                         f"{config.frames} frames")
     return torch.from_numpy(np.stack(xs)), {k: torch.tensor(v) for k, v in ys.items()}
 
 
@@ -123,18 +174,18 @@ def _loss(out: dict, y: dict) -> torch.Tensor:
     loss = ce(out["occluded"], y["occluded"])
     visible = y["occluded"] == 0
     if visible.any():
-        for k in ("onion", "end_effector"):
+        for k in FACTOR_HEADS:
             loss = loss + ce(out[k][visible], y[k][visible])
     return loss
 
 
 def evaluate(model: StateClassifier, x: torch.Tensor, y: dict) -> dict:
-    """Accuracy per factor on unoccluded frames and recall of occluded frames."""
+    """Accuracy per head on unoccluded steps and recall and precision of occluded steps."""
     probs = model.predict(x)
     pred = {k: v.argmax(axis=1) for k, v in probs.items()}
     occ = y["occluded"].numpy() == 1
     metrics = {f"accuracy_{k}": float((pred[k][~occ] == y[k].numpy()[~occ]).mean())
-               for k in ("onion", "end_effector") if (~occ).any()}
+               for k in FACTOR_HEADS if (~occ).any()}
     metrics["occlusion_recall"] = float((pred["occluded"][occ] == 1).mean()) if occ.any() else 1.0
     metrics["occlusion_precision"] = (
         float(occ[pred["occluded"] == 1].mean()) if (pred["occluded"] == 1).any() else 1.0)
@@ -153,8 +204,8 @@ def train_classifier(data: Path | str, out: Path | str, config: ClassifierConfig
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
-    x_tr, y_tr = load_frames(data, "train", config)
-    x_va, y_va = load_frames(data, "val", config)
+    x_tr, y_tr = load_steps(data, "train", config)
+    x_va, y_va = load_steps(data, "val", config)
     model = StateClassifier(config)
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * ((len(x_tr) + config.batch_size - 1) // config.batch_size)
@@ -166,7 +217,7 @@ def train_classifier(data: Path | str, out: Path | str, config: ClassifierConfig
         total = 0.0
         for i in range(0, len(order), config.batch_size):
             idx = order[i:i + config.batch_size]
-            loss = _loss(model(x_tr[idx]), {k: v[idx] for k, v in y_tr.items()})
+            loss = _loss(model(x_tr[idx].float()), {k: v[idx] for k, v in y_tr.items()})
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -180,7 +231,7 @@ def train_classifier(data: Path | str, out: Path | str, config: ClassifierConfig
             best = score
             model.save(out / "state_classifier.pt")
     model = StateClassifier.load(out / "state_classifier.pt")
-    x_te, y_te = load_frames(data, "test", config)
+    x_te, y_te = load_steps(data, "test", config)
     metrics = {"test": evaluate(model, x_te, y_te), "history": history,
                "config": asdict(config)}
     (out / "state_classifier_metrics.json").write_text(json.dumps(metrics, indent=1))

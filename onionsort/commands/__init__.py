@@ -10,4 +10,6 @@ COMMAND_MODULES = [
     "onionsort.commands.record",
     "onionsort.commands.dataset",
     "onionsort.commands.train",
+    "onionsort.commands.perception",
+    "onionsort.commands.learn",
 ]

@@ -1,0 +1,180 @@
+"""Training and evaluation of the detector from scratch on a rendered dataset.
+
+Checkpoints: ``OUT/detector_last.pt`` after every epoch (network, EMA, optimiser, scheduler,
+epoch, configuration: what ``resume`` continues from), ``OUT/detector.pt`` the EMA weights of the
+best epoch by validation mAP@0.5:0.95, and ``OUT/detector_metrics.json``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from perception.assign import detection_loss
+from perception.data import Sample, augment, load_samples
+from perception.detector import Detector, postprocess, save_weights
+from perception.metrics import mean_average_precision
+from perception.model import DetectorConfig, DetectorNet, grid_points
+
+__all__ = ["TrainConfig", "evaluate_detector", "train_detector"]
+
+logger = logging.getLogger(__name__)
+
+#: Score threshold when measuring mAP (low, as is usual: mAP integrates over scores).
+EVAL_SCORE_THRESHOLD = 0.01
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training hyperparameters (the network's own are in :class:`DetectorConfig`).
+
+    An epoch is ``images_per_epoch`` images drawn afresh from the train split (consecutive
+    frames of a session are near duplicates, so full passes waste time on a CPU).
+    """
+
+    epochs: int = 24
+    images_per_epoch: int = 1600
+    batch_size: int = 16
+    lr: float = 2e-3
+    weight_decay: float = 5e-4
+    warmup_epochs: float = 1.0
+    ema_decay: float = 0.998
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.epochs < 1:
+            raise ValueError(f"epochs must be >= 1; got {self.epochs}")
+        if self.images_per_epoch < 1:
+            raise ValueError(f"images_per_epoch must be >= 1; got {self.images_per_epoch}")
+        if self.batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")
+
+
+def _batch(samples: list[Sample]):
+    x = torch.from_numpy(np.stack([s.image for s in samples])).permute(0, 3, 1, 2).float()
+    targets = [(torch.from_numpy(s.boxes).float(), torch.from_numpy(s.classes).long())
+               for s in samples]
+    return x / 255.0, targets
+
+
+@torch.no_grad()
+def evaluate_detector(net: DetectorNet, samples: list[Sample], batch_size: int = 32
+                      ) -> dict[str, float]:
+    """mAP of ``net`` on canvas samples."""
+    net.eval()
+    points, _ = grid_points(net.config.height, net.config.width)
+    gts, dts = [], []
+    for i in range(0, len(samples), batch_size):
+        chunk = samples[i:i + batch_size]
+        x, _ = _batch(chunk)
+        logits, ltrb = net(x)
+        for s, (b, sc, c) in zip(chunk, postprocess(logits, ltrb, points, net.config,
+                                                    EVAL_SCORE_THRESHOLD), strict=True):
+            gts.append((s.boxes, s.classes))
+            dts.append((b.numpy(), sc.numpy(), c.numpy()))
+    return mean_average_precision(gts, dts)
+
+
+def _schedule(step: int, total: int, warmup: int) -> float:
+    if step < warmup:
+        return (step + 1) / warmup
+    return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * (step - warmup) / max(1, total - warmup)))
+
+
+def train_detector(data: Path | str, out: Path | str, config: TrainConfig = TrainConfig(),
+                   net_config: DetectorConfig | None = None, *, resume: bool = False,
+                   progress: bool = True) -> dict:
+    """Train on ``data``'s train split; keep the best epoch on val; report val and test mAP.
+
+    Returns the metrics written to ``out/detector_metrics.json``.
+    """
+    from tqdm import tqdm
+
+    net_config = DetectorConfig() if net_config is None else net_config
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    last = out / "detector_last.pt"
+    if resume and not last.is_file():
+        raise FileNotFoundError(f"cannot resume: {last} does not exist")
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    train = load_samples(data, "train", net_config.width, net_config.height, seed=config.seed)
+    val = load_samples(data, "val", net_config.width, net_config.height, seed=config.seed)
+    net = DetectorNet(net_config)
+    ema = copy.deepcopy(net).eval()
+    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    n_epoch = min(config.images_per_epoch, len(train))
+    per_epoch = math.ceil(n_epoch / config.batch_size)
+    total, warmup = config.epochs * per_epoch, int(config.warmup_epochs * per_epoch)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: _schedule(k, total, warmup))
+    start, history, best = 0, [], -1.0
+    if resume:
+        ckpt = torch.load(last, map_location="cpu", weights_only=False)
+        if ckpt["train_config"] != asdict(config) or ckpt["config"] != net_config.to_dict():
+            raise ValueError(f"cannot resume from {last}: it was trained with "
+                             f"{ckpt['train_config']}, {ckpt['config']}")
+        net.load_state_dict(ckpt["model"])
+        ema.load_state_dict(ckpt["ema"])
+        opt.load_state_dict(ckpt["optimizer"])
+        sched.load_state_dict(ckpt["scheduler"])
+        torch.set_rng_state(ckpt["torch_rng"])
+        rng.bit_generator.state = ckpt["numpy_rng"]
+        start, history, best = ckpt["epoch"] + 1, ckpt["history"], ckpt["best"]
+        logger.info("resuming from epoch %d of %d", start, config.epochs)
+    points, strides = grid_points(net_config.height, net_config.width)
+    step = start * per_epoch
+    for epoch in tqdm(range(start, config.epochs), desc="detector", unit="epoch",
+                      initial=start, total=config.epochs, disable=not progress):
+        net.train()
+        order = rng.permutation(len(train))[:n_epoch]
+        losses = []
+        for i in range(0, len(order), config.batch_size):
+            x, targets = _batch([augment(train[j], rng) for j in order[i:i + config.batch_size]])
+            logits, ltrb = net(x)
+            loss, _ = detection_loss(logits, ltrb, points, strides, targets)
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
+            opt.step()
+            sched.step()
+            step += 1
+            decay = config.ema_decay * (1 - math.exp(-step / 200))
+            with torch.no_grad():
+                for e, p in zip(ema.state_dict().values(), net.state_dict().values(),
+                                strict=True):
+                    if e.dtype.is_floating_point:
+                        e.mul_(decay).add_(p.detach(), alpha=1 - decay)
+                    else:
+                        e.copy_(p)
+            losses.append(loss.item())
+        metrics = evaluate_detector(ema, val)
+        history.append({"epoch": epoch, "train_loss": float(np.mean(losses)),
+                        **{f"val_{k}": v for k, v in metrics.items()}})
+        logger.info("epoch %d: %s", epoch, history[-1])
+        if metrics["map50_95"] > best:
+            best = metrics["map50_95"]
+            save_weights(ema, out / "detector.pt")
+        tmp = last.with_name(last.name + ".partial")
+        torch.save({"model": net.state_dict(), "ema": ema.state_dict(),
+                    "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
+                    "epoch": epoch, "history": history, "best": best,
+                    "config": net_config.to_dict(), "train_config": asdict(config),
+                    "torch_rng": torch.get_rng_state(), "numpy_rng": rng.bit_generator.state},
+                   tmp)
+        tmp.replace(last)
+    best_net = Detector.load(out / "detector.pt").net
+    test = load_samples(data, "test", net_config.width, net_config.height, seed=config.seed)
+    result = {"val": evaluate_detector(best_net, val), "test": evaluate_detector(best_net, test),
+              "history": history, "config": net_config.to_dict(), "train": asdict(config),
+              "n_train_images": len(train), "n_test_images": len(test)}
+    tmp = out / "detector_metrics.json.partial"
+    tmp.write_text(json.dumps(result, indent=1))
+    tmp.replace(out / "detector_metrics.json")
+    return result

@@ -1,0 +1,150 @@
+"""Perception of sessions: the prediction tracker, perceived demonstrations, the commands."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from irl.domains.onion_sorting import Location, Prediction
+from onionsort.cli import main
+from onionsort.pipeline import PerceptionModels, perceive_session
+from perception import Detector, DetectorConfig, DetectorNet
+from recordings import open_session
+from state_abstraction.classifier import HEADS, ClassifierConfig, StateClassifier
+from state_abstraction.perceive import track_predictions
+
+C, H, F, B = Location.CONVEYOR, Location.HOVER, Location.FACE, Location.BIN
+G, X, U = Prediction.GOOD, Prediction.BAD, Prediction.UNKNOWN
+
+
+def test_predictions_come_from_inspection_and_reset_on_a_new_onion():
+    # claim (gate up), pick, inspect (blemished), bin, claim, pick, inspect (good), back on belt
+    onion = [C, H, F, B, C, H, F, C]
+    waiting = [1, 0, 0, 0, 1, 0, 0, 0]
+    occluded = [0] * 8
+    inspected = [None, None, 1, None, None, None, 0, None]
+    assert track_predictions(onion, waiting, occluded, inspected) == [U, U, X, X, U, U, G, G]
+
+
+def test_an_inspection_seen_during_an_occluded_step_still_counts():
+    onion = [C, H, F, B]
+    assert track_predictions(onion, [1, 0, 0, 0], [0, 0, 1, 0], [None, None, 1, None]) == [
+        U, U, X, X]
+    with pytest.raises(ValueError, match="equal lengths"):
+        track_predictions(onion, [1], [0], [None])
+
+
+@pytest.fixture(scope="module")
+def random_models(tmp_path_factory):
+    """Untrained models: their calls are arbitrary, which is what these tests need."""
+    folder = tmp_path_factory.mktemp("models")
+    torch.manual_seed(0)
+    StateClassifier(ClassifierConfig(width=64, height=48, channels=4)).save(
+        folder / "state_classifier.pt")
+    Detector(DetectorNet(DetectorConfig(width=128, height=96, channels=4))).save(
+        folder / "detector.pt")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec")
+    assert main(["record", "--sessions", "1", "--steps-per-session", "8", "--occlusion", "0.5",
+                 "--seed", "2", "--out", str(out)]) == 0
+    return next(out.glob("*.mcap"))
+
+
+class ScriptedClassifier(StateClassifier):
+    """Calls every third step occluded; random estimates otherwise."""
+
+    def predict(self, x, batch_size=64):
+        rng = np.random.default_rng(len(x))
+        probs = {k: rng.dirichlet(np.ones(n), len(x)) for k, n in HEADS.items()}
+        probs["occluded"] = np.array([[0.1, 0.9] if t % 3 == 1 else [0.8, 0.2]
+                                      for t in range(len(x))])
+        return probs
+
+
+def test_perceived_demonstration_has_none_exactly_where_the_classifier_said_occluded(
+        random_models, session, tmp_path):
+    path = tmp_path / session.name
+    path.write_bytes(session.read_bytes())
+    with pytest.raises(ValueError, match="no perception topics"):
+        open_session(path).perceived_demonstration()
+    models = PerceptionModels.load(random_models)
+    models.classifier = ScriptedClassifier(models.classifier.config)
+    steps = perceive_session(models, path)
+    called = [s.occluded for s in steps]
+    assert called == [t % 3 == 1 for t in range(8)]
+    demo = open_session(path).perceived_demonstration()
+    assert [o is None for o in demo.observations] == called
+    for s, o in zip(steps, demo.observations, strict=True):
+        assert o is None or o == s.state * 5 + s.action
+    # the ground truth is untouched and the file still passes a CRC-validating read
+    again = open_session(path)
+    assert again.steps == open_session(session).steps
+    assert again.perception_models["detector_sha256"]
+    with pytest.raises(FileExistsError, match="already holds perception"):
+        perceive_session(models, path)
+    assert len(perceive_session(models, path, replace=True)) == len(steps)
+
+
+def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys):
+    data = tmp_path / "data"
+    assert main(["dataset", "--frames", "36", "--steps-per-session", "4", "--seed", "4",
+                 "--out", str(data)]) == 0
+    out = tmp_path / "cal"
+    assert main(["calibrate", "--data", str(data), "--models", str(random_models),
+                 "--out", str(out)]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    assert set(doc["factors"]) == {"onion", "end_effector", "prediction", "action"}
+    probs = np.load(out / "observation_model.npz")["probs"]
+    assert probs.shape == (48, 5, 240)
+    np.testing.assert_allclose(probs.sum(axis=2), 1.0)
+    assert (out / "confusion.png").stat().st_size > 0
+    capsys.readouterr()
+    assert main(["eval-perception", "--data", str(data), "--models", str(random_models),
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"map50", "map50_95", "accuracy", "occlusion_recall"} <= set(result)
+    assert set(result["accuracy"]) == {"onion", "end_effector", "prediction", "action"}
+
+
+def test_missing_models_name_the_training_command(tmp_path):
+    with pytest.raises(FileNotFoundError, match="onionsort train state-classifier"):
+        PerceptionModels.load(tmp_path)
+
+
+def test_learn_from_perceived_sessions_and_its_refusals(random_models, session, tmp_path, capsys):
+    data = tmp_path / "data"
+    assert main(["dataset", "--frames", "36", "--steps-per-session", "4", "--seed", "6",
+                 "--out", str(data)]) == 0
+    assert main(["calibrate", "--data", str(data), "--models", str(random_models),
+                 "--out", str(tmp_path / "cal")]) == 0
+    calibration = tmp_path / "cal" / "calibration.json"
+    raw = tmp_path / "raw.mcap"
+    raw.write_bytes(session.read_bytes())
+    capsys.readouterr()
+    assert main(["learn", str(raw), "--observation-model", str(calibration),
+                 "--out", str(tmp_path / "bad")]) == 2
+    assert "has no perception topics; run `onionsort perceive" in capsys.readouterr().err
+    models = PerceptionModels.load(random_models)
+    models.classifier = ScriptedClassifier(models.classifier.config)
+    perceived = tmp_path / "perceived.mcap"
+    perceived.write_bytes(session.read_bytes())
+    perceive_session(models, perceived)
+    out = tmp_path / "learn"
+    assert main(["learn", str(perceived), "--method", "mmap-birl", "--observation-model",
+                 str(calibration), "--out", str(out)]) == 0
+    model = json.loads((out / "model.json").read_text())
+    assert len(model["policy"]) == 48 and len(model["theta"]) == 6
+    assert model["n_occluded"] == 3  # steps 1, 4, 7 of 8
+    assert (out / "learn.rrd").stat().st_size > 0 and (out / "learning_curve.png").exists()
+    other = json.loads(calibration.read_text())
+    other["n_states"] = 12
+    wrong = tmp_path / "other.json"
+    wrong.write_text(json.dumps(other))
+    assert main(["learn", str(perceived), "--observation-model", str(wrong),
+                 "--out", str(tmp_path / "bad2")]) == 2
+    assert "not the onion-sorting MDP" in capsys.readouterr().err
