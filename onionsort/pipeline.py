@@ -97,9 +97,25 @@ class DatasetStep:
     record: dict
 
 
+def _splits(split: str) -> tuple[str, ...]:
+    from recordings.dataset import SPLITS
+
+    if split == "all":
+        return SPLITS
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {(*SPLITS, 'all')}; got {split!r}")
+    return (split,)
+
+
 def dataset_sessions(root: Path | str, split: str, frames_per_step: int
                      ) -> Iterator[list[DatasetStep]]:
-    """The complete steps of each session of a dataset split, in order."""
+    """The complete steps of each session of a dataset split (or of ``"all"``), in order."""
+    for name in _splits(split):
+        yield from _split_sessions(root, name, frames_per_step)
+
+
+def _split_sessions(root: Path | str, split: str, frames_per_step: int
+                    ) -> Iterator[list[DatasetStep]]:
     from recordings.dataset import read_split
 
     views = {(f.record["session"], f.record["frame"]): f.color
@@ -177,7 +193,7 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     gts: dict[str, list] = {}
     dts: dict[str, list] = {}
     for view in views:
-        frames = list(read_split(root, split, view=view))
+        frames = [f for name in _splits(split) for f in read_split(root, name, view=view)]
         gts[view] = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
                       np.asarray(f.record["classes"], int)) for f in frames]
         dts[view] = []

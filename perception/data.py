@@ -66,12 +66,13 @@ def to_canvas(image: np.ndarray, boxes, classes, width: int, height: int) -> Sam
 
 
 def augment(sample: Sample, rng: np.random.Generator, *, scale: tuple[float, float] = (0.8, 1.25),
-            translate: float = 0.1, flip: float = 0.5, color: float = 0.25,
+            translate: float = 0.1, flip: float = 0.5, color: float = 0.08,
             min_size: float = 2.0) -> Sample:
-    """Random flip, scale and translation (boxes follow), brightness/contrast/hue jitter.
+    """Random flip, scale and translation (boxes follow), and a mild hue/saturation/value jitter.
 
-    Boxes pushed partly off the canvas are clipped; those left smaller than ``min_size`` pixels
-    are dropped.
+    The colour jitter stays small on purpose: colour is what tells a blemished onion (darker,
+    browner) from a good one at 14 px, and the scene's own lighting already varies. Boxes pushed
+    partly off the canvas are clipped; those left smaller than ``min_size`` pixels are dropped.
     """
     img, boxes = sample.image, sample.boxes.copy()
     h, w = img.shape[:2]

@@ -3,7 +3,10 @@
 Joint vectors ``q`` have shape (7,) (``right_j0`` .. ``right_j6``); positions are world metres,
 shape (3,). The suction cup is modelled at the flange of ``right_l6``: :meth:`Sawyer.grasp`
 welds an object to it with a fixed constraint, which the physics keeps while the arm moves
-under position control (:meth:`Sawyer.move_to`).
+under position control (:meth:`Sawyer.move_to`). Static (mass-0) bodies, such as the kinematic
+onions of :mod:`robot.scene`, cannot hang from a constraint (the weld would pin the arm to
+them): ``grasp(body, kinematic=True)`` instead makes the body follow the flange, its pose reset
+to the flange's after every physics step.
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ class Sawyer:
         self.lower = np.array([i[8] for i in info])
         self.upper = np.array([i[9] for i in info])
         self._grasp: int | None = None
+        self._carried: tuple[list[float], list[float]] | None = None  # flange -> body pose
         self.grasped: int | None = None
         self.reset(HOME)
 
@@ -115,25 +119,41 @@ class Sawyer:
         The joint targets follow a minimum-jerk interpolation from the current configuration to
         the IK solution. Returns the final flange position error in metres.
         """
+        self.move_to_joints(self.inverse_kinematics(position, orientation), steps=steps)
+        return float(np.linalg.norm(self.end_effector()[0] - np.asarray(position)))
+
+    def move_to_joints(self, q: np.ndarray, *, steps: int = 240) -> None:
+        """Drive the joints to ``q`` (7,) under position control, stepping the physics ``steps``
+        times; the joint targets follow a minimum-jerk interpolation from the current
+        configuration."""
         from robot.avatar import min_jerk
 
-        q0, q1 = self.q, self.inverse_kinematics(position, orientation)
+        q0, q1 = self.q, np.asarray(q, float)
         for k in range(1, steps + 1):
             target = q0 + float(min_jerk(k / steps)) * (q1 - q0)
             p.setJointMotorControlArray(
                 self.body, self.joints, p.POSITION_CONTROL, targetPositions=target.tolist(),
                 forces=[200.0] * 7, physicsClientId=self.client)
             p.stepSimulation(physicsClientId=self.client)
-        return float(np.linalg.norm(self.end_effector()[0] - np.asarray(position)))
+            self._carry()
 
-    def grasp(self, body: int) -> None:
-        """Suction: weld ``body`` to the flange where it is now (a fixed constraint)."""
-        if self._grasp is not None:
+    def grasp(self, body: int, *, kinematic: bool = False) -> None:
+        """Suction: hold ``body`` at the flange where it is now.
+
+        By default a fixed constraint welds it to the flange (for dynamic bodies); with
+        ``kinematic=True`` the body follows the flange rigidly, its pose reset after every
+        physics step of :meth:`move_to_joints` (for static, mass-0 bodies).
+        """
+        if self.grasped is not None:
             raise RuntimeError(f"already holding body {self.grasped}; release it first")
         ee_pos, ee_orn = self.end_effector()
         obj_pos, obj_orn = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
         inv_pos, inv_orn = p.invertTransform(ee_pos.tolist(), ee_orn.tolist())
         rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        if kinematic:
+            self._carried = (list(rel_pos), list(rel_orn))
+            self.grasped = body
+            return
         self._grasp = p.createConstraint(
             self.body, self.end_link, body, -1, p.JOINT_FIXED, [0, 0, 0],
             parentFramePosition=rel_pos, childFramePosition=[0, 0, 0],
@@ -142,8 +162,16 @@ class Sawyer:
         p.changeConstraint(self._grasp, maxForce=500.0, physicsClientId=self.client)
         self.grasped = body
 
+    def _carry(self) -> None:
+        """Put a kinematically held body where the flange holds it."""
+        if self._carried is None or self.grasped is None:
+            return
+        ee_pos, ee_orn = self.end_effector()
+        pos, orn = p.multiplyTransforms(ee_pos.tolist(), ee_orn.tolist(), *self._carried)
+        p.resetBasePositionAndOrientation(self.grasped, pos, orn, physicsClientId=self.client)
+
     def release(self) -> None:
         """Switch the suction off."""
         if self._grasp is not None:
             p.removeConstraint(self._grasp, physicsClientId=self.client)
-        self._grasp, self.grasped = None, None
+        self._grasp, self._carried, self.grasped = None, None, None

@@ -11,6 +11,7 @@ towards +x), ``y`` from the conveyor towards the sorter, ``z`` up. Positions hav
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,8 +99,13 @@ def on_belt(position: np.ndarray) -> bool:
     )
 
 
-def hand_location(hand: np.ndarray) -> Location:
+def hand_location(
+    hand: np.ndarray, targets: Mapping[Location, np.ndarray] | None = None
+) -> Location:
     """The location of the hand: the nearest hand target (within a tolerance).
+
+    ``targets`` maps each location to its target (3,); the human sorter's
+    :data:`HAND_TARGETS` by default (the Sawyer station passes its flange targets).
 
     Raises
     ------
@@ -107,7 +113,8 @@ def hand_location(hand: np.ndarray) -> Location:
         If the hand is farther than 8 cm from every target (it is between locations).
     """
     hand = np.asarray(hand, float)
-    dists = {loc: float(np.linalg.norm(hand - t)) for loc, t in HAND_TARGETS.items()}
+    targets = HAND_TARGETS if targets is None else targets
+    dists = {loc: float(np.linalg.norm(hand - t)) for loc, t in targets.items()}
     loc = min(dists, key=dists.get)
     if dists[loc] > _HAND_TOLERANCE:
         raise ValueError(
@@ -117,14 +124,15 @@ def hand_location(hand: np.ndarray) -> Location:
     return loc
 
 
-def onion_location(position: np.ndarray, held: bool, hand: np.ndarray) -> Location:
+def onion_location(position: np.ndarray, held: bool, hand: np.ndarray,
+                   targets: Mapping[Location, np.ndarray] | None = None) -> Location:
     """The location of the onion in focus at ``position`` (3,).
 
-    A held onion is where the hand is (HOVER or FACE); a free one is on the CONVEYOR or in the
-    BIN.
+    A held onion is where the hand is (HOVER or FACE; see :func:`hand_location` for
+    ``targets``); a free one is on the CONVEYOR or in the BIN.
     """
     if held:
-        return hand_location(hand)
+        return hand_location(hand, targets)
     if in_bin(position):
         return Location.BIN
     if on_belt(position):
@@ -135,10 +143,11 @@ def onion_location(position: np.ndarray, held: bool, hand: np.ndarray) -> Locati
     )
 
 
-def state_of_world(world: WorldSnapshot) -> SortingState:
-    """Read the MDP state off the physical world."""
-    hand = hand_location(world.hand)
+def state_of_world(world: WorldSnapshot,
+                   targets: Mapping[Location, np.ndarray] | None = None) -> SortingState:
+    """Read the MDP state off the physical world (``targets`` as in :func:`hand_location`)."""
+    hand = hand_location(world.hand, targets)
     if world.focus is None:
         raise ValueError("world.focus must be a position; got None (no onion was ever claimed)")
-    onion = onion_location(world.focus, world.held, world.hand)
+    onion = onion_location(world.focus, world.held, world.hand, targets)
     return SortingState(onion, hand, Prediction(world.prediction))

@@ -12,4 +12,6 @@ COMMAND_MODULES = [
     "onionsort.commands.train",
     "onionsort.commands.perception",
     "onionsort.commands.learn",
+    "onionsort.commands.evaluate",
+    "onionsort.commands.demo",
 ]

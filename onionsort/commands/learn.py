@@ -131,6 +131,7 @@ def _log_rerun(model: dict, history, path: Path) -> None:
     rec.log("learn/policy", rr.TextDocument("\n".join(
         f"{row['state']} -> {row['action']}" for row in model["policy"])), static=True)
     rec.flush()
+    rec.disconnect()
 
 
 def run(args: argparse.Namespace) -> int:

@@ -12,8 +12,8 @@ Models default to the ones shipped with the package (``onionsort/models``).
 
 Examples
 --------
-    onionsort dataset --frames 3000 --seed 1 --out runs/heldout
-    onionsort calibrate --data runs/heldout --out runs/calibration
+    onionsort dataset --frames 1500 --seed 1 --out runs/heldout
+    onionsort calibrate --data runs/heldout --split all --out runs/calibration
     onionsort eval-perception --data runs/heldout --json
     onionsort record --sessions 12 --out runs/rec
     onionsort perceive runs/rec/*.mcap
@@ -43,7 +43,8 @@ def register(subparsers) -> None:
         "calibrate", help="measure perception's confusion matrices -> the observation model",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     cal.add_argument("--data", type=Path, required=True, help="labelled dataset folder")
-    cal.add_argument("--split", default="test", help="the held-out split to use (test)")
+    cal.add_argument("--split", default="test",
+                     help="the held-out split to use: train, val, test or all (test)")
     cal.add_argument("--out", type=Path, required=True, help="folder for the calibration")
     cal.add_argument("--smoothing", type=float, default=1.0,
                      help="additive smoothing of the confusion counts (1.0)")
@@ -54,7 +55,8 @@ def register(subparsers) -> None:
         "eval-perception", help="measure the detector and the state classifier on a dataset",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ev.add_argument("--data", type=Path, required=True, help="labelled dataset folder")
-    ev.add_argument("--split", default="test", help="split to evaluate on (test)")
+    ev.add_argument("--split", default="test",
+                    help="split to evaluate on: train, val, test or all (test)")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     _models_argument(ev)
     ev.set_defaults(func=run_eval)

@@ -1,0 +1,343 @@
+"""The sorting evaluation: the Sawyer executes a greedy policy on a line-up of onions.
+
+Policies are ``actions[s]`` (48,) — an action index per state index of
+:mod:`irl.domains.onion_sorting` — or ``pi[s, a]`` (48, 5), whose argmax is taken.
+
+Each onion of the line-up ends with a *fate*: ``"bin"`` if the robot placed it in the bin,
+``"line"`` if it set it back on the belt after inspecting it (it rides away). The episode starts
+in :data:`robot.station.START_STATE` (the MDP's initial state, nothing claimed yet) and ends
+when every onion has a fate or the step budget ``n_onions * max_steps_per_onion`` is spent;
+onions still undecided then (never claimed, or claimed and not yet released for good) count as
+left on the line. With blemished onions the positive class:
+
+=====  ==============================  =====  ==============================
+TP     blemished onion in the bin      FP     good onion in the bin
+FN     blemished onion left on line    TN     good onion left on the line
+=====  ==============================  =====  ==============================
+
+``precision = TP / (TP + FP)`` and ``recall = TP / (TP + FN)``; a ratio with a zero denominator
+(nothing binned; no blemished onion) is defined as 0.0, as scikit-learn's
+``zero_division=0``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from irl.domains.onion_sorting import (
+    N_ACTIONS,
+    N_STATES,
+    Prediction,
+    SortAction,
+    encode_state,
+)
+from robot.station import Classifier, SawyerStation
+
+__all__ = [
+    "EvaluationStep",
+    "OnionOutcome",
+    "SortingResult",
+    "evaluate_policy",
+    "greedy_actions",
+]
+
+logger = logging.getLogger(__name__)
+
+Fate = Literal["bin", "line"]
+
+
+@dataclass(frozen=True)
+class OnionOutcome:
+    """What happened to one onion of the line-up.
+
+    Attributes
+    ----------
+    index : int
+        Position in the line-up.
+    blemished : bool
+        Its true class.
+    perceived : Prediction or None
+        What the classifier said when the robot inspected it (None if never inspected).
+    fate : {"bin", "line"}
+        Where it ended; undecided onions count as ``"line"``.
+    decided : bool
+        False if the episode ended before the robot released it for good (or claimed it).
+    """
+
+    index: int
+    blemished: bool
+    perceived: Prediction | None
+    fate: Fate
+    decided: bool = True
+
+    def to_dict(self) -> dict:
+        return {
+            "index": self.index, "blemished": self.blemished,
+            "perceived": None if self.perceived is None else self.perceived.name.lower(),
+            "fate": self.fate, "decided": self.decided,
+        }
+
+
+def _ratio(num: int, den: int) -> float:
+    return num / den if den else 0.0
+
+
+@dataclass(frozen=True)
+class SortingResult:
+    """The outcome of one evaluation episode (see the module docstring for the counts)."""
+
+    tp: int
+    fp: int
+    tn: int
+    fn: int
+    n_steps: int
+    undecided: int
+    onions: tuple[OnionOutcome, ...] = field(repr=False)
+
+    def __post_init__(self) -> None:
+        if self.tp + self.fp + self.tn + self.fn != len(self.onions):
+            raise ValueError(
+                f"tp + fp + tn + fn must equal the number of onions {len(self.onions)}; got "
+                f"{self.tp} + {self.fp} + {self.tn} + {self.fn}"
+            )
+
+    @property
+    def precision(self) -> float:
+        """``TP / (TP + FP)``; 0.0 when nothing was binned."""
+        return _ratio(self.tp, self.tp + self.fp)
+
+    @property
+    def recall(self) -> float:
+        """``TP / (TP + FN)``; 0.0 when there is no blemished onion."""
+        return _ratio(self.tp, self.tp + self.fn)
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict: counts, precision, recall, steps and the per-onion outcomes."""
+        return {
+            "tp": self.tp, "fp": self.fp, "tn": self.tn, "fn": self.fn,
+            "precision": self.precision, "recall": self.recall,
+            "n_onions": len(self.onions), "n_steps": self.n_steps, "undecided": self.undecided,
+            "onions": [o.to_dict() for o in self.onions],
+        }
+
+    def table(self) -> str:
+        """The confusion table with precision and recall, as aligned text."""
+        rows = [
+            f"{'':>15} {'in bin':>8} {'on line':>8}",
+            f"{'blemished':>15} {'TP ' + str(self.tp):>8} {'FN ' + str(self.fn):>8}",
+            f"{'good':>15} {'FP ' + str(self.fp):>8} {'TN ' + str(self.tn):>8}",
+            f"precision {self.precision:.3f}   recall {self.recall:.3f}   "
+            f"({len(self.onions)} onions, {self.n_steps} steps, {self.undecided} undecided)",
+        ]
+        return "\n".join(rows)
+
+
+@dataclass(frozen=True)
+class EvaluationStep:
+    """One action of the evaluation, for logging (:func:`evaluate_policy`'s ``on_step``).
+
+    Attributes
+    ----------
+    step : int
+        Action number in the episode (from 0).
+    state, action, next_state : int
+        Flat state index, action index and next flat state index.
+    onion : int or None
+        Line-up index of the onion in focus after the action.
+    blemished : bool or None
+        Its true class.
+    perceived : Prediction or None
+        The classifier's answer, if this action inspected the onion.
+    fate : {"bin", "line"} or None
+        The onion's fate, if this action decided it.
+    tp, fp, tn, fn : int
+        Running counts over the onions decided so far.
+    color : ndarray of shape (H, W, 3) or None
+        uint8 RGB of the main camera after the action (when rendering).
+    depth : ndarray of shape (H, W) or None
+        float32 depth in metres of the main camera (when rendering).
+    inspection : ndarray of shape (h, w, 3) or None
+        uint8 RGB of the inspection view, if this action inspected the onion.
+    q : ndarray of shape (7,)
+        The Sawyer's joint positions after the action.
+    """
+
+    step: int
+    state: int
+    action: int
+    next_state: int
+    onion: int | None
+    blemished: bool | None
+    perceived: Prediction | None
+    fate: Fate | None
+    tp: int
+    fp: int
+    tn: int
+    fn: int
+    color: np.ndarray | None = field(default=None, repr=False)
+    depth: np.ndarray | None = field(default=None, repr=False)
+    inspection: np.ndarray | None = field(default=None, repr=False)
+    q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+
+    @property
+    def precision(self) -> float:
+        """Running precision (0.0 while nothing is binned)."""
+        return _ratio(self.tp, self.tp + self.fp)
+
+    @property
+    def recall(self) -> float:
+        """Running recall (0.0 while no blemished onion is decided)."""
+        return _ratio(self.tp, self.tp + self.fn)
+
+
+def greedy_actions(actions: np.ndarray) -> np.ndarray:
+    """The greedy policy ``actions[s]`` (48,) int of ``actions`` (48,) or ``pi[s, a]`` (48, 5).
+
+    Raises
+    ------
+    ValueError
+        If ``actions`` has another shape, non-integer or out-of-range action indices, or
+        non-finite probabilities.
+    """
+    arr = np.asarray(actions)
+    if arr.shape == (N_STATES, N_ACTIONS):
+        if not np.issubdtype(arr.dtype, np.number) or not np.all(np.isfinite(arr)):
+            raise ValueError(f"actions as pi[s, a] must be finite numbers; got dtype "
+                             f"{arr.dtype}")
+        return np.argmax(arr, axis=1).astype(np.int64)
+    if arr.shape != (N_STATES,):
+        raise ValueError(
+            f"actions must be an action index per state, shape ({N_STATES},), or a policy "
+            f"pi[s, a] of shape ({N_STATES}, {N_ACTIONS}); got shape {arr.shape}"
+        )
+    if arr.dtype == bool or not np.issubdtype(arr.dtype, np.number):
+        raise ValueError(f"actions must hold integer action indices; got dtype {arr.dtype}")
+    if not np.all(np.isfinite(arr)) or not np.all(arr == np.round(arr)):
+        raise ValueError("actions must hold integer action indices; got non-integer values")
+    if arr.min() < 0 or arr.max() >= N_ACTIONS:
+        raise ValueError(f"actions must be action indices in [0, {N_ACTIONS}); got values in "
+                         f"[{arr.min()}, {arr.max()}]")
+    return arr.astype(np.int64)
+
+
+def _check_int(name: str, value, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+        raise ValueError(f"{name} must be an int >= {low}; got {value!r}")
+    return int(value)
+
+
+def evaluate_policy(
+    actions: np.ndarray,
+    *,
+    n_onions: int = 50,
+    n_blemished: int = 30,
+    seed: int | np.random.SeedSequence = 0,
+    classify: Classifier | Literal["ground-truth"],
+    max_steps_per_onion: int = 12,
+    render: bool = False,
+    move_steps: int = 120,
+    on_step: Callable[[EvaluationStep], None] | None = None,
+) -> SortingResult:
+    """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
+
+    Parameters
+    ----------
+    actions : ndarray of shape (48,) or (48, 5)
+        Action index per state, or a policy ``pi[s, a]`` (its argmax per state is executed).
+    n_onions, n_blemished : int
+        Line-up size and how many of its onions are blemished (exactly).
+    seed : int or numpy.random.SeedSequence
+        Seeds the line-up and the scene; a run is reproducible from it (and a deterministic
+        ``classify``).
+    classify : callable or "ground-truth"
+        ``classify(rgb) -> Prediction`` on the inspection view (h, w, 3) uint8, or
+        ``"ground-truth"`` for perfect perception.
+    max_steps_per_onion : int
+        The episode's step budget is ``n_onions * max_steps_per_onion`` actions.
+    render : bool
+        Render the main camera after every action (passed to ``on_step``).
+    move_steps : int
+        Physics steps per arm motion (see :class:`robot.station.SawyerStation`).
+    on_step : callable, optional
+        Called with an :class:`EvaluationStep` after every action.
+
+    Returns
+    -------
+    SortingResult
+
+    Raises
+    ------
+    ValueError
+        If an argument is out of its domain (the message names it).
+    """
+    policy = greedy_actions(actions)
+    n_onions = _check_int("n_onions", n_onions, 1)
+    n_blemished = _check_int("n_blemished", n_blemished, 0)
+    if n_blemished > n_onions:
+        raise ValueError(f"n_blemished must be <= n_onions={n_onions}; got {n_blemished}")
+    max_steps_per_onion = _check_int("max_steps_per_onion", max_steps_per_onion, 1)
+    if on_step is not None and not callable(on_step):
+        raise TypeError(f"on_step must be callable or None; got {type(on_step).__name__}")
+    budget = n_onions * max_steps_per_onion
+    fates: list[Fate | None] = [None] * n_onions
+    counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
+    with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
+                       move_steps=move_steps, render_every_step=render) as station:
+        truth = station.blemished
+        n_steps = 0
+        while n_steps < budget and any(f is None for f in fates):
+            s = station.state
+            a = SortAction(int(policy[encode_state(s)]))
+            done = station.step(a)
+            fate = _fate(done.action, done.next_state) if done.changed else None
+            if fate is not None:
+                fates[done.onion] = fate
+                counts[_cell(bool(truth[done.onion]), fate)] += 1
+            if on_step is not None:
+                on_step(EvaluationStep(
+                    step=n_steps, state=encode_state(done.state), action=int(a),
+                    next_state=encode_state(done.next_state), onion=done.onion,
+                    blemished=None if done.onion is None else bool(truth[done.onion]),
+                    perceived=done.perceived, fate=fate, **counts,
+                    color=None if done.image is None else done.image.rgb,
+                    depth=None if done.image is None else done.image.depth,
+                    inspection=done.inspection, q=done.q,
+                ))
+            n_steps += 1
+        perceived = [station.perceived(i) for i in range(n_onions)]
+    undecided = sum(f is None for f in fates)
+    if undecided:
+        logger.info("step budget of %d spent with %d of %d onions undecided (left on the "
+                    "line)", budget, undecided, n_onions)
+    outcomes = tuple(
+        OnionOutcome(index=i, blemished=bool(truth[i]), perceived=perceived[i],
+                     fate=fates[i] or "line", decided=fates[i] is not None)
+        for i in range(n_onions)
+    )
+    final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
+    for o in outcomes:
+        final[_cell(o.blemished, o.fate)] += 1
+    result = SortingResult(**final, n_steps=n_steps, undecided=undecided, onions=outcomes)
+    logger.info("sorted %d onions in %d steps: precision %.3f, recall %.3f", n_onions, n_steps,
+                result.precision, result.recall)
+    return result
+
+
+def _fate(action: SortAction, next_state) -> Fate | None:
+    """The fate an action that changed the state gave the onion in focus, if final."""
+    if action == SortAction.PLACE_IN_BIN:
+        return "bin"
+    if action == SortAction.PLACE_ON_CONVEYOR and next_state.prediction != Prediction.UNKNOWN:
+        return "line"
+    return None
+
+
+def _cell(blemished: bool, fate: Fate) -> str:
+    if fate == "bin":
+        return "tp" if blemished else "fp"
+    return "fn" if blemished else "tn"

@@ -1,0 +1,609 @@
+"""The Sawyer sorting station: the robot executes sorting actions on a line-up of onions.
+
+The workcell is the human sessions' (:func:`robot.scene.build_workcell`, the :class:`StopGate`,
+the main :class:`~robot.camera.CameraSpec` and the inspection view
+:data:`robot.simulation.INSPECTION_CAMERA`), with the Sawyer standing where the sorter stood,
+facing the belt. Each :class:`~irl.domains.onion_sorting.SortAction` is a motion primitive:
+
+- CLAIM raises the gate and runs the belt until the next onion of the line-up waits at the
+  pick spot (an indexing belt: it runs only while the station claims; onions placed back
+  downstream ride away with it and leave the belt at its end);
+- PICK moves above the waiting onion, descends, switches the suction on, lowers the gate and
+  lifts the onion to the hover pose;
+- INSPECT holds the onion up in front of the inspection camera, renders that view and asks the
+  classifier for the onion's class (if the classifier abstains, the wrist turns the onion to
+  show another side and asks again);
+- PLACE_ON_CONVEYOR sets the onion on the belt downstream of the gate, where it rides away (or,
+  if it was never inspected, back at the gate, where it waits to be picked again), and returns
+  above the pick spot;
+- PLACE_IN_BIN moves over the bin and releases the onion, which drops into it.
+
+An action that the MDP says does nothing in the current state (``next_state(s, a) == s``) does
+nothing physically. After every action the state read off the world (:meth:`SawyerStation.state`)
+must equal ``next_state(s, a, blemished=<the class the classifier perceived>)``: the prediction
+factor is what the robot *perceived*, so perception errors propagate exactly as in the MDP.
+
+Onions are static, mass-0 bodies that the belt carries kinematically (as in the human
+sessions), so the suction grasp is kinematic too (``Sawyer.grasp(body, kinematic=True)``): the
+held onion's pose is reset to the flange's after every physics step, and on release it is set
+down on the belt or dropped to its place in the bin. Positions are world metres, shape (3,);
+joint vectors have shape (7,).
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pybullet as p
+
+from irl.domains.onion_sorting import (
+    Location,
+    Prediction,
+    SortAction,
+    SortingState,
+    next_state,
+)
+from robot.camera import CameraImage, CameraSpec, Lighting, render, sample_lighting
+from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
+from robot.scene import GATE_X, StopGate, build_workcell, connect
+from robot.simulation import INSPECTION_CAMERA
+from robot.state_map import (
+    BELT_HALF_LENGTH,
+    BELT_TOP,
+    BIN_CENTER,
+    BIN_TOP,
+    PICK_SPOT,
+    WorldSnapshot,
+    state_of_world,
+)
+
+__all__ = [
+    "GROUND_TRUTH",
+    "ROBOT_BASE",
+    "ROBOT_BASE_YAW",
+    "ROBOT_TARGETS",
+    "START_STATE",
+    "Classifier",
+    "SawyerStation",
+    "StationStep",
+    "make_lineup",
+]
+
+logger = logging.getLogger(__name__)
+
+Classifier = Callable[[np.ndarray], Prediction]
+"""``classify(rgb) -> Prediction``: GOOD or BAD from the inspection view ``rgb`` (h, w, 3), or
+UNKNOWN to abstain."""
+
+GROUND_TRUTH: Literal["ground-truth"] = "ground-truth"
+"""Pass as ``classify`` to perceive every inspected onion's true class (perfect perception)."""
+
+ROBOT_BASE = np.array([0.30, 0.70, 0.90])
+"""Where the Sawyer's base stands: behind the sorter's stance, on a pedestal."""
+ROBOT_BASE_YAW = -np.pi / 2
+"""The base faces -y, across the belt (as the sorter did)."""
+
+#: Flange (``right_l6``'s frame, :meth:`Sawyer.end_effector`) to the held onion's surface: the
+#: link's tool face is 2.45 cm out along the flange's axis, the suction cup 1 cm more.
+_GAP = 0.035
+_INSPECT_CENTER = np.array([0.02, 0.26, 1.465])  # on the inspection camera's optical axis
+
+#: Where the Sawyer's flange goes for each location, shape (3,) each; the flange points down.
+#: CONVEYOR is above the pick spot; FACE holds the onion on the inspection camera's axis, about
+#: 18 cm in front of it; BIN is over the bin's centre, the onion clear of the rim.
+ROBOT_TARGETS: dict[Location, np.ndarray] = {
+    Location.CONVEYOR: np.array([PICK_SPOT[0], PICK_SPOT[1], BELT_TOP + 0.17]),
+    Location.HOVER: np.array([0.14, 0.22, 1.12]),
+    Location.FACE: _INSPECT_CENTER + np.array([0.0, 0.0, 0.04 + _GAP]),
+    Location.BIN: np.array([BIN_CENTER[0], BIN_CENTER[1], BIN_TOP + 0.16]),
+}
+
+START_STATE = SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD)
+"""The station's first state: the MDP's initial state with nothing in focus (as if an onion
+had just been left on the line), the flange above the pick spot. The policy must CLAIM."""
+
+_LANES = (-0.04, 0.08)  # y range the onions ride in (as in robot.scene)
+_SPACING = 0.25  # belt travel between consecutive onions of the line-up
+_GATE_FACE = GATE_X - 0.02  # upstream face of the raised stop gate
+_PLACE_X = GATE_X + 0.12  # where the robot sets inspected onions back on the belt
+_PARKED = (0.0, 0.0, -10.0)  # bodies off the belt (not yet arrived, or ridden away)
+_SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions after a move
+_INSPECT_YAWS = (0.0, -2 * np.pi / 3, -4 * np.pi / 3)  # wrist turns while the classifier abstains
+_BIN_SLOTS = 9  # onions per layer in the bin (3 x 3)
+_BIN_LAYERS = 4
+
+
+def _down(yaw: float) -> tuple[float, ...]:
+    """Quaternion (x, y, z, w) of the flange pointing down, turned by ``yaw`` about z."""
+    return tuple(p.getQuaternionFromEuler([np.pi, 0.0, -yaw]))
+
+
+def make_lineup(
+    n_onions: int, n_blemished: int, rng: np.random.Generator
+) -> tuple[OnionAppearance, ...]:
+    """``n_onions`` appearances, exactly ``n_blemished`` of them blemished, in random order."""
+    if isinstance(n_onions, bool) or not isinstance(n_onions, int | np.integer) or n_onions < 1:
+        raise ValueError(f"n_onions must be an int >= 1; got {n_onions!r}")
+    if (isinstance(n_blemished, bool) or not isinstance(n_blemished, int | np.integer)
+            or not 0 <= n_blemished <= n_onions):
+        raise ValueError(
+            f"n_blemished must be an int in [0, n_onions={n_onions}]; got {n_blemished!r}"
+        )
+    blemished = np.zeros(n_onions, bool)
+    blemished[:n_blemished] = True
+    return tuple(sample_appearance(rng, bool(b)) for b in rng.permutation(blemished))
+
+
+@dataclass
+class _LineUpOnion:
+    """One onion of the line-up: its body and where it is.
+
+    ``place`` is ``"queued"`` (upstream, not yet claimed), ``"waiting"`` (claimed, at the gate),
+    ``"held"``, ``"belt"`` (set back on the belt), ``"bin"`` or ``"gone"`` (rode off the belt).
+    """
+
+    index: int
+    body: int
+    appearance: OnionAppearance
+    position: np.ndarray
+    place: str = "queued"
+    perceived: Prediction | None = None
+
+
+@dataclass(frozen=True)
+class StationStep:
+    """What one action did.
+
+    Attributes
+    ----------
+    state, next_state : SortingState
+        The state before and after, both read off the world.
+    action : SortAction
+    onion : int or None
+        Line-up index of the onion in focus after the action (None before the first claim).
+    perceived : Prediction or None
+        The classifier's answer, if this action inspected an onion.
+    inspection : ndarray of shape (h, w, 3) or None
+        uint8 RGB of the inspection view, if this action inspected an onion.
+    image : CameraImage or None
+        The main camera after the action, if the station renders every step.
+    q : ndarray of shape (7,)
+        The Sawyer's joint positions after the action.
+    reach_error : float
+        Largest final flange position error (m) of the action's arm motions; 0 if none.
+    """
+
+    state: SortingState
+    action: SortAction
+    next_state: SortingState
+    onion: int | None
+    perceived: Prediction | None = None
+    inspection: np.ndarray | None = field(default=None, repr=False)
+    image: CameraImage | None = field(default=None, repr=False)
+    q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+    reach_error: float = 0.0
+
+    @property
+    def changed(self) -> bool:
+        """Whether the action did anything (``next_state != state``)."""
+        return self.next_state != self.state
+
+
+class SawyerStation:
+    """The Sawyer sorting a line-up of onions, in its own headless PyBullet client.
+
+    Use as a context manager; :meth:`step` executes one action.
+
+    Parameters
+    ----------
+    classify : callable or "ground-truth"
+        ``classify(rgb) -> Prediction`` from the inspection view (h, w, 3) uint8: GOOD, BAD, or
+        UNKNOWN to abstain (the robot then shows it other sides of the onion, and counts an
+        onion it never classifies as GOOD); :data:`GROUND_TRUTH` perceives each onion's true
+        class.
+    n_onions : int
+        Onions in the line-up.
+    n_blemished : int
+        How many of them are blemished (exactly).
+    seed : int or numpy.random.SeedSequence
+        Seeds the line-up (order, appearances, lanes) and the scene (tints, lighting).
+    move_steps : int
+        Physics steps of each arm motion between poses (short vertical motions take half).
+    render_every_step : bool
+        Render the main camera after every action (:attr:`StationStep.image`).
+    camera, inspection : CameraSpec
+        The main camera and the inspection view.
+
+    Attributes
+    ----------
+    lineup : tuple of OnionAppearance
+        The onions in the order they arrive.
+    blemished : ndarray of shape (n_onions,)
+        Their true classes.
+    focus : int or None
+        Line-up index of the onion in focus (the last one claimed).
+    n_claimed : int
+        Onions claimed so far.
+    lighting : Lighting
+    """
+
+    def __init__(
+        self,
+        classify: Classifier | Literal["ground-truth"],
+        *,
+        n_onions: int = 50,
+        n_blemished: int = 30,
+        seed: int | np.random.SeedSequence = 0,
+        move_steps: int = 120,
+        render_every_step: bool = False,
+        camera: CameraSpec | None = None,
+        inspection: CameraSpec = INSPECTION_CAMERA,
+    ) -> None:
+        if isinstance(classify, str):
+            if classify != GROUND_TRUTH:
+                raise ValueError(
+                    f"classify must be a callable rgb -> Prediction or {GROUND_TRUTH!r}; "
+                    f"got {classify!r}"
+                )
+        elif not callable(classify):
+            raise TypeError(
+                f"classify must be a callable rgb -> Prediction or {GROUND_TRUTH!r}; got "
+                f"{type(classify).__name__}"
+            )
+        if isinstance(move_steps, bool) or not isinstance(move_steps, int | np.integer) \
+                or move_steps < 2:
+            raise ValueError(f"move_steps must be an int >= 2; got {move_steps!r}")
+        seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        lineup_seq, self._lanes_seq, self._scene_seq = seq.spawn(3)
+        self.lineup = make_lineup(n_onions, n_blemished, np.random.default_rng(lineup_seq))
+        self.blemished = np.array([look.blemished for look in self.lineup])
+        self.classify = classify
+        self.move_steps = int(move_steps)
+        self.render_every_step = bool(render_every_step)
+        self.camera = CameraSpec() if camera is None else camera
+        self.inspection = inspection
+        self.client: int | None = None
+        self.focus: int | None = None
+        self.n_claimed = 0
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def __enter__(self) -> SawyerStation:
+        from robot.sawyer import Sawyer
+
+        self.client = connect()
+        self._scene_rng = np.random.default_rng(self._scene_seq)  # the same world on every entry
+        try:
+            self.lighting: Lighting = sample_lighting(self._scene_rng)
+            self.workcell = build_workcell(self.client, self._scene_rng)
+            self.gate = StopGate(self.client)
+            self.workcell["pedestal"] = self._pedestal()
+            self.arm = Sawyer(self.client, base_position=ROBOT_BASE, base_yaw=ROBOT_BASE_YAW)
+            self._q_rest = self.arm.inverse_kinematics(ROBOT_TARGETS[Location.CONVEYOR])
+            self.arm.reset(self._q_rest)
+            self._onions = self._make_onions()
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        self.focus, self.n_claimed = None, 0
+        self._travel = -_SPACING  # belt travel; onion k waits at the gate at travel k*_SPACING
+        self._in_bin = 0
+        self._arrange_belt()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.client is not None:
+            p.disconnect(physicsClientId=self.client)
+            self.client = None
+
+    def _require_client(self) -> int:
+        if self.client is None:
+            raise RuntimeError("SawyerStation must be entered (`with SawyerStation(...)`)")
+        return self.client
+
+    def _pedestal(self) -> int:
+        half = [0.13, 0.13, ROBOT_BASE[2] / 2]
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[0.25, 0.25, 0.27, 1],
+                                  physicsClientId=self.client)
+        return p.createMultiBody(0, -1, vis, basePosition=[*ROBOT_BASE[:2], half[2]],
+                                 physicsClientId=self.client)
+
+    def _make_onions(self) -> list[_LineUpOnion]:
+        onions = []
+        lanes = np.random.default_rng(self._lanes_seq).uniform(*_LANES, len(self.lineup))
+        with tempfile.TemporaryDirectory(prefix="station-onions-") as tmp:
+            for i, look in enumerate(self.lineup):
+                png = save_texture(onion_texture(look, 64), Path(tmp) / f"{i}.png")
+                texture = p.loadTexture(str(png), physicsClientId=self.client)
+                vis = p.createVisualShape(p.GEOM_SPHERE, radius=look.radius,
+                                          rgbaColor=[1, 1, 1, 1], physicsClientId=self.client)
+                body = p.createMultiBody(0, -1, vis, basePosition=list(_PARKED),
+                                         physicsClientId=self.client)
+                p.changeVisualShape(body, -1, textureUniqueId=texture,
+                                    physicsClientId=self.client)
+                # queued so that at belt travel i * _SPACING it touches the raised gate (the
+                # belt starts at travel -_SPACING)
+                stop_x = _GATE_FACE - look.radius - 0.002
+                pos = np.array([stop_x - (i + 1) * _SPACING, lanes[i], BELT_TOP + look.radius])
+                onions.append(_LineUpOnion(i, body, look, pos))
+        return onions
+
+    # -- the world ---------------------------------------------------------------------------
+    def _put(self, onion: _LineUpOnion, position: np.ndarray | None = None) -> None:
+        """Show ``onion`` at ``position`` (its own by default) if it is on the belt or in the bin;
+        park it out of the world if it is upstream of the belt or has ridden off its end."""
+        if position is not None:
+            onion.position = np.asarray(position, float).copy()
+        x = onion.position[0]
+        if onion.place in ("queued", "belt") and x > BELT_HALF_LENGTH - 0.05:
+            onion.place = "gone"
+        visible = onion.place != "gone" and (
+            onion.place != "queued" or x >= -BELT_HALF_LENGTH + 0.05)
+        p.resetBasePositionAndOrientation(
+            onion.body, onion.position.tolist() if visible else list(_PARKED), [0, 0, 0, 1],
+            physicsClientId=self.client)
+
+    def _arrange_belt(self) -> None:
+        for onion in self._onions:
+            if onion.place in ("queued", "belt", "waiting"):
+                self._put(onion)
+
+    def _run_belt(self, distance: float) -> None:
+        """Carry every onion on the belt ``distance`` m downstream (the gate holds none)."""
+        self._travel += distance
+        for onion in self._onions:
+            if onion.place in ("queued", "belt"):
+                onion.position[0] += distance
+                self._put(onion)
+
+    def position(self, index: int) -> np.ndarray:
+        """World position (3,) of line-up onion ``index``, as the physics client has it."""
+        body = self._onions[int(index)].body
+        pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=self._require_client())
+        return np.array(pos)
+
+    def place_of(self, index: int) -> str:
+        """Where line-up onion ``index`` is: queued, waiting, held, belt, bin or gone."""
+        return self._onions[int(index)].place
+
+    def perceived(self, index: int) -> Prediction | None:
+        """The class the robot perceived for onion ``index`` (None if never inspected)."""
+        return self._onions[int(index)].perceived
+
+    @property
+    def flange(self) -> np.ndarray:
+        """The Sawyer's flange position (3,)."""
+        self._require_client()
+        return self.arm.end_effector()[0]
+
+    @property
+    def state(self) -> SortingState:
+        """The MDP state read off the world (:func:`robot.state_map.state_of_world` with the
+        flange targets :data:`ROBOT_TARGETS`); :data:`START_STATE` before the first claim."""
+        self._require_client()
+        if self.focus is None:
+            return START_STATE
+        onion = self._onions[self.focus]
+        world = WorldSnapshot(
+            hand=self.flange, focus=self.position(self.focus),
+            held=self.arm.grasped == onion.body,
+            prediction=Prediction.UNKNOWN if onion.perceived is None else onion.perceived,
+        )
+        return state_of_world(world, ROBOT_TARGETS)
+
+    def target_errors(self) -> dict[Location, tuple[float, float]]:
+        """IK accuracy at each flange target: ``location -> (position error m, angle error rad)``.
+
+        The arm is left where it was.
+        """
+        self._require_client()
+        start = self.arm.q
+        errors = {}
+        down = np.array(_down(0.0))
+        for loc, target in ROBOT_TARGETS.items():
+            self.arm.reset(self._solve(target))
+            pos, orn = self.arm.end_effector()
+            angle = 2 * np.arccos(min(1.0, abs(float(np.dot(orn, down)))))
+            errors[loc] = (float(np.linalg.norm(pos - target)), float(angle))
+        self.arm.reset(start)
+        return errors
+
+    def render(self) -> CameraImage:
+        """The main camera's view now."""
+        return render(self._require_client(), self.camera, self.lighting)
+
+    def render_inspection(self) -> CameraImage:
+        """The inspection view now."""
+        return render(self._require_client(), self.inspection, self.lighting)
+
+    # -- motion primitives -------------------------------------------------------------------
+    def _solve(self, target: np.ndarray, orientation: tuple[float, ...] | None = None,
+               seed: np.ndarray | None = None) -> np.ndarray:
+        """Joint positions (7,) putting the flange at ``target`` (3,), pointing down (turned by
+        the quaternion ``orientation`` if given).
+
+        The IK starts from ``seed`` (7,), by default the canonical configuration above the pick
+        spot, so the answer does not depend on where the arm happens to be (IK started from a
+        folded or turned wrist can stall at a joint limit). The arm ends where it was.
+        """
+        start = self.arm.q
+        self.arm.reset(self._q_rest if seed is None else seed)
+        q = self.arm.inverse_kinematics(np.asarray(target, float),
+                                        _down(0.0) if orientation is None else orientation)
+        self.arm.reset(start)
+        return q
+
+    def _move(self, target: np.ndarray, steps: int | None = None, *,
+              orientation: tuple[float, ...] | None = None,
+              seed: np.ndarray | None = None) -> float:
+        """Move the flange to ``target`` (3,) in ``steps`` physics steps, then let it settle
+        (short corrective motions, at most :data:`_MAX_SETTLE`) to within :data:`_SETTLE_TOL`;
+        returns the final position error (m). ``orientation`` and ``seed`` as in
+        :meth:`_solve`."""
+        target = np.asarray(target, float)
+        q = self._solve(target, orientation, seed)
+        self.arm.move_to_joints(q, steps=steps or self.move_steps)
+        err = float(np.linalg.norm(self.flange - target))
+        for _ in range(_MAX_SETTLE):
+            if err <= _SETTLE_TOL:
+                break
+            self.arm.move_to_joints(q, steps=_SETTLE_STEPS)
+            err = float(np.linalg.norm(self.flange - target))
+        if err > 0.02:
+            logger.warning("the Sawyer stopped %.3f m from %s", err,
+                           np.round(target, 3).tolist())
+        return err
+
+    def _above(self, point: np.ndarray) -> np.ndarray:
+        return np.array([point[0], point[1], ROBOT_TARGETS[Location.CONVEYOR][2]])
+
+    def _claim(self) -> list[float]:
+        if self.n_claimed >= len(self._onions):
+            raise RuntimeError(
+                f"the line-up is exhausted: all {len(self._onions)} onions were claimed"
+            )
+        self.gate.set(True)
+        onion = self._onions[self.n_claimed]
+        self._run_belt(self.n_claimed * _SPACING - self._travel)
+        onion.place = "waiting"
+        self.focus, self.n_claimed = onion.index, self.n_claimed + 1
+        return []
+
+    def _pick(self, onion: _LineUpOnion) -> list[float]:
+        errs = []
+        grip = onion.position + np.array([0.0, 0.0, onion.appearance.radius + _GAP])
+        if np.linalg.norm(self.flange - self._above(grip)) > 0.01:
+            errs.append(self._move(self._above(grip)))
+        errs.append(self._move(grip, self.move_steps // 2))
+        self.arm.grasp(onion.body, kinematic=True)
+        onion.place = "held"
+        self.gate.set(False)
+        errs.append(self._move(self._above(grip), self.move_steps // 2))
+        errs.append(self._move(ROBOT_TARGETS[Location.HOVER]))
+        return errs
+
+    def _classify(self, onion: _LineUpOnion, rgb: np.ndarray) -> Prediction | None:
+        """The classifier's answer on ``rgb``; None if it abstains (UNKNOWN)."""
+        if self.classify == GROUND_TRUTH:
+            return Prediction.BAD if onion.appearance.blemished else Prediction.GOOD
+        raw = self.classify(rgb)
+        try:
+            answer = Prediction(int(raw))
+        except (TypeError, ValueError):
+            raise ValueError(f"classify must return a Prediction (GOOD, BAD, or UNKNOWN to "
+                             f"abstain); got {raw!r}") from None
+        return None if answer == Prediction.UNKNOWN else answer
+
+    def _inspect(self, onion: _LineUpOnion) -> tuple[list[float], Prediction | None,
+                                                      np.ndarray | None]:
+        """Hold the onion up to the inspection camera and classify it.
+
+        While the classifier abstains (answers UNKNOWN, e.g. it found no onion), the wrist
+        turns the onion to show another side, up to ``len(_INSPECT_YAWS)`` views; an onion
+        still unclassified then counts as GOOD (it is not discarded without evidence), with a
+        warning.
+        """
+        target = ROBOT_TARGETS[Location.FACE]
+        errs = [self._move(target)]
+        if onion.perceived is not None:
+            return errs, None, None
+        answer, rgb = None, None
+        for k, yaw in enumerate(_INSPECT_YAWS):
+            if k:
+                errs.append(self._move(target, self.move_steps // 2, orientation=_down(yaw),
+                                       seed=self.arm.q))
+            rgb = self.render_inspection().rgb
+            answer = self._classify(onion, rgb)
+            if answer is not None:
+                break
+        if answer is None:
+            logger.warning("the classifier abstained on onion %d in all %d views; it counts "
+                           "as GOOD", onion.index, len(_INSPECT_YAWS))
+            answer = Prediction.GOOD
+        onion.perceived = answer
+        return errs, answer, rgb
+
+    def _place_on_conveyor(self, onion: _LineUpOnion) -> list[float]:
+        inspected = onion.perceived is not None
+        r = onion.appearance.radius
+        # an inspected onion goes downstream of the gate and rides away; an uninspected one
+        # stays in focus: it goes back to the gate, which rises again
+        x = _PLACE_X if inspected else _GATE_FACE - r - 0.002
+        rest = np.array([x, onion.position[1], BELT_TOP + r])
+        grip = rest + np.array([0.0, 0.0, r + _GAP])
+        errs = [self._move(self._above(grip)), self._move(grip, self.move_steps // 2)]
+        self.arm.release()
+        onion.place = "belt" if inspected else "waiting"
+        self.gate.set(not inspected)
+        self._put(onion, rest)
+        errs.append(self._move(self._above(grip), self.move_steps // 2))
+        errs.append(self._move(ROBOT_TARGETS[Location.CONVEYOR], self.move_steps // 2))
+        return errs
+
+    def _place_in_bin(self, onion: _LineUpOnion) -> list[float]:
+        errs = [self._move(ROBOT_TARGETS[Location.BIN])]
+        self.arm.release()
+        onion.place = "bin"
+        slot, layer = self._in_bin % _BIN_SLOTS, min(self._in_bin // _BIN_SLOTS, _BIN_LAYERS - 1)
+        self._in_bin += 1
+        grid = np.array([slot % 3 - 1, slot // 3 - 1], float) * 0.09
+        jitter = self._scene_rng.uniform(-0.015, 0.015, 2)
+        floor = BIN_TOP - 0.29  # top of the bin's floor
+        self._put(onion, np.array([BIN_CENTER[0] + grid[0] + jitter[0],
+                                   BIN_CENTER[1] + grid[1] + jitter[1],
+                                   floor + onion.appearance.radius + 0.07 * layer]))
+        return errs
+
+    def step(self, action: SortAction | int) -> StationStep:
+        """Execute ``action`` and check that the world reached the MDP's next state.
+
+        Raises
+        ------
+        ValueError
+            If ``action`` is not a :class:`SortAction`, or the classifier's answer is not a
+            :class:`Prediction`.
+        RuntimeError
+            If the world does not show ``next_state(s, a, blemished=<perceived class>)``, or a
+            CLAIM finds the line-up exhausted.
+        """
+        self._require_client()
+        try:
+            a = SortAction(int(action))
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"action must be a SortAction in [0, {len(SortAction)}); got {action!r}"
+            ) from None
+        s = self.state
+        applies = next_state(s, a, blemished=False) != s or next_state(s, a, blemished=True) != s
+        errs: list[float] = []
+        perceived, inspection = None, None
+        if applies:
+            onion = None if self.focus is None else self._onions[self.focus]
+            if a == SortAction.CLAIM:
+                errs = self._claim()
+            elif a == SortAction.PICK:
+                errs = self._pick(onion)
+            elif a == SortAction.INSPECT:
+                errs, perceived, inspection = self._inspect(onion)
+            elif a == SortAction.PLACE_ON_CONVEYOR:
+                errs = self._place_on_conveyor(onion)
+            else:
+                errs = self._place_in_bin(onion)
+        focus = None if self.focus is None else self._onions[self.focus]
+        seen_bad = focus is not None and focus.perceived == Prediction.BAD
+        expected = next_state(s, a, blemished=seen_bad)
+        seen = self.state
+        if seen != expected:
+            raise RuntimeError(f"after {a.name} in {s} the world shows {seen}; the MDP says "
+                               f"{expected}")
+        logger.debug("%s: %s -> %s", a.name, s, seen)
+        return StationStep(
+            state=s, action=a, next_state=seen, onion=self.focus, perceived=perceived,
+            inspection=inspection, image=self.render() if self.render_every_step else None,
+            q=self.arm.q, reach_error=max(errs, default=0.0),
+        )

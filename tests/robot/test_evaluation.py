@@ -1,0 +1,166 @@
+"""The sorting evaluation: the Sawyer executes a greedy policy and TP/FP/TN/FN are counted."""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from irl.domains.onion_sorting import (
+    N_ACTIONS,
+    N_STATES,
+    Prediction,
+    SortAction,
+    onion_sorting,
+)
+from robot.evaluation import SortingResult, evaluate_policy, greedy_actions
+
+
+@pytest.fixture(scope="module")
+def expert_pi():
+    return onion_sorting().expert_policy()
+
+
+@pytest.fixture(scope="module")
+def expert_run(expert_pi):
+    events = []
+    result = evaluate_policy(expert_pi, n_onions=8, n_blemished=5, seed=3,
+                             classify="ground-truth", on_step=events.append)
+    return result, events
+
+
+def always(prediction):
+    return lambda rgb: prediction
+
+
+def test_the_expert_with_perfect_perception_sorts_perfectly(expert_run):
+    result, _ = expert_run
+    assert (result.tp, result.fp, result.tn, result.fn) == (5, 0, 3, 0)
+    assert result.precision == result.recall == 1.0
+    assert result.undecided == 0 and result.n_steps == 8 * 4  # claim, pick, inspect, place
+    assert [o.index for o in result.onions] == list(range(8))
+    for o in result.onions:
+        assert o.decided and o.fate == ("bin" if o.blemished else "line")
+        assert o.perceived == (Prediction.BAD if o.blemished else Prediction.GOOD)
+
+
+def test_the_step_events_tell_the_episode(expert_run):
+    result, events = expert_run
+    assert [e.step for e in events] == list(range(result.n_steps))
+    assert all(a.next_state == b.state for a, b in itertools.pairwise(events))
+    last = events[-1]
+    assert (last.tp, last.fp, last.tn, last.fn) == (result.tp, result.fp, result.tn, result.fn)
+    inspected = [e for e in events if e.inspection is not None]
+    assert len(inspected) == 8
+    assert all(e.action == SortAction.INSPECT and e.perceived is not None for e in inspected)
+    assert sum(e.fate is not None for e in events) == 8
+    assert all(e.color is None and e.depth is None and e.q.shape == (7,) for e in events)
+
+
+def test_a_classifier_that_always_says_good_finds_no_blemished_onion(expert_pi):
+    r = evaluate_policy(expert_pi, n_onions=8, n_blemished=5, seed=3,
+                        classify=always(Prediction.GOOD))
+    assert (r.tp, r.fp, r.tn, r.fn) == (0, 0, 3, 5)
+    assert r.recall == 0.0 and r.precision == 0.0  # 0/0 is defined as 0
+    assert all(o.perceived == Prediction.GOOD for o in r.onions)
+
+
+def test_perception_errors_propagate_as_in_the_mdp(expert_pi):
+    r = evaluate_policy(expert_pi, n_onions=6, n_blemished=2, seed=0,
+                        classify=always(Prediction.BAD))
+    assert (r.tp, r.fp, r.tn, r.fn) == (2, 4, 0, 0)
+    assert r.precision == pytest.approx(2 / 6) and r.recall == 1.0
+
+
+def test_a_policy_that_never_claims_leaves_everything_on_the_line():
+    never = np.full(N_STATES, int(SortAction.PICK))
+    r = evaluate_policy(never, n_onions=5, n_blemished=2, classify="ground-truth",
+                        max_steps_per_onion=2)
+    assert (r.tp, r.fp, r.tn, r.fn) == (0, 0, 3, 2)
+    assert r.undecided == 5 and r.n_steps == 10
+    assert all(not o.decided and o.fate == "line" and o.perceived is None for o in r.onions)
+
+
+def test_a_policy_array_and_its_greedy_actions_give_the_same_episode(expert_pi):
+    kwargs = {"n_onions": 3, "n_blemished": 1, "seed": 7, "classify": "ground-truth"}
+    assert evaluate_policy(expert_pi, **kwargs) == evaluate_policy(greedy_actions(expert_pi),
+                                                                    **kwargs)
+    assert np.array_equal(greedy_actions(expert_pi), onion_sorting().optimal_policy())
+
+
+def test_seeded_runs_are_reproducible(expert_pi):
+    kwargs = {"n_onions": 6, "n_blemished": 3, "classify": "ground-truth"}
+    a, b = evaluate_policy(expert_pi, seed=1, **kwargs), evaluate_policy(expert_pi, seed=1,
+                                                                          **kwargs)
+    c = evaluate_policy(expert_pi, seed=2, **kwargs)
+    assert a == b and a.to_dict() == b.to_dict()
+    assert [o.blemished for o in a.onions] != [o.blemished for o in c.onions]
+
+
+def test_the_result_is_json_ready_and_prints_a_confusion_table(expert_run):
+    result, _ = expert_run
+    d = json.loads(json.dumps(result.to_dict()))
+    assert d["tp"] == 5 and d["precision"] == 1.0 and len(d["onions"]) == 8
+    assert d["onions"][0]["perceived"] in ("good", "bad")
+    table = result.table()
+    assert "TP 5" in table and "TN 3" in table and "precision 1.000" in table
+    with pytest.raises(ValueError, match="number of onions"):
+        SortingResult(tp=1, fp=0, tn=0, fn=0, n_steps=1, undecided=0, onions=())
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"actions": np.zeros(47, int)}, r"actions must be .* shape \(48,\)"),
+    ({"actions": np.zeros((48, 4))}, r"actions must be .*got shape \(48, 4\)"),
+    ({"actions": np.full(48, 0.5)}, "actions must hold integer"),
+    ({"actions": np.full(48, N_ACTIONS)}, r"actions must be action indices in \[0, 5\)"),
+    ({"actions": np.full((48, 5), np.nan)}, "actions as pi"),
+    ({"n_onions": 0}, "n_onions must be an int >= 1"),
+    ({"n_onions": 2.5}, "n_onions must be an int"),
+    ({"n_blemished": 9}, "n_blemished must be <= n_onions=8"),
+    ({"n_blemished": -1}, "n_blemished must be an int >= 0"),
+    ({"max_steps_per_onion": 0}, "max_steps_per_onion must be an int >= 1"),
+    ({"classify": "oracle"}, "classify must be"),
+])
+def test_bad_arguments_raise_value_errors_naming_them(kwargs, match):
+    args = {"actions": np.zeros(N_STATES, int), "n_onions": 8, "n_blemished": 5,
+            "classify": "ground-truth", **kwargs}
+    with pytest.raises(ValueError, match=match):
+        evaluate_policy(args.pop("actions"), **args)
+
+
+def _rerun_cli() -> str | None:
+    local = Path(sys.executable).parent / "rerun"
+    return str(local) if local.exists() else shutil.which("rerun")
+
+
+def test_the_evaluation_logs_to_a_valid_rerun_recording(tmp_path, expert_pi):
+    rr = pytest.importorskip("rerun")
+    from recordings.rerun_eval import evaluation_blueprint, log_evaluation_step
+
+    path = tmp_path / "eval.rrd"
+    rec = rr.RecordingStream("onionsort-test")
+    rec.save(path, default_blueprint=evaluation_blueprint())
+    result = evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=0,
+                             classify=always(Prediction.BAD), render=True,
+                             on_step=functools.partial(log_evaluation_step, rec))
+    rec.flush()
+    rec.disconnect()
+    assert result.n_steps == 8 and path.stat().st_size > 10_000
+    cli = _rerun_cli()
+    if cli is None:
+        pytest.skip("the rerun CLI is not installed")
+    done = subprocess.run([cli, "rrd", "verify", str(path)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+@pytest.mark.slow
+def test_the_expert_sorts_fifty_onions_perfectly(expert_pi):
+    r = evaluate_policy(expert_pi, n_onions=50, n_blemished=30, seed=0, classify="ground-truth")
+    assert (r.tp, r.fp, r.tn, r.fn) == (30, 0, 20, 0) and r.n_steps == 200

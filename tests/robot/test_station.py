@@ -1,0 +1,251 @@
+"""The Sawyer station: each motion primitive takes the world to the state the MDP predicts."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from irl.domains.onion_sorting import Location, Prediction, SortAction, SortingState, next_state
+from robot.camera import boxes_from_segmentation
+from robot.scene import GATE_X
+from robot.state_map import PICK_SPOT, hand_location, in_bin, on_belt
+from robot.station import (
+    GROUND_TRUTH,
+    ROBOT_TARGETS,
+    START_STATE,
+    SawyerStation,
+    make_lineup,
+)
+
+C, P, I, PC, PB = SortAction  # CLAIM, PICK, INSPECT, PLACE_ON_CONVEYOR, PLACE_IN_BIN
+
+
+def always(prediction: Prediction):
+    return lambda rgb: prediction
+
+
+#: (name, actions from the start, classifier): one starting state each
+_SCENARIOS = {
+    "start": ((), GROUND_TRUTH),
+    "claimed": ((C,), GROUND_TRUTH),
+    "hover": ((C, P), GROUND_TRUTH),
+    "face-good": ((C, P, I), always(Prediction.GOOD)),
+    "face-bad": ((C, P, I), always(Prediction.BAD)),
+    "binned": ((C, P, I, PB), always(Prediction.BAD)),
+    "left-on-line": ((C, P, I, PC), always(Prediction.GOOD)),
+    "put-back-unknown": ((C, P, PC), GROUND_TRUTH),
+    "claimed-from-bin": ((C, P, PB, C), GROUND_TRUTH),
+}
+
+
+@pytest.fixture(scope="module")
+def station():
+    with SawyerStation(GROUND_TRUTH, n_onions=4, n_blemished=2, seed=5) as st:
+        yield st
+
+
+@contextlib.contextmanager
+def _station_in(scenario: str) -> Iterator[SawyerStation]:
+    prefix, classify = _SCENARIOS[scenario]
+    with SawyerStation(classify, n_onions=3, n_blemished=1, seed=2) as st:
+        for a in prefix:
+            st.step(a)
+        yield st
+
+
+def _check_step(st: SawyerStation, action: SortAction) -> None:
+    s, flange, focus = st.state, st.flange, st.focus
+    done = st.step(action)
+    perceived_bad = st.focus is not None and st.perceived(st.focus) == Prediction.BAD
+    expected = next_state(s, action, blemished=perceived_bad)
+    assert done.state == s and done.next_state == expected == st.state, action.name
+    if expected == s:  # nothing happens physically
+        assert st.focus == focus and np.allclose(st.flange, flange, atol=1e-3), action.name
+    else:  # the flange ends at its target for the new end-effector location
+        assert np.linalg.norm(st.flange - ROBOT_TARGETS[expected.end_effector]) < 0.01
+        assert done.reach_error < 0.01, action.name
+    assert (done.perceived is not None) == (done.inspection is not None)
+
+
+@pytest.mark.parametrize("scenario", list(_SCENARIOS))
+def test_each_primitive_reaches_the_mdps_next_state(scenario):
+    """Every action from the scenario's state; the no-ops share one station."""
+    with _station_in(scenario) as shared:
+        s = shared.state
+        for action in SortAction:
+            if next_state(s, action, False) == s == next_state(s, action, True):
+                _check_step(shared, action)
+            else:
+                with _station_in(scenario) as st:
+                    _check_step(st, action)
+
+
+def test_the_station_starts_in_the_mdps_initial_state(station):
+    assert station.state == START_STATE
+    assert hand_location(station.flange, ROBOT_TARGETS) == Location.CONVEYOR
+
+
+@pytest.mark.parametrize("loc", list(Location))
+def test_every_flange_target_is_reached_exactly_with_the_flange_down(station, loc):
+    position_error, angle_error = station.target_errors()[loc]
+    assert position_error < 1e-3 and angle_error < 0.02
+    assert hand_location(ROBOT_TARGETS[loc], ROBOT_TARGETS) == loc
+
+
+def test_a_sorting_cycle_moves_the_onion_where_the_mdp_says():
+    with SawyerStation(always(Prediction.BAD), n_onions=3, n_blemished=1, seed=0) as st:
+        st.step(C)
+        first = st.focus
+        pos = st.position(first)
+        assert st.gate.raised and st.place_of(first) == "waiting"
+        assert abs(pos[0] - PICK_SPOT[0]) < 0.02 and pos[0] < GATE_X and on_belt(pos)
+        st.step(P)
+        assert not st.gate.raised and st.place_of(first) == "held"
+        held = st.position(first)
+        assert held[2] > pos[2] + 0.15  # lifted with the flange
+        assert np.allclose(held[:2], st.flange[:2], atol=1e-3)
+        st.step(I)
+        st.step(PB)
+        assert st.place_of(first) == "bin" and in_bin(st.position(first))
+        assert st.state == SortingState(Location.BIN, Location.BIN, Prediction.BAD)
+
+        st.step(C)
+        second = st.focus
+        assert second == first + 1 and st.gate.raised
+        assert abs(st.position(second)[0] - PICK_SPOT[0]) < 0.02
+        assert in_bin(st.position(first))  # the binned onion stays in the bin
+
+
+def test_an_inspected_onion_put_back_rides_away_downstream():
+    with SawyerStation(always(Prediction.GOOD), n_onions=9, n_blemished=1, seed=0) as st:
+        for a in (C, P, I, PC):
+            st.step(a)
+        first = st.focus
+        placed = st.position(first)
+        assert on_belt(placed) and placed[0] > GATE_X + 0.03 and not st.gate.raised
+        assert st.state == SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD)
+        st.step(C)
+        assert st.position(first)[0] > placed[0] + 0.1  # carried downstream by the belt
+        assert st.focus == first + 1
+        for _ in range(6):  # ... and, a few onions later, off the belt's end, out of the world
+            for a in (P, I, PC, C):
+                st.step(a)
+        assert st.place_of(first) == "gone" and st.position(first)[2] < -1
+        assert st.place_of(st.focus + 1) == "queued" and on_belt(st.position(st.focus + 1))
+
+
+def test_an_uninspected_onion_put_back_waits_at_the_gate_to_be_picked_again():
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=0) as st:
+        for a in (C, P, PC):
+            st.step(a)
+        assert st.gate.raised and st.place_of(0) == "waiting"
+        assert st.state == SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.UNKNOWN)
+        assert not st.step(C).changed  # still in focus: nothing to claim
+        assert st.step(P).next_state.onion == Location.HOVER
+
+
+def test_the_inspection_view_shows_the_held_onion_large_and_centred():
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=1) as st:
+        done = [st.step(a) for a in (C, P, I)][-1]
+        assert done.inspection.shape == (st.inspection.height, st.inspection.width, 3)
+        seg = st.render_inspection().seg
+        body = st._onions[st.focus].body
+        x0, y0, x1, y1, n = boxes_from_segmentation(seg, [body])[body]
+        h, w = seg.shape
+        assert n > 0.1 * h * w  # large: a tenth of the view or more
+        assert abs((x0 + x1) / 2 - w / 2) < 0.1 * w and abs((y0 + y1) / 2 - h / 2) < 0.15 * h
+        assert x0 > 0 and y0 > 0 and x1 < w and y1 < h  # whole
+
+
+def test_the_classifier_sees_the_inspection_view_and_its_answer_is_the_prediction():
+    seen = []
+
+    def classify(rgb):
+        seen.append(rgb.copy())
+        return Prediction.BAD
+
+    with SawyerStation(classify, n_onions=2, n_blemished=0, seed=0) as st:
+        for a in (C, P, I):
+            done = st.step(a)
+        assert len(seen) == 1 and np.array_equal(seen[0], done.inspection)
+        assert done.perceived == Prediction.BAD == done.next_state.prediction
+        assert not st.step(I).changed and len(seen) == 1  # a known onion is not re-inspected
+
+
+def test_rendering_every_step_returns_the_main_view():
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=0,
+                       render_every_step=True) as st:
+        image = st.step(C).image
+        assert image.rgb.shape == (240, 320, 3) and np.all(image.depth > 0)
+
+
+def test_when_the_classifier_abstains_the_robot_shows_it_another_side():
+    views = []
+
+    def hesitant(rgb):
+        views.append(rgb.copy())
+        return Prediction.UNKNOWN if len(views) == 1 else Prediction.BAD
+
+    with SawyerStation(hesitant, n_onions=2, n_blemished=0) as st:
+        done = [st.step(a) for a in (C, P, I)][-1]
+        assert len(views) == 2 and not np.array_equal(views[0], views[1])
+        assert done.perceived == Prediction.BAD and np.array_equal(done.inspection, views[1])
+        assert st.state == SortingState(Location.FACE, Location.FACE, Prediction.BAD)
+        assert st.step(PB).next_state.onion == Location.BIN  # and the motions go on
+
+
+def test_an_onion_the_classifier_never_classifies_counts_as_good(caplog):
+    with SawyerStation(always(Prediction.UNKNOWN), n_onions=2, n_blemished=1, seed=0) as st:
+        done = [st.step(a) for a in (C, P, I)][-1]
+        assert done.perceived == Prediction.GOOD == done.next_state.prediction
+        assert "abstained" in caplog.text
+        for a in (PC, C, P):  # from the turned wrist, the motions go on as usual
+            assert st.step(a).reach_error < 0.01
+        assert st.state == SortingState(Location.HOVER, Location.HOVER, Prediction.UNKNOWN)
+
+
+def test_bad_classifier_answers_and_arguments_are_rejected():
+    with SawyerStation(always("rotten"), n_onions=2, n_blemished=1) as st:
+        st.step(C)
+        st.step(P)
+        with pytest.raises(ValueError, match="classify must return a Prediction"):
+            st.step(I)
+    with pytest.raises(ValueError, match="classify"):
+        SawyerStation("oracle")
+    with pytest.raises(TypeError, match="classify"):
+        SawyerStation(42)
+    with pytest.raises(ValueError, match="move_steps"):
+        SawyerStation(GROUND_TRUTH, move_steps=1)
+    with pytest.raises(ValueError, match="n_blemished"):
+        SawyerStation(GROUND_TRUTH, n_onions=3, n_blemished=4)
+    with pytest.raises(RuntimeError, match="entered"):
+        _ = SawyerStation(GROUND_TRUTH).state
+
+
+def test_bad_actions_are_rejected(station):
+    for bad in (5, -1, "claim"):
+        with pytest.raises(ValueError, match="action must be"):
+            station.step(bad)
+
+
+def test_claiming_past_the_end_of_the_line_up_fails_loudly():
+    with SawyerStation(always(Prediction.GOOD), n_onions=1, n_blemished=0) as st:
+        for a in (C, P, I, PC):
+            st.step(a)
+        with pytest.raises(RuntimeError, match="exhausted"):
+            st.step(C)
+
+
+def test_the_line_up_has_exactly_the_blemished_count_in_a_seeded_order():
+    a = make_lineup(20, 7, np.random.default_rng(3))
+    b = make_lineup(20, 7, np.random.default_rng(3))
+    c = make_lineup(20, 7, np.random.default_rng(4))
+    assert sum(o.blemished for o in a) == 7 and len(a) == 20
+    assert [o.blemished for o in a] == [o.blemished for o in b]
+    assert [o.blemished for o in a] != [o.blemished for o in c]
+    assert len({o.texture_seed for o in a}) == 20  # every onion looks different
+    with pytest.raises(ValueError, match="n_onions"):
+        make_lineup(0, 0, np.random.default_rng(0))
