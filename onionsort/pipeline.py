@@ -119,7 +119,8 @@ def _split_sessions(root: Path | str, split: str, frames_per_step: int
     from recordings.dataset import read_split
 
     views = {(f.record["session"], f.record["frame"]): f.color
-             for f in read_split(root, split, view="inspection")}
+             for f in read_split(root, split, view="inspection")
+             if f.record.get("source", "human") == "human"}
     sessions: dict[int, dict[int, list]] = defaultdict(lambda: defaultdict(list))
     for frame in read_split(root, split):
         rec = frame.record

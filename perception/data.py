@@ -100,11 +100,13 @@ def augment(sample: Sample, rng: np.random.Generator, *, scale: tuple[float, flo
 
 
 def load_samples(root: Path | str, split: str, width: int, height: int,
-                 empty_inspection_share: float = 0.15, seed: int = 0) -> list[Sample]:
+                 empty_inspection_share: float = 0.15, inspection_repeat: int = 1,
+                 seed: int = 0) -> list[Sample]:
     """Canvas samples of a dataset split: every camera frame and the inspection views.
 
     Inspection views without an onion are many (the onion is in view only while it is
-    inspected); ``empty_inspection_share`` of them are kept as negatives.
+    inspected); ``empty_inspection_share`` of them are kept as negatives. Views with an onion
+    are few next to the camera frames; ``inspection_repeat`` repeats them (for training).
     """
     from recordings.dataset import read_split
 
@@ -118,9 +120,12 @@ def load_samples(root: Path | str, split: str, width: int, height: int,
                for f in read_split(root, split)]
     if "inspection" in views:
         for f in read_split(root, split, view="inspection"):
-            if f.record["boxes"] or rng.random() < empty_inspection_share:
-                samples.append(to_canvas(f.color, f.record["boxes"], f.record["classes"],
-                                         width, height))
+            if f.record["boxes"]:
+                sample = to_canvas(f.color, f.record["boxes"], f.record["classes"], width,
+                                   height)
+                samples.extend([sample] * inspection_repeat)
+            elif rng.random() < empty_inspection_share:
+                samples.append(to_canvas(f.color, [], [], width, height))
     if not samples:
         raise ValueError(f"split {split!r} of {root} holds no frames")
     return samples

@@ -105,7 +105,8 @@ def train_detector(data: Path | str, out: Path | str, config: TrainConfig = Trai
         raise FileNotFoundError(f"cannot resume: {last} does not exist")
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    train = load_samples(data, "train", net_config.width, net_config.height, seed=config.seed)
+    train = load_samples(data, "train", net_config.width, net_config.height,
+                         inspection_repeat=3, seed=config.seed)
     val = load_samples(data, "val", net_config.width, net_config.height, seed=config.seed)
     net = DetectorNet(net_config)
     ema = copy.deepcopy(net).eval()

@@ -20,7 +20,10 @@ pixels, exclusive max, of the onions with at least ``MIN_VISIBLE_PIXELS`` visibl
 
 ``dataset.json`` lists its ``views``: ``camera`` (the main RGB-D camera) and ``inspection`` (the
 close view where the sorter, or the robot, looks at the onion in hand; boxes there are in that
-view's pixels). The detector trains on both; the state classifier on the camera view.
+view's pixels). Inspection records have a ``source``: ``human`` (from a session, with the
+step's labels) or ``robot`` (the Sawyer holding an onion of a line-up up to the same camera, so
+the detector learns what the robot will see). The detector trains on both views; the state
+classifier on the camera view.
 """
 
 from __future__ import annotations
@@ -60,6 +63,7 @@ def frame_record(frame: Frame, session: int, name: str, view: str = "camera") ->
               else {"color": f"inspection/{name}.png"})
     return {
         **images,
+        "source": "human",
         "boxes": boxes,
         "classes": classes,
         "state": int(frame.step.state),
@@ -109,6 +113,25 @@ class DatasetWriter:
             name = f"{len(close):06d}"
             _write_rgb(folder / "inspection" / f"{name}.png", frame.inspection)
             close.append(frame_record(frame, session, name, view="inspection"))
+
+    def add_robot_view(self, split: str, rgb: np.ndarray,
+                       labels: list[tuple[tuple[int, int, int, int], bool, int]],
+                       lineup: int, index: int) -> None:
+        """Add an inspection view rendered at the robot's station (Sawyer holding an onion).
+
+        ``labels`` are ``(box, blemished, visible_pixels)``; the record has ``source: "robot"``,
+        ``lineup`` and ``index`` and no state (the robot's views are for the detector only).
+        """
+        if split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
+        records = self._records[split, "inspection"]
+        name = f"{len(records):06d}"
+        _write_rgb(self.root / split / "inspection" / f"{name}.png", rgb)
+        kept = [(b, c) for b, c, n in labels if n >= MIN_VISIBLE_PIXELS]
+        records.append({"color": f"inspection/{name}.png", "source": "robot",
+                        "boxes": [[int(v) for v in b] for b, _ in kept],
+                        "classes": [int(c) for _, c in kept], "lineup": int(lineup),
+                        "index": int(index)})
 
     def flush(self, split: str | None = None) -> None:
         for s in SPLITS if split is None else (split,):

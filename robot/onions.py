@@ -68,8 +68,9 @@ def _blob(shape: tuple[int, int], center: np.ndarray, radius: float, rng) -> np.
 def onion_texture(appearance: OnionAppearance, size: int = 128) -> np.ndarray:
     """The onion's texture, shape (size, size, 3), uint8 RGB.
 
-    Veins run along ``u`` (around the onion); a blemished onion gets 3-7 dark patches of varied
-    size and darkness.
+    Veins run along ``u`` (around the onion); a blemished onion gets 5-9 dark rot patches of
+    varied size and darkness, spread so that some show from any side (the camera sees one
+    hemisphere, and a sorter one view of it).
     """
     if size < 16:
         raise ValueError(f"size must be >= 16; got {size}")
@@ -80,10 +81,12 @@ def onion_texture(appearance: OnionAppearance, size: int = 128) -> np.ndarray:
     tex = appearance.skin[None, None, :] * shade
     if appearance.blemished:
         rot = np.array([45.0, 32.0, 20.0])
-        for _ in range(int(rng.integers(3, 8))):
-            center = rng.uniform([0, 0.15 * size], [size, 0.85 * size])
-            mask = _blob((size, size), center, rng.uniform(0.08, 0.2) * size, rng)
-            darkness = rng.uniform(0.6, 0.95)
+        n = int(rng.integers(5, 10))
+        for k in range(n):
+            u0 = (k + rng.uniform(0.0, 1.0)) / n * size  # one patch per sector around the onion
+            center = np.array([u0, rng.uniform(0.15 * size, 0.85 * size)])
+            mask = _blob((size, size), center, rng.uniform(0.1, 0.2) * size, rng)
+            darkness = rng.uniform(0.75, 0.95)
             tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
     return np.clip(tex, 0, 255).astype(np.uint8)
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -49,7 +49,14 @@ from irl.domains.onion_sorting import (
     SortingState,
     next_state,
 )
-from robot.camera import CameraImage, CameraSpec, Lighting, render, sample_lighting
+from robot.camera import (
+    CameraImage,
+    CameraSpec,
+    Lighting,
+    boxes_from_segmentation,
+    render,
+    sample_lighting,
+)
 from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
 from robot.scene import GATE_X, StopGate, build_workcell, connect
 from robot.simulation import INSPECTION_CAMERA
@@ -421,6 +428,20 @@ class SawyerStation:
         """The inspection view now."""
         return render(self._require_client(), self.inspection, self.lighting)
 
+    def inspection_labels(self, image: CameraImage | None = None
+                          ) -> list[tuple[tuple[int, int, int, int], bool, int]]:
+        """``(box, blemished, visible_pixels)`` of each onion in the inspection view.
+
+        Boxes are ``(x_min, y_min, x_max, y_max)`` pixels (exclusive max) from the segmentation
+        of ``image`` (rendered now if None): the ground truth of the robot's inspection views,
+        for training the detector on what the robot will see.
+        """
+        image = self.render_inspection() if image is None else image
+        boxes = boxes_from_segmentation(image.seg, [o.body for o in self._onions])
+        by_body = {o.body: o for o in self._onions}
+        return [(tuple(b[:4]), by_body[body].appearance.blemished, b[4])
+                for body, b in boxes.items()]
+
     # -- motion primitives -------------------------------------------------------------------
     def _solve(self, target: np.ndarray, orientation: tuple[float, ...] | None = None,
                seed: np.ndarray | None = None) -> np.ndarray:
@@ -607,3 +628,37 @@ class SawyerStation:
             inspection=inspection, image=self.render() if self.render_every_step else None,
             q=self.arm.q, reach_error=max(errs, default=0.0),
         )
+
+
+def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
+                           ) -> Iterator[tuple[int, np.ndarray, list]]:
+    """The Sawyer's inspection views of a line-up, with their ground-truth boxes.
+
+    The expert's greedy policy runs the line-up with a classifier that abstains, so the wrist
+    shows each onion from every side it turns to (:data:`_INSPECT_YAWS`). Yields ``(onion
+    index, rgb (h, w, 3) uint8, labels)`` with labels as :meth:`SawyerStation.inspection_labels`.
+    """
+    from irl.domains.onion_sorting import encode_state, onion_sorting
+
+    actions = onion_sorting().expert_policy().argmax(axis=1)
+    views: list[tuple[int, np.ndarray, list]] = []
+    holder: list[SawyerStation] = []
+
+    def abstain(rgb: np.ndarray) -> Prediction:
+        views.append((holder[0].focus, rgb, holder[0].inspection_labels()))
+        return Prediction.UNKNOWN
+
+    with SawyerStation(abstain, n_onions=n_onions, n_blemished=n_onions // 2,
+                       seed=seed) as station:
+        holder.append(station)
+        logger.disabled = True  # the classifier abstains on purpose: no warning per onion
+        try:
+            for _ in range(n_onions * 6):
+                if all(station.place_of(i) in ("bin", "belt", "gone")
+                       for i in range(n_onions)):
+                    break
+                station.step(int(actions[encode_state(station.state)]))
+                yield from views
+                views.clear()
+        finally:
+            logger.disabled = False

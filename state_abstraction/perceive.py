@@ -41,7 +41,7 @@ __all__ = [
 ]
 
 #: Minimum detector score for an onion in the inspection view to count as seen.
-INSPECTION_SCORE = 0.5
+INSPECTION_SCORE = 0.2
 
 
 @dataclass(frozen=True)

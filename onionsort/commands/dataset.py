@@ -35,6 +35,9 @@ def register(subparsers) -> None:
     add_session_arguments(parser, occlusion=0.3)
     parser.add_argument("--val", type=float, default=0.15, help="share of sessions for val")
     parser.add_argument("--test", type=float, default=0.15, help="share of sessions for test")
+    parser.add_argument("--robot-onions", type=int, default=120,
+                        help="onions the Sawyer holds up to the inspection camera, 3 views each, "
+                             "in line-ups of 10 split like the sessions (120; 0 for none)")
     parser.set_defaults(func=run)
 
 
@@ -64,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.frames < 1:
         raise ValueError(f"--frames must be >= 1; got {args.frames}")
+    if args.robot_onions < 0:
+        raise ValueError(f"--robot-onions must be >= 0; got {args.robot_onions}")
     config = SessionConfig(n_steps=args.steps_per_session, occlusion=args.occlusion,
                            frames_per_step=args.frames_per_step)
     per_session = config.n_steps * config.frames_per_step
@@ -93,4 +98,32 @@ def run(args: argparse.Namespace) -> int:
         writer.close()
     sessions = ", ".join(f"{s}: {plan.count(s)} sessions" for s in dict.fromkeys(plan))
     print(f"wrote {written} frames ({sessions}) to {args.out}")
+    if args.robot_onions:
+        n = _robot_views(writer, args)
+        print(f"wrote {n} inspection views of the Sawyer holding {args.robot_onions} onions")
     return 0
+
+
+def _robot_views(writer, args: argparse.Namespace) -> int:
+    """Add the Sawyer's inspection views, line-ups of 10 onions split like the sessions."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from robot.station import robot_inspection_views
+
+    sizes = [10] * (args.robot_onions // 10) + ([args.robot_onions % 10]
+                                               if args.robot_onions % 10 else [])
+    plan = (split_plan(len(sizes), args.val, args.test) if len(sizes) >= 3
+            else ["train"] * len(sizes))
+    seeds = np.random.SeedSequence([args.seed, 0x5A3E7]).spawn(len(sizes))
+    n = 0
+    try:
+        for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
+                                                     desc="robot views", unit="line-up")):
+            for index, rgb, labels in robot_inspection_views(size, seed):
+                writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
+                n += 1
+            writer.flush(split)
+    finally:
+        writer.close()
+    return n

@@ -18,7 +18,8 @@ TINY = DetectorConfig(width=128, height=96, channels=4)
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("det") / "data"
-    assert main(["dataset", "--frames", "30", "--steps-per-session", "5", "--frames-per-step",
+    assert main(["dataset", "--frames", "30", "--robot-onions", "3",
+                 "--steps-per-session", "5", "--frames-per-step",
                  "2", "--occlusion", "0.3", "--seed", "3", "--out", str(out)]) == 0
     return out
 

@@ -15,7 +15,8 @@ from recordings.dataset import SPLITS, read_split
 def dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("ds") / "data"
     code = main(["dataset", "--frames", "14", "--steps-per-session", "2", "--frames-per-step",
-                 "2", "--occlusion", "0.5", "--seed", "3", "--out", str(out)])
+                 "2", "--occlusion", "0.5", "--seed", "3", "--robot-onions", "30",
+                 "--out", str(out)])
     assert code == 0
     return out
 
@@ -47,6 +48,22 @@ def test_frames_and_labels_are_consistent(dataset):
             assert 0 <= x0 < x1 <= 320 and 0 <= y0 < y1 <= 240 and c in (0, 1)
         assert 0.0 <= r["occluded_fraction"] <= 1.0
     assert any(f.record["boxes"] for f in frames)
+
+
+def test_inspection_views_of_the_sorter_and_of_the_robot_are_labelled(dataset):
+    views = [f for split in SPLITS for f in read_split(dataset, split, view="inspection")]
+    human = [f for f in views if f.record["source"] == "human"]
+    robot = [f for f in views if f.record["source"] == "robot"]
+    assert len(robot) == 90  # 30 onions, 3 wrist turns each
+    for f in robot:
+        assert f.color.shape == (120, 160, 3) and f.depth is None
+        assert len(f.record["boxes"]) == 1  # the onion in the gripper, seen whole
+        x0, y0, x1, y1 = f.record["boxes"][0]
+        assert (x1 - x0) * (y1 - y0) > 0.05 * 160 * 120
+    assert {f.record["lineup"] for f in read_split(dataset, "test", view="inspection")
+            if f.record["source"] == "robot"}
+    assert sum(f.record["classes"][0] for f in robot) == 45  # half of each line-up blemished
+    assert len(human) == 14 // 2  # the first frame of every step
 
 
 def test_existing_dataset_is_never_overwritten(dataset, capsys):

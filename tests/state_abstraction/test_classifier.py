@@ -19,7 +19,8 @@ from state_abstraction.classifier import (
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("sc") / "data"
-    assert main(["dataset", "--frames", "36", "--steps-per-session", "4", "--frames-per-step",
+    assert main(["dataset", "--frames", "36", "--robot-onions", "0",
+                 "--steps-per-session", "4", "--frames-per-step",
                  "3", "--occlusion", "0.5", "--seed", "5", "--out", str(out)]) == 0
     return out
 

@@ -92,7 +92,8 @@ def test_perceived_demonstration_has_none_exactly_where_the_classifier_said_occl
 
 def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys):
     data = tmp_path / "data"
-    assert main(["dataset", "--frames", "36", "--steps-per-session", "4", "--seed", "4",
+    assert main(["dataset", "--frames", "36", "--robot-onions", "0",
+                 "--steps-per-session", "4", "--seed", "4",
                  "--out", str(data)]) == 0
     out = tmp_path / "cal"
     assert main(["calibrate", "--data", str(data), "--models", str(random_models),
@@ -118,7 +119,8 @@ def test_missing_models_name_the_training_command(tmp_path):
 
 def test_learn_from_perceived_sessions_and_its_refusals(random_models, session, tmp_path, capsys):
     data = tmp_path / "data"
-    assert main(["dataset", "--frames", "36", "--steps-per-session", "4", "--seed", "6",
+    assert main(["dataset", "--frames", "36", "--robot-onions", "0",
+                 "--steps-per-session", "4", "--seed", "6",
                  "--out", str(data)]) == 0
     assert main(["calibrate", "--data", str(data), "--models", str(random_models),
                  "--out", str(tmp_path / "cal")]) == 0
