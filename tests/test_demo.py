@@ -3,6 +3,7 @@
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,8 +14,8 @@ from onionsort.pipeline import CLASSIFIER_FILE, DEFAULT_MODELS, DETECTOR_FILE
 
 
 def _rerun_cli():
-    venv = Path(shutil.which("python") or "").parent / "rerun"
-    return str(venv) if venv.exists() else shutil.which("rerun")
+    local = Path(sys.executable).parent / "rerun"
+    return str(local) if local.exists() else shutil.which("rerun")
 
 
 @pytest.mark.skipif(not (DEFAULT_MODELS / DETECTOR_FILE).exists()
@@ -29,6 +30,7 @@ def test_quick_demo_runs_end_to_end(tmp_path, capsys):
         assert r["tp"] + r["fp"] + r["tn"] + r["fn"] == 10
         assert 0.0 <= r["precision"] <= 1.0 and 0.0 <= r["recall"] <= 1.0
     assert "| mmap-birl | paper (physical robot) | 23 | 2 | 18 | 7 |" in capsys.readouterr().out
+    assert all(r["ile"] >= 0.0 for r in results["methods"].values())
 
     sessions = sorted((out / "sessions").glob("*.mcap"))
     assert len(sessions) == 4

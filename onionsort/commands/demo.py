@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"perceived {len(paths)} sessions")
     data = out / "heldout"
     _stage("dataset", ["dataset", "--frames", str(heldout), "--seed", str(args.seed + 1000),
-                       "--out", str(data)])
+                       "--robot-onions", "0", "--out", str(data)])
     calibration, metrics = evaluate_dataset(models, data, "all")
     cal_dir = out / "calibration"
     cal_dir.mkdir(parents=True, exist_ok=True)
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
             "precision": result.precision, "recall": result.recall,
             "learn_seconds": round(learn_s, 3), "theta": model["theta"],
-            "undecided": result.undecided}
+            "ile": _ile(model), "undecided": result.undecided}
     results["seconds"] = round(time.perf_counter() - start, 1)
     tmp = out / "results.json.partial"
     tmp.write_text(json.dumps(results, indent=1))
@@ -120,13 +120,26 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ile(model: dict) -> float:
+    """The learned reward's inverse learning error against the sorter's true reward."""
+    import numpy as np
+
+    from irl.domains.onion_sorting import onion_sorting
+    from irl.metrics import inverse_learning_error
+
+    domain = onion_sorting()
+    theta = np.array([model["theta"][name] for name in domain.feature_names])
+    return float(inverse_learning_error(domain.mdp, domain.true_theta, theta))
+
+
 def table(results: dict) -> str:
     """The paper's Table 1 beside ours, as Markdown."""
-    rows = ["| method | source | TP | FP | TN | FN | precision | recall |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = ["| method | source | TP | FP | TN | FN | precision | recall | ILE |",
+            "|---|---|---|---|---|---|---|---|---|"]
     for method in METHODS:
         for source, r in (("paper (physical robot)", PAPER_TABLE_1[method]),
                           ("ours (simulation)", results["methods"][method])):
+            ile = f"{r['ile']:.3f}" if "ile" in r else "-"
             rows.append(f"| {method} | {source} | {r['tp']} | {r['fp']} | {r['tn']} | "
-                        f"{r['fn']} | {r['precision']:.3f} | {r['recall']:.3f} |")
+                        f"{r['fn']} | {r['precision']:.3f} | {r['recall']:.3f} | {ile} |")
     return "\n".join(rows)
