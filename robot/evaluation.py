@@ -87,8 +87,26 @@ def _ratio(num: int, den: int) -> float:
     return num / den if den else 0.0
 
 
+class _PrecisionRecall:
+    """``precision`` and ``recall`` of a class with ``tp``, ``fp`` and ``fn`` counts."""
+
+    tp: int
+    fp: int
+    fn: int
+
+    @property
+    def precision(self) -> float:
+        """``TP / (TP + FP)``; 0.0 while nothing is binned."""
+        return _ratio(self.tp, self.tp + self.fp)
+
+    @property
+    def recall(self) -> float:
+        """``TP / (TP + FN)``; 0.0 while no blemished onion is decided."""
+        return _ratio(self.tp, self.tp + self.fn)
+
+
 @dataclass(frozen=True)
-class SortingResult:
+class SortingResult(_PrecisionRecall):
     """The outcome of one evaluation episode (see the module docstring for the counts)."""
 
     tp: int
@@ -105,16 +123,6 @@ class SortingResult:
                 f"tp + fp + tn + fn must equal the number of onions {len(self.onions)}; got "
                 f"{self.tp} + {self.fp} + {self.tn} + {self.fn}"
             )
-
-    @property
-    def precision(self) -> float:
-        """``TP / (TP + FP)``; 0.0 when nothing was binned."""
-        return _ratio(self.tp, self.tp + self.fp)
-
-    @property
-    def recall(self) -> float:
-        """``TP / (TP + FN)``; 0.0 when there is no blemished onion."""
-        return _ratio(self.tp, self.tp + self.fn)
 
     def to_dict(self) -> dict:
         """A JSON-ready dict: counts, precision, recall, steps and the per-onion outcomes."""
@@ -138,7 +146,7 @@ class SortingResult:
 
 
 @dataclass(frozen=True)
-class EvaluationStep:
+class EvaluationStep(_PrecisionRecall):
     """One action of the evaluation, for logging (:func:`evaluate_policy`'s ``on_step``).
 
     Attributes
@@ -183,16 +191,6 @@ class EvaluationStep:
     depth: np.ndarray | None = field(default=None, repr=False)
     inspection: np.ndarray | None = field(default=None, repr=False)
     q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
-
-    @property
-    def precision(self) -> float:
-        """Running precision (0.0 while nothing is binned)."""
-        return _ratio(self.tp, self.tp + self.fp)
-
-    @property
-    def recall(self) -> float:
-        """Running recall (0.0 while no blemished onion is decided)."""
-        return _ratio(self.tp, self.tp + self.fn)
 
 
 def greedy_actions(actions: np.ndarray) -> np.ndarray:

@@ -86,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     def _terminate(signum, _frame):  # finish the open file on SIGTERM as on Ctrl-C
         raise KeyboardInterrupt(f"signal {signum}")
 
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    # SIGINT explicitly too: a process started in the background inherits SIGINT ignored
+    previous = {sig: signal.signal(sig, _terminate) for sig in (signal.SIGTERM, signal.SIGINT)}
     total = args.sessions * config.n_steps * config.frames_per_step
     try:
         with tqdm(total=total, unit="frame", desc="record") as bar:
@@ -111,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
                 if rerun_logger is not None:
                     rerun_logger.log_session(open_session(path), i)
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if rerun_logger is not None:
             rerun_logger.close()
     return 0
