@@ -85,12 +85,14 @@ def evaluate_run(run_dir: Path, *, onions: int = 50, blemished: int = 30, seed: 
     from robot.evaluation import evaluate_policy
 
     actions, doc = load_policy(run_dir)
+    detector = None
     if ground_truth:
         classify = "ground-truth"
     else:
         from onionsort.pipeline import PerceptionModels
 
-        classify = inspection_classifier(PerceptionModels.load(models).detector)
+        detector = PerceptionModels.load(models).detector
+        classify = inspection_classifier(detector)
     on_step, rec = None, None
     if rerun:
         import rerun as rr
@@ -99,9 +101,16 @@ def evaluate_run(run_dir: Path, *, onions: int = 50, blemished: int = 30, seed: 
 
         rec = rr.RecordingStream("onionsort_evaluate")
         rec.save(Path(run_dir) / "evaluation.rrd", default_blueprint=evaluation_blueprint())
+        rec.log("evaluation/inspection", rr.AnnotationContext(
+            [(0, "good", (40, 200, 60)), (1, "blemished", (230, 40, 40))]), static=True)
 
         def on_step(event):
             log_evaluation_step(rec, event)
+            if detector is not None and event.inspection is not None:
+                det = detector.detect([event.inspection])[0]  # the boxes behind the decision
+                rec.log("evaluation/inspection/detections", rr.Boxes2D(
+                    array=det.boxes, array_format=rr.Box2DFormat.XYXY, class_ids=det.classes,
+                    labels=[f"{s:.2f}" for s in det.scores]))
 
     result = evaluate_policy(actions, n_onions=onions, n_blemished=blemished, seed=seed,
                              classify=classify, render=rerun, on_step=on_step)
