@@ -45,7 +45,7 @@ def bench_camera(n: int) -> tuple[float, np.ndarray, np.ndarray]:
 def main() -> None:
     import torch
 
-    from onionsort.pipeline import PerceptionModels
+    from onionsort.stages.models import PerceptionModels
     from state_abstraction.classifier import step_input
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

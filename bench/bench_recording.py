@@ -74,7 +74,7 @@ def bench_recording(config, policy, initial, folder: Path) -> tuple[int, float, 
     t0 = time.perf_counter()
     with SortingSession(config, policy, initial, seed=1) as session, SessionWriter(
         path, {"seed": 1}, intrinsics(config.camera), intrinsics(config.inspection),
-        overwrite=True,
+        frames_per_step=config.frames_per_step, overwrite=True,
     ) as writer:
         for frame in session.frames():
             writer.write_frame(frame)

@@ -1,4 +1,4 @@
-"""Figures of the experiment sweeps (matplotlib, written as PNG)."""
+"""Figures (matplotlib, written as PNG): experiment sweeps, confusion matrices, learning curves."""
 
 from __future__ import annotations
 
@@ -100,7 +100,20 @@ def confusion_figure(calibration, path: Path) -> Path:
         ax.set_title(f"{name} (accuracy {m.accuracy:.3f})", fontsize=10)
         ax.set_xlabel("perceived")
         ax.set_ylabel("true")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, plt)
+
+
+def learning_curve_figure(objective: Sequence[float], method: str, path: Path) -> Path:
+    """The learner's objective per iteration, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.plot(list(objective), ".-")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("objective (log posterior / log likelihood)")
+    ax.set_title(method)
+    ax.grid(alpha=0.3)
+    return _save(fig, path, plt)

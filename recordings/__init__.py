@@ -1,6 +1,13 @@
-"""Sessions on disk: MCAP writer and reader (:mod:`recordings.writer`, :mod:`recordings.reader`),
-the topic layout (:mod:`recordings.schema`) and Rerun logging (:mod:`recordings.rerun_log`,
-imported on demand because it loads the Rerun SDK).
+"""Sessions on disk and the frames that make them.
+
+- the session format, sensor side and optional ground truth (:mod:`recordings.schema`), its
+  MCAP writer and reader (:mod:`recordings.writer`, :mod:`recordings.reader`), atomic rewrites
+  (:mod:`recordings.rewrite`: perception topics, stripping ground truth), step grouping
+  (:mod:`recordings.steps`);
+- frame sources for a video file or a camera and the import of their frames as a session
+  (:mod:`recordings.sources`, :mod:`recordings.segmentation`, :mod:`recordings.video_import`);
+- labelled datasets for perception (:mod:`recordings.dataset`);
+- all Rerun logging (:mod:`recordings.rerun`, imported on demand: it loads the Rerun SDK).
 """
 
 from recordings.reader import (
@@ -10,6 +17,7 @@ from recordings.reader import (
     open_session,
     read_demonstrations,
 )
+from recordings.rewrite import strip_ground_truth
 from recordings.writer import SessionWriter
 
 __all__ = [
@@ -19,4 +27,5 @@ __all__ = [
     "SessionWriter",
     "open_session",
     "read_demonstrations",
+    "strip_ground_truth",
 ]

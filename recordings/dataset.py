@@ -37,9 +37,11 @@ import cv2
 import numpy as np
 
 from irl.domains.onion_sorting import decode_state
-from robot.labels import Frame
+from recordings.frames import TruthFrame
+from recordings.steps import group_steps
 
-__all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetWriter", "LabelledFrame", "read_split"]
+__all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
+           "read_split", "read_steps", "split_names"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -50,7 +52,7 @@ MIN_VISIBLE_PIXELS = 25
 """Onions with fewer visible pixels (slivers behind the hand or the passer-by) get no box."""
 
 
-def frame_record(frame: Frame, session: int, name: str, view: str = "camera") -> dict:
+def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera") -> dict:
     """The JSON record of one frame in ``view`` (see the module docstring)."""
     boxes, classes = [], []
     onions = frame.onions if view == "camera" else frame.inspection_onions
@@ -98,7 +100,7 @@ class DatasetWriter:
             for sub in ("color", "depth", "inspection"):
                 (self.root / split / sub).mkdir(parents=True, exist_ok=True)
 
-    def add(self, split: str, frame: Frame, session: int) -> None:
+    def add(self, split: str, frame: TruthFrame, session: int) -> None:
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
         records = self._records[split, "camera"]
@@ -191,3 +193,48 @@ def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[L
             color=cv2.cvtColor(color, cv2.COLOR_BGR2RGB),
             depth=None if depth is None else depth.astype(np.float32) / 1000.0, record=rec,
         )
+
+
+def split_names(split: str) -> tuple[str, ...]:
+    """The splits that ``split`` names: one of :data:`SPLITS`, or ``"all"`` for every one."""
+    if split == "all":
+        return SPLITS
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {(*SPLITS, 'all')}; got {split!r}")
+    return (split,)
+
+
+@dataclass(frozen=True)
+class DatasetStep:
+    """One complete step of a dataset session: its frames (phase order), the inspection view
+    of its first frame (None where there was none) and the first frame's record (labels)."""
+
+    colors: list[np.ndarray]
+    depths: list[np.ndarray]
+    inspection: np.ndarray | None
+    record: dict
+
+
+def read_steps(root: Path | str, split: str, frames_per_step: int) -> list[list[DatasetStep]]:
+    """The complete steps of each session of a split (or ``"all"``), sessions in order.
+
+    Frames are grouped by :func:`recordings.steps.group_steps`; a step cut short at the end of
+    the dataset (by its frame count) is left out.
+    """
+    out = []
+    for name in split_names(split):
+        views = {(f.record["session"], f.record["frame"]): f.color
+                 for f in read_split(root, name, view="inspection")
+                 if f.record.get("source", "human") == "human"}
+        steps = group_steps(read_split(root, name),
+                            step=lambda f: (f.record["session"], f.record["step"]),
+                            phase=lambda f: f.record["phase"], frames_per_step=frames_per_step,
+                            incomplete="drop", source=f"{root}/{name}")
+        sessions: dict[int, list[DatasetStep]] = {}
+        for (session, _), frames in steps:
+            first = frames[0].record
+            sessions.setdefault(session, []).append(DatasetStep(
+                [f.color for f in frames], [f.depth for f in frames],
+                views.get((session, first["frame"])), first))
+        out.extend(sessions[k] for k in sorted(sessions))
+    return out

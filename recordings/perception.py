@@ -27,11 +27,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
-from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from recordings.schema import END_METADATA, SESSION_METADATA, json_schema_bytes
+from recordings.rewrite import rewrite_session
+from recordings.schema import json_schema_bytes
 from recordings.writer import box_annotations
 
 __all__ = ["PERCEPTION_METADATA", "PerceptionTopic", "add_perception"]
@@ -122,47 +122,22 @@ def add_perception(path: str | Path, steps: Sequence[dict], *,
     FileExistsError
         If the session already holds perception topics and ``replace`` is False.
     """
+    from mcap.reader import make_reader
+
     path = Path(path)
     with path.open("rb") as fh:
-        reader = make_reader(fh, validate_crcs=True)
-        metadata = list(reader.iter_metadata())
-        names = [m.name for m in metadata]
-        if PERCEPTION_METADATA in names and not replace:
-            raise FileExistsError(f"{path} already holds perception topics; pass --replace to "
-                                  "perceive it again")
-        messages = [(sch, ch, msg) for sch, ch, msg in reader.iter_messages(log_time_order=False)
-                    if ch.topic not in PerceptionTopic.ALL]
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        with tmp.open("wb") as out:
-            writer = Writer(out, compression=CompressionType.ZSTD, enable_crcs=True)
-            writer.start(profile="", library="onionsort")
-            for m in metadata:
-                if m.name == SESSION_METADATA:
-                    writer.add_metadata(m.name, dict(m.metadata))
-            schemas: dict[int, int] = {}
-            channels: dict[int, int] = {}
-            for sch, ch, msg in messages:
-                if sch is not None and sch.id not in schemas:
-                    schemas[sch.id] = writer.register_schema(sch.name, sch.encoding, sch.data)
-                if ch.id not in channels:
-                    channels[ch.id] = writer.register_channel(
-                        ch.topic, ch.message_encoding, schemas.get(sch.id, 0) if sch else 0,
-                        dict(ch.metadata))
-                writer.add_message(channels[ch.id], log_time=msg.log_time, data=msg.data,
-                                   publish_time=msg.publish_time, sequence=msg.sequence)
-            _write_perception(writer, steps, detections, inspection, frame_times)
-            writer.add_metadata(PERCEPTION_METADATA,
-                                {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
-                                 for k, v in models.items()})
-            for m in metadata:
-                if m.name == END_METADATA:
-                    writer.add_metadata(m.name, dict(m.metadata))
-            writer.finish()
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+        names = [m.name for m in make_reader(fh, validate_crcs=True).iter_metadata()]
+    if PERCEPTION_METADATA in names and not replace:
+        raise FileExistsError(f"{path} already holds perception topics; pass --replace to "
+                              "perceive it again")
+
+    def add(writer: Writer) -> dict:
+        _write_perception(writer, steps, detections, inspection, frame_times)
+        return {PERCEPTION_METADATA: {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+                                      for k, v in models.items()}}
+
+    return rewrite_session(path, drop_topics=PerceptionTopic.ALL,
+                           drop_metadata=(PERCEPTION_METADATA,), add=add)
 
 
 def _write_perception(writer: Writer, steps, detections, inspection, frame_times) -> None:

@@ -1,4 +1,8 @@
-"""Read a session back: its frames with labels, its steps, and its demonstration for ``irl``.
+"""Read a session back: its frames, its steps, and its demonstration for ``irl``.
+
+The sensor side is all a session needs: every frame with its colour image (depth and the
+inspection view where the sensor has them) and its step clock. Ground truth is read where the
+file has it and is ``None`` elsewhere (a session imported from a camera or a video).
 
 The file is scanned sequentially with CRC validation, so a truncated file (a recording killed
 outright) or a corrupt one is detected at the first bad record; everything before it is
@@ -23,14 +27,21 @@ from mcap.stream_reader import StreamReader
 from irl.demonstrations import Demonstration, Trajectory
 from irl.domains.onion_sorting import N_ACTIONS
 from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
-from recordings.schema import END_METADATA, FORMAT_NAME, SESSION_METADATA, Topic
-from robot.labels import StepLabel
+from recordings.schema import (
+    END_METADATA,
+    FORMAT_NAME,
+    READABLE_VERSIONS,
+    SESSION_METADATA,
+    Topic,
+)
+from recordings.steps import group_steps
 
 __all__ = [
     "FrameRecord",
     "NotASessionError",
     "RecordingDamagedError",
     "Session",
+    "StepTruth",
     "open_session",
     "read_demonstrations",
 ]
@@ -49,30 +60,43 @@ class RecordingDamagedError(ValueError):
 
 
 @dataclass(frozen=True)
-class FrameRecord:
-    """One recorded frame: its images (decoded on demand) and its ground truth.
+class StepTruth:
+    """A step's ground truth: in ``state`` the sorter took ``action`` and reached
+    ``next_state``; ``occluded`` says whether the passer-by crossed the view."""
 
-    ``state`` holds the ``/ground_truth/state`` message, ``boxes`` and ``onions`` the lists of
-    the ``/ground_truth/boxes`` and ``/ground_truth/onions`` messages.
+    step: int
+    state: int
+    action: int
+    next_state: int
+    occluded: bool
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One recorded frame: its images (decoded on demand), its step clock, its ground truth.
+
+    ``step`` and ``phase`` come from the sensor side's step clock. ``state`` holds the
+    ``/ground_truth/state`` message, ``boxes`` and ``onions`` the lists of the
+    ``/ground_truth/boxes`` and ``/ground_truth/onions`` messages: each is None in a session
+    without ground truth.
     """
 
     index: int
     time_ns: int
-    state: dict
-    boxes: list[dict]
-    onions: list[dict]
+    step: int
+    phase: int
     color_jpeg: bytes = field(repr=False)
-    depth_raw: bytes = field(repr=False)
+    depth_raw: bytes | None = field(default=None, repr=False)
     depth_shape: tuple[int, int] = (0, 0)
     inspection_png: bytes | None = field(default=None, repr=False)
+    state: dict | None = None
+    boxes: list[dict] | None = None
+    onions: list[dict] | None = None
 
     @property
-    def step(self) -> int:
-        return int(self.state["step"])
-
-    @property
-    def occluded(self) -> bool:
-        return bool(self.state["occluded"])
+    def occluded(self) -> bool | None:
+        """Whether the step was truly occluded (ground truth), None without ground truth."""
+        return None if self.state is None else bool(self.state["occluded"])
 
     @property
     def color(self) -> np.ndarray:
@@ -80,8 +104,11 @@ class FrameRecord:
         return _decode_image(self.color_jpeg)
 
     @property
-    def depth(self) -> np.ndarray:
-        """Depth in metres, (H, W) float32 (0 where there was no reading)."""
+    def depth(self) -> np.ndarray | None:
+        """Depth in metres, (H, W) float32 (0 where there was no reading); None without a
+        depth sensor."""
+        if self.depth_raw is None:
+            return None
         mm = np.frombuffer(self.depth_raw, dtype="<u2").reshape(self.depth_shape)
         return mm.astype(np.float32) / 1000.0
 
@@ -112,8 +139,12 @@ class Session:
     status : str
         ``complete``, ``interrupted`` (stopped, file finished) or ``damaged`` (truncated or
         corrupt, opened with ``recover=True``).
-    steps : list of StepLabel
-        The ground-truth steps, in order.
+    frames_per_step : int
+        Frames of each step.
+    has_depth, has_ground_truth : bool
+        Whether the sensor gave depth, and whether the file carries ground truth.
+    steps : list of StepTruth
+        The ground-truth steps, in order; empty without ground truth.
     problem : str or None
         What was wrong with a damaged file.
     perception : dict of int -> dict
@@ -126,7 +157,10 @@ class Session:
     path: Path
     metadata: dict
     status: str
-    steps: list[StepLabel]
+    frames_per_step: int
+    has_depth: bool
+    has_ground_truth: bool
+    steps: list[StepTruth]
     _frames: list[FrameRecord] = field(repr=False)
     problem: str | None = None
     perception: dict[int, dict] = field(default_factory=dict, repr=False)
@@ -140,18 +174,51 @@ class Session:
         return len(self._frames)
 
     def frames(self) -> Iterator[FrameRecord]:
-        """The frames in order, each with its ground-truth labels."""
+        """Every sensor frame in order, with its ground truth where the file has it."""
         return iter(self._frames)
+
+    def step_frames(self) -> list[list[FrameRecord]]:
+        """The frames of each complete step, steps in order, frames in phase order.
+
+        A session ends with a complete step unless it was interrupted or damaged; an
+        incomplete last step is left out. Steps must be numbered ``0, 1, ...``.
+
+        Raises
+        ------
+        ValueError
+            If a step other than the last is incomplete, or the numbering has a gap.
+        """
+        steps = group_steps(self._frames, step=lambda f: f.step, phase=lambda f: f.phase,
+                            frames_per_step=self.frames_per_step, incomplete="drop",
+                            source=str(self.path))
+        numbers = [k for k, _ in steps]
+        last = max((f.step for f in self._frames), default=-1)
+        expected = list(range(last + 1))
+        if numbers != expected and numbers != expected[:-1]:
+            missing = sorted(set(expected) - set(numbers))
+            raise ValueError(f"{self.path}: steps {missing[:5]} are incomplete or missing; a "
+                             f"session's steps must be 0..T-1 of {self.frames_per_step} "
+                             "frames each")
+        return [frames for _, frames in steps]
 
     def trajectory(self) -> Trajectory:
         """Ground-truth states and actions of the steps, shape (T,) each."""
+        self._require_ground_truth()
         return Trajectory(states=np.array([s.state for s in self.steps], np.int64),
                           actions=np.array([s.action for s in self.steps], np.int64))
 
     @property
     def occluded(self) -> np.ndarray:
-        """Which steps the passer-by occluded, bool (T,)."""
+        """Which steps the passer-by occluded (ground truth), bool (T,)."""
+        self._require_ground_truth()
         return np.array([s.occluded for s in self.steps], bool)
+
+    def _require_ground_truth(self) -> None:
+        if not self.has_ground_truth:
+            raise ValueError(f"{self.path} carries no ground truth (a sensor-only session); "
+                             "use perceived_demonstration() after `onionsort perceive`")
+        if not self.steps:
+            raise ValueError(f"{self.path}: the session holds no complete step")
 
     def demonstration(self) -> Demonstration:
         """The session as a demonstration of ``(s, a)`` pairs from ground truth.
@@ -159,8 +226,6 @@ class Session:
         Observation ``o = s * 5 + a`` (the identity observation model of
         :meth:`irl.demonstrations.Demonstration.from_pairs`), None at occluded steps.
         """
-        if not self.steps:
-            raise ValueError(f"{self.path}: the session holds no complete step")
         traj = self.trajectory()
         return Demonstration.from_pairs(traj.states, traj.actions, N_ACTIONS,
                                         occluded=self.occluded)
@@ -169,23 +234,22 @@ class Session:
         """The session as perception saw it: pair observations ``o = s * 5 + a`` of the
         perceived state and action, None exactly where the classifier said occluded.
 
+        Uses only the sensor side and the perception topics, never ground truth.
+
         Raises
         ------
         ValueError
-            If the session has no perception topics (run ``onionsort perceive`` on it), or a
-            step lacks its perception.
+            If the session has no perception topics (run ``onionsort perceive`` on it), or its
+            perceived steps are not numbered ``0..T-1``.
         """
         if not self.perception:
             raise ValueError(f"{self.path} has no perception topics; run `onionsort perceive "
                              f"{self.path}` first")
-        if not self.steps:
-            raise ValueError(f"{self.path}: the session holds no complete step")
-        missing = [s.step for s in self.steps if s.step not in self.perception]
-        if missing:
-            raise ValueError(f"{self.path}: steps {missing[:5]} have no perception (the "
-                             "session was perceived before it was complete?)")
-        obs = [self.perception[s.step]["observation"] for s in self.steps]
-        return Demonstration(obs)
+        numbers = sorted(self.perception)
+        if numbers != list(range(len(numbers))):
+            raise ValueError(f"{self.path}: perceived steps must be numbered 0..T-1; got "
+                             f"{numbers[:5]}... (perceive it again with --replace)")
+        return Demonstration([self.perception[t]["observation"] for t in numbers])
 
 
 def _scan(path: Path):
@@ -237,7 +301,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     meta: dict | None = None
     end: dict | None = None
     parts: dict[int, dict] = {}
-    steps: dict[int, StepLabel] = {}
+    steps: dict[int, StepTruth] = {}
     perception: dict[int, dict] = {}
     models = None
     problem = None
@@ -270,7 +334,15 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
             f"{path} is an MCAP file but not an onionsort session (no '{SESSION_METADATA}' "
             f"metadata record with format '{FORMAT_NAME}')"
             + (f"; reading it failed with {problem}" if problem else ""))
-    frames = [_assemble(i, parts[i]) for i in sorted(parts) if _complete(parts[i])]
+    metadata = _decode_metadata(meta)
+    version = str(metadata.get("format_version"))
+    if version not in READABLE_VERSIONS:
+        raise NotASessionError(f"{path} is an onionsort session of format version {version!r}; "
+                               f"this version of onionsort reads {READABLE_VERSIONS}")
+    layout = _layout(metadata, version, path)
+    frames = [_assemble(i, parts[i], version) for i in sorted(parts)
+              if _complete(parts[i], version, layout["depth"])]
+    truth = version == "1" or bool(metadata.get("ground_truth", False))
     complete_steps = [steps[t] for t in sorted(steps)]
     if problem is None and end is None:
         problem = "no end record"
@@ -282,9 +354,24 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
         if not recover:
             raise RecordingDamagedError(message + "; open it with recover=True to use them")
         logger.warning("%s", message)
-    return Session(path=path, metadata=_decode_metadata(meta), status=status,
-                   steps=complete_steps, _frames=frames, problem=problem,
-                   perception=perception, perception_models=models)
+    return Session(path=path, metadata=metadata, status=status,
+                   frames_per_step=layout["frames_per_step"], has_depth=layout["depth"],
+                   has_ground_truth=truth, steps=complete_steps, _frames=frames,
+                   problem=problem, perception=perception, perception_models=models)
+
+
+def _layout(metadata: dict, version: str, path: Path) -> dict:
+    """Frames per step and whether there is depth, from the session record."""
+    if version == "1":  # simulated, always with depth; frames per step in its configuration
+        fps = metadata.get("config", {}).get("frames_per_step")
+        return {"frames_per_step": int(fps) if fps else 0, "depth": True}
+    try:
+        fps = int(metadata["frames_per_step"])
+        depth = bool(metadata["sensors"]["depth"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise NotASessionError(f"{path}: the session record lacks {exc} (frames_per_step, "
+                               "sensors.depth)") from None
+    return {"frames_per_step": fps, "depth": depth}
 
 
 def _decode_metadata(meta: dict) -> dict:
@@ -297,10 +384,10 @@ def _decode_metadata(meta: dict) -> dict:
     return out
 
 
-def _collect(topic: str, rec: Message, parts: dict[int, dict], steps: dict[int, StepLabel]):
+def _collect(topic: str, rec: Message, parts: dict[int, dict], steps: dict[int, StepTruth]):
     if topic == Topic.ACTION:
         m = json.loads(rec.data)
-        steps[int(m["step"])] = StepLabel(step=int(m["step"]), state=int(m["state"]),
+        steps[int(m["step"])] = StepTruth(step=int(m["step"]), state=int(m["state"]),
                                           action=int(m["action"]),
                                           next_state=int(m["next_state"]),
                                           occluded=bool(m["occluded"]))
@@ -317,22 +404,32 @@ def _collect(topic: str, rec: Message, parts: dict[int, dict], steps: dict[int, 
         if msg.encoding != "16UC1":
             raise ValueError(f"depth encoding must be 16UC1; got {msg.encoding!r}")
         part[topic] = (bytes(msg.data), (msg.height, msg.width))
-    elif topic in (Topic.STATE, Topic.BOXES, Topic.ONIONS):
+    elif topic in (Topic.STEP_CLOCK, Topic.STATE, Topic.BOXES, Topic.ONIONS):
         part[topic] = json.loads(rec.data)
 
 
-def _complete(part: dict) -> bool:
-    return all(t in part for t in (Topic.COLOR, Topic.DEPTH, Topic.STATE, Topic.BOXES,
-                                   Topic.ONIONS))
+def _clock_topic(version: str) -> str:
+    """Where a frame's step and phase are: the step clock, or in version 1 the ground truth."""
+    return Topic.STATE if version == "1" else Topic.STEP_CLOCK
 
 
-def _assemble(index: int, part: dict) -> FrameRecord:
-    depth, shape = part[Topic.DEPTH]
+def _complete(part: dict, version: str, depth: bool) -> bool:
+    need = [Topic.COLOR, _clock_topic(version)] + ([Topic.DEPTH] if depth else [])
+    if version == "1":
+        need += [Topic.BOXES, Topic.ONIONS]
+    return all(t in part for t in need)
+
+
+def _assemble(index: int, part: dict, version: str) -> FrameRecord:
+    clock = part[_clock_topic(version)]
+    depth, shape = part.get(Topic.DEPTH, (None, (0, 0)))
+    boxes, onions = part.get(Topic.BOXES), part.get(Topic.ONIONS)
     return FrameRecord(
-        index=index, time_ns=int(part["time_ns"]), state=part[Topic.STATE],
-        boxes=part[Topic.BOXES]["boxes"], onions=part[Topic.ONIONS]["onions"],
-        color_jpeg=part[Topic.COLOR], depth_raw=depth, depth_shape=shape,
-        inspection_png=part.get(Topic.INSPECTION),
+        index=index, time_ns=int(part["time_ns"]), step=int(clock["step"]),
+        phase=int(clock.get("phase", 0)), color_jpeg=part[Topic.COLOR], depth_raw=depth,
+        depth_shape=shape, inspection_png=part.get(Topic.INSPECTION),
+        state=part.get(Topic.STATE), boxes=None if boxes is None else boxes["boxes"],
+        onions=None if onions is None else onions["onions"],
     )
 
 

@@ -1,8 +1,14 @@
 """The session format: topics, message schemas and the session metadata record.
 
-One MCAP file per session. Images use Foxglove's well-known protobuf schemas; ground truth uses
-JSON messages with JSON-schema channels, each on its own topic. Every message's ``log_time`` is
-the simulated time in nanoseconds and its ``sequence`` the frame index.
+One MCAP file per session, in two sides. The **sensor side** is complete on its own: it is all a
+real work cell records, and all that perception and the learners read. The **ground-truth side**
+is what a simulator adds for training, calibration and scoring; a session recorded from a camera
+or imported from a video has none. Images use Foxglove's well-known protobuf schemas; the step
+clock and ground truth use JSON messages with JSON-schema channels, each on its own topic. Every
+message's ``log_time`` is the recording time in nanoseconds and its ``sequence`` the frame
+index.
+
+Sensor side (``/camera/depth`` and the inspection view only where the sensor has them):
 
 =========================  ==========================  ==========================================
 topic                      schema                      content
@@ -10,8 +16,17 @@ topic                      schema                      content
 /camera/color              foxglove.CompressedImage    main RGB camera, JPEG, every frame
 /camera/depth              foxglove.RawImage           depth, 16UC1 millimetres, every frame
 /camera/calibration        foxglove.CameraCalibration  pinhole K, P of the main camera
+/step_clock                onionsort.StepClock         which step each frame belongs to, and its
+                                                       phase (position) within the step
 /inspection/color          foxglove.CompressedImage    inspection view, PNG, first frame of a step
 /inspection/calibration    foxglove.CameraCalibration  pinhole K, P of the inspection view
+=========================  ==========================  ==========================================
+
+Ground-truth side (optional):
+
+=========================  ==========================  ==========================================
+topic                      schema                      content
+=========================  ==========================  ==========================================
 /ground_truth/state        onionsort.GroundTruthState  true MDP state of each frame
 /ground_truth/action       onionsort.GroundTruthStep   (s_t, a_t, s_t+1, occluded), once a step
 /ground_truth/boxes        onionsort.GroundTruthBoxes  boxes of visible onions (segmentation)
@@ -19,8 +34,14 @@ topic                      schema                      content
 /ground_truth/onions       onionsort.GroundTruthOnions  every onion's class and position
 =========================  ==========================  ==========================================
 
-Metadata records: ``onionsort.session`` (written first: format, seed, configuration, software
-version) and ``onionsort.session.end`` (written last: status, frame and step counts).
+Metadata records: ``onionsort.session`` (written first: format and version, ``sensors``
+(``depth``, ``inspection``), ``ground_truth``, ``frames_per_step``, the ``task`` description,
+seed, configuration, software version) and ``onionsort.session.end`` (written last: status,
+frame and step counts).
+
+Versions: ``2`` added the step clock, made depth and ground truth optional and records which
+sensors a session has. A version-``1`` file (always simulated, always with depth) has no step
+clock; the reader takes the step and phase of each frame from ``/ground_truth/state`` instead.
 """
 
 from __future__ import annotations
@@ -28,23 +49,30 @@ from __future__ import annotations
 import json
 
 __all__ = [
+    "CLASS_COLORS",
     "CLASS_NAMES",
     "END_METADATA",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "JSON_SCHEMAS",
+    "READABLE_VERSIONS",
+    "SENSOR_JSON_SCHEMAS",
     "SESSION_METADATA",
     "Topic",
     "json_schema_bytes",
 ]
 
 FORMAT_NAME = "onionsort-session"
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"
+#: Versions this reader opens.
+READABLE_VERSIONS = ("1", "2")
 SESSION_METADATA = "onionsort.session"
 END_METADATA = "onionsort.session.end"
 
 #: Class ids of onions in box annotations.
 CLASS_NAMES = {0: "good", 1: "blemished"}
+#: Their display colours (RGB 0-255), for Foxglove annotations and Rerun alike.
+CLASS_COLORS = {0: (40, 200, 60), 1: (230, 40, 40)}
 
 
 class Topic:
@@ -53,6 +81,7 @@ class Topic:
     COLOR = "/camera/color"
     DEPTH = "/camera/depth"
     CALIBRATION = "/camera/calibration"
+    STEP_CLOCK = "/step_clock"
     INSPECTION = "/inspection/color"
     INSPECTION_CALIBRATION = "/inspection/calibration"
     STATE = "/ground_truth/state"
@@ -60,6 +89,8 @@ class Topic:
     BOXES = "/ground_truth/boxes"
     ANNOTATIONS = "/ground_truth/annotations"
     ONIONS = "/ground_truth/onions"
+    #: Every ground-truth topic: what stripping a session of its ground truth removes.
+    GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS)
 
 
 _INT = {"type": "integer"}
@@ -67,6 +98,19 @@ _NUM = {"type": "number"}
 _STR = {"type": "string"}
 _BOOL = {"type": "boolean"}
 
+#: The sensor side's JSON topics.
+SENSOR_JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
+    Topic.STEP_CLOCK: ("onionsort.StepClock", {
+        "type": "object",
+        "description": "Which abstract step a frame belongs to and its position in the step "
+                       "(phase 0 shows the state at rest). Written by the recorder, or by the "
+                       "segmentation of an imported video; never derived from ground truth.",
+        "properties": {"frame": _INT, "step": _INT, "phase": _INT},
+        "required": ["frame", "step", "phase"],
+    }),
+}
+
+#: The ground-truth side's JSON topics.
 JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
     Topic.STATE: ("onionsort.GroundTruthState", {
         "type": "object",

@@ -1,4 +1,8 @@
-"""Write a simulated session to MCAP, frame by frame, so an interruption loses nothing written.
+"""Write a session to MCAP, frame by frame, so an interruption loses nothing written.
+
+A frame's sensor side (colour, depth where the sensor has it, calibration, the step clock,
+the inspection view) is written by :meth:`SessionWriter.write_sensor_frame`; a simulated frame
+adds its ground truth with :meth:`SessionWriter.write_frame`. See :mod:`recordings.schema`.
 
 Every frame's messages go into their own zstd chunk that is flushed to the OS before the next
 frame is rendered (:meth:`mcap.writer.Writer.flush`). A process killed outright (SIGKILL, power
@@ -25,17 +29,19 @@ from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from irl.domains.onion_sorting import SortAction, decode_state
+from recordings.frames import TruthFrame
 from recordings.schema import (
+    CLASS_COLORS,
     CLASS_NAMES,
     END_METADATA,
     FORMAT_NAME,
     FORMAT_VERSION,
     JSON_SCHEMAS,
+    SENSOR_JSON_SCHEMAS,
     SESSION_METADATA,
     Topic,
     json_schema_bytes,
 )
-from robot.labels import Frame
 
 __all__ = [
     "SessionWriter",
@@ -52,7 +58,7 @@ _PROTO_TOPICS = {
     Topic.INSPECTION: CompressedImage, Topic.INSPECTION_CALIBRATION: CameraCalibration,
     Topic.ANNOTATIONS: ImageAnnotations,
 }
-_RGBA = {0: (0.16, 0.78, 0.24, 1.0), 1: (0.9, 0.16, 0.16, 1.0)}
+_RGBA = {k: (*(c / 255.0 for c in rgb), 1.0) for k, rgb in CLASS_COLORS.items()}
 
 
 def _stamp(msg, time_ns: int) -> None:
@@ -123,18 +129,34 @@ class SessionWriter:
     metadata : dict
         Session description: seed, configuration, ... (stored as JSON strings in the
         ``onionsort.session`` metadata record with the format name and version).
-    camera_K, inspection_K : ndarray of shape (3, 3)
-        Intrinsics of the main camera and of the inspection view.
+    camera_K : ndarray of shape (3, 3)
+        Intrinsics of the main camera.
+    inspection_K : ndarray of shape (3, 3) or None
+        Intrinsics of the inspection view; None for a sensor without one.
+    frames_per_step : int
+        Frames of each step (phases ``0 .. frames_per_step - 1``).
+    depth : bool
+        Whether the main camera gives depth (a plain video does not).
+    ground_truth : bool
+        Whether frames come with ground truth (:meth:`write_frame`) or not
+        (:meth:`write_sensor_frame` only).
     overwrite : bool
     """
 
     def __init__(self, path: str | Path, metadata: dict[str, Any], camera_K: np.ndarray,
-                 inspection_K: np.ndarray, *, overwrite: bool = False) -> None:
+                 inspection_K: np.ndarray | None = None, *, frames_per_step: int,
+                 depth: bool = True, ground_truth: bool = True,
+                 overwrite: bool = False) -> None:
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise FileExistsError(f"{self.path} exists; choose another --out or remove it")
+        if int(frames_per_step) < 1:
+            raise ValueError(f"frames_per_step must be >= 1; got {frames_per_step}")
         self.metadata = dict(metadata)
-        self.camera_K, self.inspection_K = np.asarray(camera_K), np.asarray(inspection_K)
+        self.camera_K = np.asarray(camera_K, float)
+        self.inspection_K = None if inspection_K is None else np.asarray(inspection_K, float)
+        self.frames_per_step = int(frames_per_step)
+        self.depth, self.ground_truth = bool(depth), bool(ground_truth)
         self.n_frames = 0
         self.n_steps = 0
         self._file = None
@@ -151,19 +173,34 @@ class SessionWriter:
                   "created_utc": datetime.now(UTC).isoformat(timespec="seconds")}
         record.update({k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
                        for k, v in self.metadata.items()})
+        record["frames_per_step"] = str(self.frames_per_step)
+        record["sensors"] = json.dumps({"depth": self.depth,
+                                        "inspection": self.inspection_K is not None})
+        record["ground_truth"] = json.dumps(self.ground_truth)
         record["camera_K"] = json.dumps(self.camera_K.tolist())
-        record["inspection_K"] = json.dumps(self.inspection_K.tolist())
+        if self.inspection_K is not None:
+            record["inspection_K"] = json.dumps(self.inspection_K.tolist())
         self._writer.add_metadata(SESSION_METADATA, record)
         for topic, cls in _PROTO_TOPICS.items():
+            if not self._has(topic):
+                continue
             schema = self._writer.register_schema(
                 cls.DESCRIPTOR.full_name, "protobuf",
                 build_file_descriptor_set(cls).SerializeToString())
             self._channels[topic] = self._writer.register_channel(topic, "protobuf", schema)
-        for topic, (name, schema) in JSON_SCHEMAS.items():
+        json_topics = {**SENSOR_JSON_SCHEMAS, **(JSON_SCHEMAS if self.ground_truth else {})}
+        for topic, (name, schema) in json_topics.items():
             sid = self._writer.register_schema(name, "jsonschema", json_schema_bytes(schema))
             self._channels[topic] = self._writer.register_channel(topic, "json", sid)
         self._writer.flush()
         return self
+
+    def _has(self, topic: str) -> bool:
+        if topic == Topic.DEPTH:
+            return self.depth
+        if topic in (Topic.INSPECTION, Topic.INSPECTION_CALIBRATION):
+            return self.inspection_K is not None
+        return self.ground_truth or topic not in Topic.GROUND_TRUTH
 
     def __exit__(self, exc_type, exc, tb) -> None:
         status = "complete" if exc_type is None else "interrupted"
@@ -191,37 +228,84 @@ class SessionWriter:
     def _write_json(self, topic: str, obj: dict, time_ns: int, sequence: int) -> None:
         self._write(topic, json.dumps(obj, separators=(",", ":")).encode(), time_ns, sequence)
 
-    def write_frame(self, frame: Frame) -> None:
-        """Write one frame (images and ground truth) and flush it to the OS."""
+    def write_sensor_frame(self, *, index: int, step: int, phase: int, time_ns: int,
+                           color: np.ndarray, depth: np.ndarray | None = None,
+                           inspection: np.ndarray | None = None) -> None:
+        """Write one frame's sensor side and flush it to the OS.
+
+        Parameters
+        ----------
+        index : int
+            Frame number in the session (the messages' ``sequence``).
+        step, phase : int
+            The step clock: the frame's step and its position in the step.
+        time_ns : int
+            Recording time of the frame.
+        color : ndarray of shape (H, W, 3)
+            uint8 RGB.
+        depth : ndarray of shape (H, W) or None
+            float metres; required exactly when the writer was made with ``depth=True``.
+        inspection : ndarray of shape (h, w, 3) or None
+            The inspection view, on a step's first frame.
+        """
+        self._sensor_side(index, step, phase, time_ns, color, depth, inspection)
+        self._end_frame()
+
+    def write_frame(self, frame: TruthFrame) -> None:
+        """Write one simulated frame, sensor side and ground truth, and flush it to the OS."""
+        if not self.ground_truth:
+            raise ValueError(f"{self.path} was opened with ground_truth=False; write its "
+                             "frames with write_sensor_frame")
+        t, i = round(frame.time_s * 1e9), frame.index
+        self._sensor_side(i, frame.step.step, frame.phase, t, frame.color, frame.depth,
+                          frame.inspection)
+        self._truth_side(frame, t, i)
+        self._end_frame()
+
+    def _sensor_side(self, i, step, phase, t, color, depth, inspection) -> None:
         if self._writer is None:
             raise RuntimeError("SessionWriter must be entered (`with SessionWriter(...)`)")
-        t, i = round(frame.time_s * 1e9), frame.index
-        h, w = frame.color.shape[:2]
-        color = CompressedImage(frame_id="camera", format="jpeg", data=encode_color(frame.color))
-        _stamp(color, t)
-        self._write(Topic.COLOR, color.SerializeToString(), t, i)
-        depth = RawImage(frame_id="camera", width=w, height=h, encoding="16UC1", step=2 * w,
-                         data=encode_depth(frame.depth))
-        _stamp(depth, t)
-        self._write(Topic.DEPTH, depth.SerializeToString(), t, i)
+        if (depth is not None) != self.depth:
+            raise ValueError(f"{self.path}: this session was opened with depth={self.depth}; "
+                             f"frame {i} {'has' if depth is not None else 'lacks'} depth")
+        if not 0 <= phase < self.frames_per_step:
+            raise ValueError(f"phase must be in [0, {self.frames_per_step}); got {phase}")
+        h, w = color.shape[:2]
+        msg = CompressedImage(frame_id="camera", format="jpeg", data=encode_color(color))
+        _stamp(msg, t)
+        self._write(Topic.COLOR, msg.SerializeToString(), t, i)
+        if depth is not None:
+            msg = RawImage(frame_id="camera", width=w, height=h, encoding="16UC1", step=2 * w,
+                           data=encode_depth(depth))
+            _stamp(msg, t)
+            self._write(Topic.DEPTH, msg.SerializeToString(), t, i)
         self._write(Topic.CALIBRATION,
                     calibration_message(self.camera_K, w, h, "camera", t).SerializeToString(),
                     t, i)
-        if frame.inspection is not None:
-            ih, iw = frame.inspection.shape[:2]
-            insp = CompressedImage(frame_id="inspection", format="png",
-                                   data=encode_color(frame.inspection, "png"))
-            _stamp(insp, t)
-            self._write(Topic.INSPECTION, insp.SerializeToString(), t, i)
+        self._write_json(Topic.STEP_CLOCK, {"frame": i, "step": int(step), "phase": int(phase)},
+                         t, i)
+        if inspection is not None and self.inspection_K is not None:
+            ih, iw = inspection.shape[:2]
+            msg = CompressedImage(frame_id="inspection", format="png",
+                                  data=encode_color(inspection, "png"))
+            _stamp(msg, t)
+            self._write(Topic.INSPECTION, msg.SerializeToString(), t, i)
             self._write(Topic.INSPECTION_CALIBRATION, calibration_message(
                 self.inspection_K, iw, ih, "inspection", t).SerializeToString(), t, i)
+        if phase == 0:
+            self.n_steps += 1
+
+    def _end_frame(self) -> None:
+        self._writer.flush()  # one chunk per frame, handed to the OS now
+        self.n_frames += 1
+
+    def _truth_side(self, frame: TruthFrame, t: int, i: int) -> None:
         step = frame.step
         if frame.phase == 0:
             self._write_json(Topic.ACTION, {
                 "step": step.step, "frame": i, "state": step.state, "action": step.action,
                 "action_name": SortAction(step.action).name.lower(),
                 "next_state": step.next_state, "occluded": step.occluded}, t, step.step)
-            self.n_steps += 1
         s = decode_state(step.state)
         self._write_json(Topic.STATE, {
             "frame": i, "step": step.step, "phase": frame.phase, "time_s": frame.time_s,
@@ -241,5 +325,3 @@ class SessionWriter:
             {"onion_id": o.onion_id, "blemished": o.blemished, "in_focus": o.in_focus,
              "position": [round(float(x), 5) for x in o.position]}
             for o in frame.onions]}, t, i)
-        self._writer.flush()  # one chunk per frame, handed to the OS now
-        self.n_frames += 1

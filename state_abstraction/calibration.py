@@ -128,12 +128,19 @@ class Calibration:
         Steps whose state and action were both right.
     smoothing : float
         Additive smoothing applied when the observation model is built.
+    models : dict or None
+        Which perception models were measured (their hashes), as read from the file.
+    depth : bool or None
+        Whether the classifier was given depth (RGB-D) or colour alone; a calibration holds
+        only for the mode it was measured in. None in files that predate the field.
     """
 
     factors: dict[str, ConfusionMatrix]
     joint_state: ConfusionMatrix
     pair_correct: int = 0
     smoothing: float = 1.0
+    models: dict | None = None
+    depth: bool | None = None
 
     def with_smoothing(self, smoothing: float) -> Calibration:
         """The same counts with another smoothing."""
@@ -236,6 +243,8 @@ def load_calibration(path: Path | str) -> Calibration:
     if set(factors) != set(FACTORS):
         raise ValueError(f"{path}: factors must be {list(FACTORS)}; got {sorted(factors)}")
     joint = ConfusionMatrix(np.array(doc["joint_state_counts"]), [str(s) for s in range(N_STATES)])
+    depth = doc.get("depth")
     return Calibration(factors=factors, joint_state=joint,
                        pair_correct=int(doc.get("pair_correct", 0)),
-                       smoothing=float(doc.get("smoothing", 1.0)))
+                       smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
+                       depth=None if depth is None else bool(depth))

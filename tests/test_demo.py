@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 
 from onionsort.cli import main
-from onionsort.pipeline import CLASSIFIER_FILE, DEFAULT_MODELS, DETECTOR_FILE
+from onionsort.stages.models import CLASSIFIER_FILE, DEFAULT_MODELS, DETECTOR_FILE
 
 
 def _rerun_cli():

@@ -8,9 +8,12 @@ so ``onionsort --help`` stays fast.
 COMMAND_MODULES = [
     "onionsort.commands.experiment",
     "onionsort.commands.record",
+    "onionsort.commands.import_video",
     "onionsort.commands.dataset",
     "onionsort.commands.train",
-    "onionsort.commands.perception",
+    "onionsort.commands.perceive",
+    "onionsort.commands.calibrate",
+    "onionsort.commands.eval_perception",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",
     "onionsort.commands.demo",

@@ -12,6 +12,12 @@ from robot.labels import Frame, StepLabel
 from robot.simulation import SessionConfig, SortingSession, expert_model
 
 
+def step_tuples(steps) -> list[tuple]:
+    """Steps as (step, state, action, next_state, occluded): the simulator's labels and the
+    reader's records are different classes with the same fields."""
+    return [(s.step, s.state, s.action, s.next_state, s.occluded) for s in steps]
+
+
 @dataclass
 class Recorded:
     path: object
@@ -26,7 +32,7 @@ def record(path, n_steps=12, occlusion=0.3, seed=4, frames_per_step=2) -> Record
     frames = []
     with SortingSession(config, policy, initial, seed) as session, SessionWriter(
         path, {"seed": seed, "config": config.to_dict()}, intrinsics(config.camera),
-        intrinsics(config.inspection),
+        intrinsics(config.inspection), frames_per_step=frames_per_step,
     ) as writer:
         for frame in session.frames():
             writer.write_frame(frame)

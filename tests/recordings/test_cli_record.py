@@ -48,6 +48,6 @@ def test_record_writes_readable_sessions_and_a_verified_rrd(tmp_path):
 
 def test_record_rejects_bad_arguments(tmp_path, capsys):
     assert main(["record", "--sessions", "0", "--out", str(tmp_path)]) == 2
-    assert "--sessions must be >= 1" in capsys.readouterr().err
+    assert "sessions must be >= 1; got 0" in capsys.readouterr().err
     assert main(["record", "--occlusion", "1.5", "--out", str(tmp_path)]) == 2
     assert "occlusion must be in [0, 1]" in capsys.readouterr().err

@@ -7,7 +7,7 @@ import pytest
 
 from irl.domains.onion_sorting import encode_state
 from onionsort.cli import main
-from onionsort.commands.dataset import split_plan
+from onionsort.stages.dataset import split_plan
 from recordings.dataset import SPLITS, read_split
 
 

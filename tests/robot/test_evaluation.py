@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import itertools
 import json
 import shutil
@@ -141,17 +140,14 @@ def _rerun_cli() -> str | None:
 
 
 def test_the_evaluation_logs_to_a_valid_rerun_recording(tmp_path, expert_pi):
-    rr = pytest.importorskip("rerun")
-    from recordings.rerun_eval import evaluation_blueprint, log_evaluation_step
+    pytest.importorskip("rerun")
+    from recordings.rerun import EvaluationLogger
 
     path = tmp_path / "eval.rrd"
-    rec = rr.RecordingStream("onionsort-test")
-    rec.save(path, default_blueprint=evaluation_blueprint())
-    result = evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=0,
-                             classify=always(Prediction.BAD), render=True,
-                             on_step=functools.partial(log_evaluation_step, rec))
-    rec.flush()
-    rec.disconnect()
+    with EvaluationLogger(path) as log:
+        result = evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=0,
+                                 classify=always(Prediction.BAD), render=True,
+                                 on_step=log.on_step)
     assert result.n_steps == 8 and path.stat().st_size > 10_000
     cli = _rerun_cli()
     if cli is None:

@@ -8,7 +8,8 @@ import torch
 
 from irl.domains.onion_sorting import Location, Prediction
 from onionsort.cli import main
-from onionsort.pipeline import PerceptionModels, perceive_session
+from onionsort.stages.models import PerceptionModels
+from onionsort.stages.perceive import perceive_session
 from perception import Detector, DetectorConfig, DetectorNet
 from recordings import open_session
 from state_abstraction.classifier import HEADS, ClassifierConfig, StateClassifier
@@ -74,7 +75,7 @@ def test_perceived_demonstration_has_none_exactly_where_the_classifier_said_occl
         open_session(path).perceived_demonstration()
     models = PerceptionModels.load(random_models)
     models.classifier = ScriptedClassifier(models.classifier.config)
-    steps = perceive_session(models, path)
+    steps = perceive_session(models, path).steps
     called = [s.occluded for s in steps]
     assert called == [t % 3 == 1 for t in range(8)]
     demo = open_session(path).perceived_demonstration()
@@ -87,7 +88,7 @@ def test_perceived_demonstration_has_none_exactly_where_the_classifier_said_occl
     assert again.perception_models["detector_sha256"]
     with pytest.raises(FileExistsError, match="already holds perception"):
         perceive_session(models, path)
-    assert len(perceive_session(models, path, replace=True)) == len(steps)
+    assert perceive_session(models, path, replace=True).n_steps == len(steps)
 
 
 def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys):

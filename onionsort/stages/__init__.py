@@ -1,0 +1,61 @@
+"""The pipeline's stages: one module each, a frozen config plus a function that runs it.
+
+=================  ===========================  ==========================================
+stage              config                       function
+=================  ===========================  ==========================================
+record             :class:`RecordConfig`        :func:`record` -> session paths
+import             :class:`ImportConfig`        :func:`import_video` -> a sensor-only session
+dataset            :class:`DatasetConfig`       :func:`make_dataset`
+train              ``ClassifierTrainConfig``,   ``train_state_classifier``, ``train_detector``
+                   ``DetectorTrainConfig``      (in :mod:`onionsort.stages.train`)
+perceive           :class:`PerceiveConfig`      :func:`perceive`
+calibrate          :class:`CalibrateConfig`     :func:`calibrate`, :func:`eval_perception`
+learn              :class:`LearnConfig`         :func:`learn` -> model.json content
+evaluate           :class:`EvaluateConfig`      :func:`evaluate`
+demo               :class:`DemoConfig`          :func:`demo` (composes the stages above)
+experiment         :class:`ExperimentConfig`    :func:`run_experiment` (synthetic sweeps)
+=================  ===========================  ==========================================
+
+The CLI's commands parse arguments into these configs and call the function; scripts do the
+same. Each function logs its resolved config once.
+"""
+
+from onionsort.stages.calibrate import (
+    CalibrateConfig,
+    PerceptionEvalConfig,
+    calibrate,
+    eval_perception,
+)
+from onionsort.stages.dataset import DatasetConfig, make_dataset
+from onionsort.stages.demo import DemoConfig, demo
+from onionsort.stages.evaluate import EvaluateConfig, evaluate
+from onionsort.stages.experiment import ExperimentConfig, run_experiment
+from onionsort.stages.import_video import ImportConfig, import_video
+from onionsort.stages.learn import LearnConfig, learn
+from onionsort.stages.models import PerceptionModels
+from onionsort.stages.perceive import PerceiveConfig, perceive
+from onionsort.stages.record import RecordConfig, record
+
+__all__ = [
+    "CalibrateConfig",
+    "DatasetConfig",
+    "DemoConfig",
+    "EvaluateConfig",
+    "ExperimentConfig",
+    "ImportConfig",
+    "LearnConfig",
+    "PerceiveConfig",
+    "PerceptionEvalConfig",
+    "PerceptionModels",
+    "RecordConfig",
+    "calibrate",
+    "demo",
+    "eval_perception",
+    "evaluate",
+    "import_video",
+    "learn",
+    "make_dataset",
+    "perceive",
+    "record",
+    "run_experiment",
+]

@@ -1,0 +1,64 @@
+"""What every stage shares: logging its resolved configuration once, and atomic outputs.
+
+A stage is a frozen config dataclass plus a function that runs it (``record(RecordConfig(...))``);
+the CLI's commands only parse arguments into a config and call the stage. The same stages are
+the Python API for scripting a study::
+
+    from onionsort.stages import RecordConfig, record
+    paths = record(RecordConfig(out=Path("runs/rec"), sessions=2))
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+__all__ = ["check_output_folder", "log_config", "write_json"]
+
+logger = logging.getLogger(__name__)
+
+
+def _jsonable(value):
+    if isinstance(value, Path):
+        return str(value)
+    if dataclasses.is_dataclass(value):
+        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, tuple | list):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    return value
+
+
+def log_config(stage: str, config) -> dict:
+    """Log a stage's resolved configuration once, as JSON; return it as a dict."""
+    resolved = _jsonable(config)
+    logger.info("%s: %s", stage, json.dumps(resolved, sort_keys=True))
+    return resolved
+
+
+def write_json(path: Path, doc) -> Path:
+    """Write ``doc`` as JSON to ``path`` through a temporary name, then rename it."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        tmp.write_text(json.dumps(doc, indent=1))
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def check_output_folder(folder: Path, what: str = "--out") -> Path:
+    """Create ``folder`` (and parents) now, before any expensive work, or fail clearly."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ValueError(f"{what} {folder} is a file, not a folder; choose another") from None
+    except (NotADirectoryError, PermissionError, OSError) as exc:
+        raise ValueError(f"{what} {folder} cannot be created ({exc.strerror or exc}); "
+                         "choose another") from None
+    return folder

@@ -1,0 +1,185 @@
+"""Stages ``calibrate`` and ``eval-perception``: measure perception on labelled held-out data.
+
+``calibrate`` runs the detector and the state classifier on a dataset split, measures the
+confusion of every factor of the state and of the action on the steps the classifier called
+unoccluded (exactly the steps that become observations), and writes the calibration the learners
+read (``calibration.json``, with the models' hashes and the depth mode), the observation model it
+gives (``observation_model.npz``, ``O[s, a, o]``) and a plot of each confusion matrix.
+
+A calibration holds for one mode: RGB-D (``depth=True``) or colour alone (``depth=False``, what a
+plain video gives). It is measured in the mode asked for, with depth removed from every step when
+``depth`` is False.
+
+Example::
+
+    from onionsort.stages import CalibrateConfig, calibrate
+    calibration, metrics = calibrate(CalibrateConfig(data=Path("runs/heldout"), split="all",
+                                                     out=Path("runs/calibration")))
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
+
+__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "calibrate", "detector_map",
+           "eval_perception", "measure_perception"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    """Where to measure perception and where to write the calibration.
+
+    Attributes
+    ----------
+    data : Path
+        A labelled dataset from ``onionsort dataset`` (held out: not trained on).
+    out : Path
+        Folder for ``calibration.json``, ``observation_model.npz`` and ``confusion.png``.
+    split : str
+        ``train``, ``val``, ``test`` or ``all``.
+    smoothing : float
+        Additive smoothing of the confusion counts.
+    models : Path or None
+        Perception models folder (None: the shipped models).
+    depth : bool
+        Measure with depth (RGB-D) or colour alone.
+    """
+
+    data: Path
+    out: Path
+    split: str = "test"
+    smoothing: float = 1.0
+    models: Path | None = None
+    depth: bool = True
+
+    def __post_init__(self) -> None:
+        if self.smoothing < 0:
+            raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
+
+
+@dataclass(frozen=True)
+class PerceptionEvalConfig:
+    """A dataset split to measure the detector and the state classifier on."""
+
+    data: Path
+    split: str = "test"
+    models: Path | None = None
+    depth: bool = True
+
+
+def measure_perception(models: PerceptionModels, root: Path | str, split: str = "test", *,
+                       depth: bool = True):
+    """Perceive every step of a dataset split and compare with the truth.
+
+    Returns
+    -------
+    calibration : state_abstraction.calibration.Calibration
+        Confusion of each factor on the steps the classifier called unoccluded, with the
+        models and the depth mode recorded.
+    metrics : dict
+        ``accuracy`` per factor on truly unoccluded steps, ``occlusion_recall``,
+        ``occlusion_precision``, ``n_steps``, ``n_occluded``, ``depth``.
+    """
+    from recordings.dataset import read_steps
+    from state_abstraction.calibration import FACTORS, calibrate
+
+    true = {k: [] for k in FACTORS}
+    pred = {k: [] for k in FACTORS}
+    truly_occluded, called_occluded = [], []
+    for steps in read_steps(root, split, models.frames_per_step):
+        perceived = models.perceive([(s.colors, s.depths if depth else None, s.inspection)
+                                     for s in steps])
+        for step, seen in zip(steps, perceived, strict=True):
+            truly_occluded.append(bool(step.record["occluded"]))
+            called_occluded.append(seen.occluded)
+            for k in FACTORS:
+                true[k].append(int(step.record[k]))
+                pred[k].append(int(getattr(seen, k)))
+    if not true["onion"]:
+        raise ValueError(f"split {split!r} of {root} holds no complete step")
+    occ, called = np.array(truly_occluded), np.array(called_occluded)
+    observed = ~called
+    calibration = calibrate({k: np.array(v)[observed] for k, v in true.items()},
+                            {k: np.array(v)[observed] for k, v in pred.items()})
+    visible = ~occ
+    metrics = {
+        "accuracy": {k: float(np.mean(np.array(true[k])[visible] == np.array(pred[k])[visible]))
+                     for k in FACTORS},
+        "occlusion_recall": float(called[occ].mean()) if occ.any() else 1.0,
+        "occlusion_precision": float(occ[called].mean()) if called.any() else 1.0,
+        "n_steps": len(occ),
+        "n_occluded": int(occ.sum()),
+        "depth": depth,
+    }
+    return replace(calibration, models=models.describe(), depth=depth), metrics
+
+
+def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
+                 batch_size: int = 32) -> dict[str, dict[str, float]]:
+    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``."""
+    import json
+
+    from perception.metrics import mean_average_precision
+    from perception.train import EVAL_SCORE_THRESHOLD
+    from recordings.dataset import read_split, split_names
+
+    views = json.loads((Path(root) / "dataset.json").read_text()).get("views", ["camera"])
+    gts: dict[str, list] = {}
+    dts: dict[str, list] = {}
+    for view in views:
+        frames = [f for name in split_names(split) for f in read_split(root, name, view=view)]
+        gts[view] = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
+                      np.asarray(f.record["classes"], int)) for f in frames]
+        dts[view] = []
+        for i in range(0, len(frames), batch_size):
+            for det in models.detector.detect([f.color for f in frames[i:i + batch_size]],
+                                              score_threshold=EVAL_SCORE_THRESHOLD):
+                dts[view].append((det.boxes, det.scores, det.classes))
+    out = {v: mean_average_precision(gts[v], dts[v]) for v in views}
+    out["all"] = mean_average_precision([g for v in views for g in gts[v]],
+                                        [d for v in views for d in dts[v]])
+    return out
+
+
+def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
+    """Measure perception on ``config.data`` and write the calibration into ``config.out``.
+
+    Returns ``(calibration, metrics)`` (see :func:`measure_perception`).
+    """
+    from onionsort.plots import confusion_figure
+
+    log_config("calibrate", config)
+    check_output_folder(config.out)
+    models = PerceptionModels.load(config.models) if models is None else models
+    calibration, metrics = measure_perception(models, config.data, config.split,
+                                              depth=config.depth)
+    calibration = calibration.with_smoothing(config.smoothing)
+    calibration.save(config.out / CALIBRATION_FILE, extra={
+        "data": str(config.data), "split": config.split, "models": calibration.models,
+        "depth": config.depth, "metrics": metrics})
+    np.savez_compressed(config.out / "observation_model.npz",
+                        probs=calibration.observation_model().probs)
+    confusion_figure(calibration, config.out / "confusion.png")
+    return calibration, metrics
+
+
+def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None
+                    ) -> dict:
+    """mAP of the detector and the state classifier's accuracy on a dataset split."""
+    log_config("eval-perception", config)
+    models = PerceptionModels.load(config.models) if models is None else models
+    _, metrics = measure_perception(models, config.data, config.split, depth=config.depth)
+    maps = detector_map(models, config.data, config.split)
+    return {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
+            "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
+            "occlusion_precision": metrics["occlusion_precision"], "map_by_view": maps,
+            "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth}

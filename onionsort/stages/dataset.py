@@ -1,0 +1,154 @@
+"""Stage ``dataset``: render labelled frames of the sorting world for perception.
+
+Frames come from whole simulated sessions (the sorter acting on the expert's policy, the
+passer-by occluding the camera), split into train, val and test by session: frames of one
+session are correlated, so no session appears in two splits. With ``robot_onions`` the Sawyer
+also holds onions up to the inspection camera, so the detector learns what the robot will see.
+See :mod:`recordings.dataset` for the folder layout and the label records.
+
+Example::
+
+    from onionsort.stages import DatasetConfig, make_dataset
+    make_dataset(DatasetConfig(out=Path("runs/data"), frames=300, robot_onions=0))
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from onionsort.stages.base import log_config
+
+__all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """What to render.
+
+    Attributes
+    ----------
+    out : Path
+        A new dataset folder (an existing dataset is never overwritten).
+    frames : int
+        Camera frames in all.
+    seed : int
+    occlusion : float
+        Probability that the passer-by occludes a step (0.3: the classifier must see many).
+    steps_per_session, frames_per_step : int
+    val, test : float
+        Shares of sessions for the val and test splits.
+    robot_onions : int
+        Onions the Sawyer holds up to the inspection camera (3 views each), in line-ups of 10
+        split like the sessions; 0 for none.
+    """
+
+    out: Path
+    frames: int = 3000
+    seed: int = 0
+    occlusion: float = 0.3
+    steps_per_session: int = 20
+    frames_per_step: int = 3
+    val: float = 0.15
+    test: float = 0.15
+    robot_onions: int = 120
+
+    def __post_init__(self) -> None:
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1; got {self.frames}")
+        if self.robot_onions < 0:
+            raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
+
+
+@dataclass(frozen=True)
+class DatasetSummary:
+    """What was written: frames, sessions per split, and the robot's inspection views."""
+
+    frames: int
+    sessions: dict[str, int]
+    robot_views: int
+
+
+def split_plan(n_sessions: int, val: float, test: float) -> list[str]:
+    """The split of each session: train first, then val, then test; each split non-empty."""
+    if not (0 < val < 1 and 0 < test < 1 and val + test < 1):
+        raise ValueError(f"--val and --test must be in (0, 1) with a sum below 1; got {val}, "
+                         f"{test}")
+    n_val, n_test = max(1, round(val * n_sessions)), max(1, round(test * n_sessions))
+    n_train = n_sessions - n_val - n_test
+    if n_train < 1:
+        raise ValueError(
+            f"{n_sessions} sessions cannot fill three splits; ask for more --frames or fewer "
+            "--steps-per-session"
+        )
+    return ["train"] * n_train + ["val"] * n_val + ["test"] * n_test
+
+
+def make_dataset(config: DatasetConfig) -> DatasetSummary:
+    """Render ``config.frames`` labelled frames into ``config.out``."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from onionsort import __version__
+    from recordings.dataset import DatasetWriter
+    from robot.simulation import SessionConfig, SortingSession, expert_model
+
+    log_config("dataset", config)
+    session_config = SessionConfig(n_steps=config.steps_per_session,
+                                   occlusion=config.occlusion,
+                                   frames_per_step=config.frames_per_step)
+    per_session = session_config.n_steps * session_config.frames_per_step
+    n_sessions = math.ceil(config.frames / per_session)
+    plan = split_plan(n_sessions, config.val, config.test)
+    writer = DatasetWriter(config.out, {
+        "seed": config.seed, "frames": config.frames, "sessions": n_sessions,
+        "config": session_config.to_dict(), "software": f"onionsort {__version__}",
+        "session_splits": plan,
+    })
+    policy, initial = expert_model(session_config.blemish_rate)
+    seeds = np.random.SeedSequence([config.seed, 0x0D47A5E7]).spawn(n_sessions)
+    written = 0
+    try:
+        with tqdm(total=config.frames, unit="frame", desc="dataset") as bar:
+            for k, (split, seed) in enumerate(zip(plan, seeds, strict=True)):
+                with SortingSession(session_config, policy, initial, seed) as session:
+                    for frame in session.frames():
+                        if written == config.frames:
+                            break
+                        writer.add(split, frame, session=k)
+                        written += 1
+                        bar.update()
+                writer.flush(split)
+    finally:
+        writer.close()
+    views = _robot_views(writer, config) if config.robot_onions else 0
+    return DatasetSummary(written, {s: plan.count(s) for s in dict.fromkeys(plan)}, views)
+
+
+def _robot_views(writer, config: DatasetConfig) -> int:
+    """Add the Sawyer's inspection views, line-ups of 10 onions split like the sessions."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from robot.station import robot_inspection_views
+
+    sizes = [10] * (config.robot_onions // 10) + ([config.robot_onions % 10]
+                                                 if config.robot_onions % 10 else [])
+    plan = (split_plan(len(sizes), config.val, config.test) if len(sizes) >= 3
+            else ["train"] * len(sizes))
+    seeds = np.random.SeedSequence([config.seed, 0x5A3E7]).spawn(len(sizes))
+    n = 0
+    try:
+        for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
+                                                     desc="robot views", unit="line-up")):
+            for index, rgb, labels in robot_inspection_views(size, seed):
+                writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
+                n += 1
+            writer.flush(split)
+    finally:
+        writer.close()
+    return n

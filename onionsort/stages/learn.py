@@ -1,0 +1,173 @@
+"""Stage ``learn``: an offline learning run from perceived sessions.
+
+The learner sees only the perceived observations of each session (occluded where the classifier
+said so), never ground truth, through the observation model of a calibration. The calibration
+must have been measured with the same perception models (their hashes) and in the same depth
+mode as the sessions were perceived; ``allow_model_mismatch`` overrides the refusal.
+
+Writes into ``out``: ``model.json`` (method, learned reward weights with feature names, the
+greedy policy with state and action names, the inputs), ``learning_curve.json`` and ``.png``,
+and ``learn.rrd`` (Rerun).
+
+Example::
+
+    from onionsort.stages import LearnConfig, learn
+    model = learn(LearnConfig(sessions=(Path("runs/rec/session_000.mcap"),),
+                              calibration=Path("runs/calibration/calibration.json"),
+                              out=Path("runs/learn-mmap")))
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import check_output_folder, log_config, write_json
+from onionsort.stages.models import model_mismatch
+
+__all__ = ["MODEL_FILE", "LearnConfig", "learn", "load_policy"]
+
+logger = logging.getLogger(__name__)
+
+MODEL_FILE = "model.json"
+MODEL_FORMAT = "onionsort.learned-model/1"
+
+
+@dataclass(frozen=True)
+class LearnConfig:
+    """What to learn from, with which learner, into which run folder.
+
+    Attributes
+    ----------
+    sessions : tuple of Path
+        Perceived session files.
+    calibration : Path
+        ``calibration.json`` from ``onionsort calibrate``.
+    out : Path
+        Run folder.
+    method : str
+        A learner of :data:`irl.experiments.METHODS`.
+    seed : int
+    allow_model_mismatch : bool
+        Learn even when the sessions were perceived by other models, or in another depth
+        mode, than the calibration was measured with.
+    rerun : bool
+        Write ``learn.rrd``.
+    """
+
+    sessions: tuple[Path, ...]
+    calibration: Path
+    out: Path
+    method: str = "mmap-birl"
+    seed: int = 0
+    allow_model_mismatch: bool = False
+    rerun: bool = True
+
+    def __post_init__(self) -> None:
+        from irl.experiments import METHODS
+
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
+        if not self.sessions:
+            raise ValueError("sessions must name at least one session file; got none")
+        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
+        if missing:
+            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+
+
+def _check_provenance(session, calibration, calibration_path: Path) -> None:
+    """Refuse a session perceived by other models, or in another mode, than the calibration."""
+    record = session.perception_models or {}
+    differ = model_mismatch(record, calibration.models)
+    if differ:
+        raise ValueError(
+            f"{session.path} was perceived by other models than {calibration_path} was "
+            f"measured with ({', '.join(differ)} differ); perceive it again with the "
+            "calibration's models, recalibrate, or pass --allow-model-mismatch")
+    if calibration.depth is not None and record.get("depth", True) != calibration.depth:
+        mode = {True: "RGB-D", False: "colour-only"}
+        raise ValueError(
+            f"{session.path} was perceived {mode[bool(record.get('depth', True))]} but "
+            f"{calibration_path} was measured {mode[calibration.depth]}; calibrate with "
+            "--no-depth to match, or pass --allow-model-mismatch")
+
+
+def learn(config: LearnConfig) -> dict:
+    """Fit the learner on the perceived sessions; write the run folder; return ``model.json``."""
+    import dataclasses
+
+    from irl.domains.onion_sorting import onion_sorting
+    from irl.experiments import make_estimator
+    from onionsort.plots import learning_curve_figure
+    from recordings import open_session
+    from state_abstraction.calibration import load_calibration
+
+    log_config("learn", config)
+    check_output_folder(config.out)
+    calibration = load_calibration(config.calibration)
+    sessions = [open_session(p) for p in config.sessions]
+    if not config.allow_model_mismatch:
+        for session in sessions:
+            if session.perception:
+                _check_provenance(session, calibration, config.calibration)
+    demos = [s.perceived_demonstration() for s in sessions]
+    domain = dataclasses.replace(onion_sorting(),
+                                 observation_model=calibration.observation_model())
+    estimator = make_estimator(config.method, domain, seed=config.seed)
+    estimator.fit(demos)
+    theta = np.asarray(estimator.theta_, float)
+    policy = np.asarray(estimator.policy_, int)
+    model = {
+        "format": MODEL_FORMAT, "method": config.method,
+        "theta": dict(zip(domain.feature_names, theta.round(6).tolist(), strict=True)),
+        "policy": [{"state": domain.state_names[s], "action": domain.action_names[a]}
+                   for s, a in enumerate(policy)],
+        "policy_indices": policy.tolist(),
+        "sessions": [str(p) for p in config.sessions],
+        "n_steps": sum(len(d) for d in demos),
+        "n_occluded": sum(d.n_occluded for d in demos),
+        "observation_model": str(config.calibration),
+        "state_error_rate": calibration.state_error_rate,
+        "n_iter": int(getattr(estimator, "n_iter_", 0)),
+    }
+    history = list(getattr(estimator, "history_", []))
+    write_json(config.out / "learning_curve.json", history)
+    write_json(config.out / MODEL_FILE, model)
+    learning_curve_figure(objective_curve(history), config.method,
+                          config.out / "learning_curve.png")
+    if config.rerun:
+        from recordings.rerun import log_learning
+
+        log_learning(config.out / "learn.rrd", model, history)
+    return model
+
+
+def objective_curve(history: list[dict]) -> list[float]:
+    """The objective per iteration from a learner's ``history_``."""
+    key = next((k for k in ("value", "log_likelihood") if history and k in history[0]), None)
+    return [float(h[key]) for h in history] if key else []
+
+
+def load_policy(run_dir: Path):
+    """The greedy policy ``actions[s]`` (48,) of a learning run and its model.json, with clear
+    errors."""
+    import json
+
+    from irl.domains.onion_sorting import N_ACTIONS, N_STATES
+
+    path = Path(run_dir) / MODEL_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} holds no learned model (no {MODEL_FILE}); run "
+                                "`onionsort learn ... --out RUN_DIR` first")
+    try:
+        doc = json.loads(path.read_text())
+        actions = np.asarray(doc["policy_indices"], dtype=np.int64)
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{path} is not a learned model ({exc})") from None
+    if actions.shape != (N_STATES,) or actions.min() < 0 or actions.max() >= N_ACTIONS:
+        raise ValueError(f"{path}: the policy must give one action in [0, {N_ACTIONS}) for each "
+                         f"of the {N_STATES} onion-sorting states; got shape {actions.shape}")
+    return actions, doc

@@ -1,0 +1,145 @@
+"""Stage ``perceive``: run the detector and the state classifier on recorded sessions.
+
+Reads only a session's sensor side (colour, depth where there is any, the inspection view, the
+step clock) and adds the perception topics to its file (:mod:`recordings.perception`), atomically.
+The perception record names the models (with their hashes) and whether depth was used, so
+``learn`` can check the calibration was measured for the same models and mode.
+
+Example::
+
+    from onionsort.stages import PerceiveConfig, perceive
+    perceive(PerceiveConfig(sessions=(Path("runs/rec/session_000.mcap"),)))
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import log_config
+from onionsort.stages.models import PerceptionModels
+
+__all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PerceiveConfig:
+    """Which sessions to perceive, with which models.
+
+    Attributes
+    ----------
+    sessions : tuple of Path
+        Session files (``.mcap``); each gets the perception topics in place.
+    models : Path or None
+        Folder with ``state_classifier.pt`` and ``detector.pt`` (None: the shipped models).
+    replace : bool
+        Perceive sessions that already hold perception topics again.
+    batch_size : int
+        Frames per detector batch.
+    """
+
+    sessions: tuple[Path, ...]
+    models: Path | None = None
+    replace: bool = False
+    batch_size: int = 32
+
+    def __post_init__(self) -> None:
+        if not self.sessions:
+            raise ValueError("sessions must name at least one session file; got none")
+        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
+        if missing:
+            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+        if self.batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")
+
+
+@dataclass(frozen=True)
+class PerceivedSession:
+    """What perceiving one session found: its perceived steps, and whether it had depth (else
+    the classifier read colour alone)."""
+
+    path: Path
+    steps: list
+    depth: bool
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.steps)
+
+    @property
+    def n_occluded(self) -> int:
+        return sum(s.occluded for s in self.steps)
+
+
+def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
+             ) -> list[PerceivedSession]:
+    """Perceive every session of ``config``; return a summary of each."""
+    from tqdm import tqdm
+
+    log_config("perceive", config)
+    models = PerceptionModels.load(config.models) if models is None else models
+    out = []
+    for path in tqdm(config.sessions, desc="perceive", unit="session"):
+        out.append(perceive_session(models, path, replace=config.replace,
+                                    batch_size=config.batch_size))
+        logger.info("%s: %d steps, %d called occluded", path, out[-1].n_steps,
+                    out[-1].n_occluded)
+    return out
+
+
+def perceive_session(models: PerceptionModels, path: Path | str, *, replace: bool = False,
+                     batch_size: int = 32) -> PerceivedSession:
+    """Run both models on a session's sensor side and add the perception topics to its file.
+
+    Raises
+    ------
+    ValueError
+        If the session's steps do not have the classifier's frame count, or perception finds
+        no usable step (none complete, or every one called occluded).
+    """
+    from recordings.perception import add_perception
+    from recordings.reader import open_session
+
+    session = open_session(path)
+    if session.frames_per_step != models.frames_per_step:
+        raise ValueError(f"{path}: its steps have {session.frames_per_step} frames; the state "
+                         f"classifier reads steps of {models.frames_per_step} (record with "
+                         f"--frames-per-step {models.frames_per_step})")
+    steps = session.step_frames()
+    if not steps:
+        raise ValueError(f"{path}: perception found no complete step in {session.n_frames} "
+                         "frames; nothing to learn from")
+    perceived = models.perceive([([f.color for f in frames],
+                                  [f.depth for f in frames] if session.has_depth else None,
+                                  frames[0].inspection) for frames in steps])
+    if all(s.occluded for s in perceived):
+        raise ValueError(f"{path}: perception called all {len(perceived)} steps occluded; "
+                         "there is no usable step (is the camera blocked?)")
+    frames = list(session.frames())
+    detections = {}
+    for i in range(0, len(frames), batch_size):
+        chunk = frames[i:i + batch_size]
+        for frame, det in zip(chunk, models.detector.detect([f.color for f in chunk]),
+                              strict=True):
+            detections[frame.index] = _rows(det)
+    views = [f for f in frames if f.inspection_png is not None]
+    inspection = {f.index: _rows(d)
+                  for f, d in zip(views, models.detector.detect([f.inspection for f in views]),
+                                  strict=True)} if views else {}
+    docs = [{**seen.to_dict(), "frame": step[0].index}
+            for seen, step in zip(perceived, steps, strict=True)]
+    add_perception(path, docs, detections=detections, inspection=inspection,
+                   frame_times={f.index: f.time_ns for f in frames},
+                   models={**models.describe(), "depth": session.has_depth}, replace=replace)
+    return PerceivedSession(Path(path), perceived, session.has_depth)
+
+
+def _rows(det) -> list[tuple]:
+    boxes, classes, scores = (np.asarray(det.boxes), np.asarray(det.classes),
+                              np.asarray(det.scores))
+    return [(*boxes[i].tolist(), int(classes[i]), float(scores[i])) for i in range(len(scores))]

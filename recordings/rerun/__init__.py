@@ -1,0 +1,55 @@
+"""All Rerun logging of onionsort, one entity root per purpose.
+
+=============  ====================================  ==========================================
+root           logger                                what
+=============  ====================================  ==========================================
+``record/``    :class:`SessionLogger`                recorded sessions: cameras, ground truth
+``perceive/``  :class:`PerceptionLogger`             what perception made of a session
+``learn/``     :func:`log_learning`                  a learner's objective, reward and policy
+``evaluate/``  :class:`EvaluationLogger`             the Sawyer executing a policy
+=============  ====================================  ==========================================
+
+Shared pieces (:mod:`recordings.rerun.common`): :func:`open_recording` opens a stream to an
+``.rrd`` file, a spawned viewer or a gRPC URL with one blueprint; the onion classes' annotation
+context comes from :mod:`recordings.schema`; a camera is a static pinhole ``<root>/camera`` with
+``color`` and ``depth`` under it. Importing this package loads the Rerun SDK.
+"""
+
+from __future__ import annotations
+
+from recordings.rerun.common import (
+    class_annotations,
+    close_recording,
+    log_camera_images,
+    log_class_annotations,
+    log_pinhole,
+    open_recording,
+    send_series,
+)
+from recordings.rerun.evaluate import (
+    EvaluationEvent,
+    EvaluationLogger,
+    evaluation_blueprint,
+)
+from recordings.rerun.learn import learn_blueprint, log_learning
+from recordings.rerun.perceive import PerceptionLogger, read_detections
+from recordings.rerun.session import SessionLogger, session_blueprint
+
+__all__ = [
+    "EvaluationEvent",
+    "EvaluationLogger",
+    "PerceptionLogger",
+    "SessionLogger",
+    "class_annotations",
+    "close_recording",
+    "evaluation_blueprint",
+    "learn_blueprint",
+    "log_camera_images",
+    "log_class_annotations",
+    "log_learning",
+    "log_pinhole",
+    "open_recording",
+    "read_detections",
+    "send_series",
+    "session_blueprint",
+]

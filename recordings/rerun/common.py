@@ -1,0 +1,202 @@
+"""What every Rerun logger of onionsort shares: opening a stream, classes, cameras, series.
+
+A stream is opened once with its one blueprint (:func:`open_recording`) and closed with
+:func:`close_recording`. Onion classes are drawn from one annotation context built from
+:data:`recordings.schema.CLASS_NAMES` and :data:`recordings.schema.CLASS_COLORS`, logged static
+at the root so that every box of every logger (``class_ids``) gets the same name and colour.
+A camera is a static pinhole at ``<root>/camera`` with its images under it::
+
+    <root>/camera          Pinhole (static): intrinsics and resolution
+    <root>/camera/color    the colour image (JPEG or raw RGB)
+    <root>/camera/depth    DepthImage (``meter`` units per metre)
+
+Scalar series are sent whole with :func:`send_series` (one ``rr.send_columns`` call per
+series), their names logged static once with :func:`log_series_names`.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from enum import IntEnum
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from recordings.schema import CLASS_COLORS, CLASS_NAMES
+
+__all__ = [
+    "GRPC_SCHEMES",
+    "class_annotations",
+    "close_recording",
+    "enum_labels",
+    "log_camera_images",
+    "log_class_annotations",
+    "log_pinhole",
+    "log_series_names",
+    "open_recording",
+    "send_series",
+]
+
+logger = logging.getLogger(__name__)
+
+#: URL schemes of a viewer or server reached over gRPC (``rr.RecordingStream.connect_grpc``).
+GRPC_SCHEMES = ("rerun+http://", "rerun+https://", "rerun://")
+
+
+def open_recording(application_id: str, target: str | Path,
+                   blueprint: rrb.Blueprint | None = None) -> rr.RecordingStream:
+    """A new recording stream sent to ``target`` with ``blueprint`` as its one layout.
+
+    Parameters
+    ----------
+    application_id : str
+        The application the recording belongs to (the viewer groups recordings by it).
+    target : path-like or str
+        An ``.rrd`` file to write (its folder is created), ``"spawn"`` to start (or reach) a
+        local viewer, or a gRPC URL (``rerun+http://host:port/proxy``; also ``rerun+https://``
+        and ``rerun://``) of a running viewer.
+    blueprint : rerun.blueprint.Blueprint or None
+        The layout, sent once as the recording's default blueprint.
+
+    Returns
+    -------
+    rerun.RecordingStream
+        Close it with :func:`close_recording`.
+
+    Raises
+    ------
+    ValueError
+        If ``application_id`` is empty, or ``target`` is none of the above.
+    """
+    if not application_id:
+        raise ValueError(f"application_id must be a non-empty string; got {application_id!r}")
+    rec = rr.RecordingStream(application_id)
+    text = str(target)
+    if isinstance(target, str) and text == "spawn":
+        rec.spawn(default_blueprint=blueprint)
+    elif isinstance(target, str) and text.startswith(GRPC_SCHEMES):
+        rec.connect_grpc(text, default_blueprint=blueprint)
+    elif isinstance(target, str | Path) and Path(text).suffix == ".rrd":
+        path = Path(text)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rec.save(path, default_blueprint=blueprint)
+    else:
+        raise ValueError(f"target must be an .rrd file, 'spawn' or a gRPC URL starting with "
+                         f"{' or '.join(GRPC_SCHEMES)}; got {target!r}")
+    logger.debug("rerun recording %s (%s) -> %s", application_id, rec.get_recording_id(), text)
+    return rec
+
+
+def close_recording(rec: rr.RecordingStream) -> None:
+    """Flush everything logged to ``rec`` to its file or viewer and disconnect it."""
+    rec.flush()
+    rec.disconnect()
+
+
+def class_annotations() -> rr.AnnotationContext:
+    """The onion classes (id, name, colour) of :mod:`recordings.schema` as an annotation
+    context."""
+    return rr.AnnotationContext([(cid, name, CLASS_COLORS[cid])
+                                 for cid, name in sorted(CLASS_NAMES.items())])
+
+
+def log_class_annotations(rec: rr.RecordingStream, entity: str = "/") -> None:
+    """Log the class annotation context static at ``entity`` (the root: every entity)."""
+    rec.log(entity, class_annotations(), static=True)
+
+
+def log_pinhole(rec: rr.RecordingStream, root: str, K: Sequence[Sequence[float]] | np.ndarray,
+                width: int, height: int) -> None:
+    """Log ``<root>/camera`` as a static pinhole camera of intrinsics ``K`` (3, 3).
+
+    Raises
+    ------
+    ValueError
+        If ``K`` is not 3 x 3 or the resolution is not positive.
+    """
+    K = np.asarray(K, float)
+    if K.shape != (3, 3):
+        raise ValueError(f"K must be a 3 x 3 intrinsics matrix; got shape {K.shape}")
+    if int(width) < 1 or int(height) < 1:
+        raise ValueError(f"width and height must be positive; got {width} x {height}")
+    rec.log(f"{root}/camera", rr.Pinhole(image_from_camera=K, resolution=[int(width),
+                                                                            int(height)]),
+            static=True)
+
+
+def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray | None = None,
+                      color_jpeg: bytes | None = None, depth: np.ndarray | None = None,
+                      depth_meter: float = 1.0, jpeg_quality: int | None = None) -> None:
+    """Log a camera's images at the current time: ``<root>/camera/color`` and
+    ``<root>/camera/depth``.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    root : str
+        The logger's entity root.
+    color : ndarray of shape (H, W, 3) or None
+        uint8 RGB (compressed to JPEG if ``jpeg_quality`` is given).
+    color_jpeg : bytes or None
+        An already encoded JPEG (instead of ``color``).
+    depth : ndarray of shape (H, W) or None
+        Depth, ``depth_meter`` units per metre (1.0 for float metres, 1000 for uint16 mm).
+    depth_meter : float
+    jpeg_quality : int or None
+
+    Raises
+    ------
+    ValueError
+        If both ``color`` and ``color_jpeg`` are given.
+    """
+    if color is not None and color_jpeg is not None:
+        raise ValueError("give color or color_jpeg, not both")
+    if color_jpeg is not None:
+        rec.log(f"{root}/camera/color", rr.EncodedImage(contents=color_jpeg,
+                                                        media_type="image/jpeg"))
+    elif color is not None:
+        image = rr.Image(np.asarray(color))
+        rec.log(f"{root}/camera/color",
+                image if jpeg_quality is None else image.compress(jpeg_quality=jpeg_quality))
+    if depth is not None:
+        rec.log(f"{root}/camera/depth", rr.DepthImage(np.asarray(depth), meter=depth_meter))
+
+
+def enum_labels(enum: type[IntEnum]) -> str:
+    """``"0=name, 1=name, ..."``: the value labels of a series of enum indices."""
+    return ", ".join(f"{m.value}={m.name.lower()}" for m in enum)
+
+
+def log_series_names(rec: rr.RecordingStream, names: Mapping[str, str | Sequence[str]],
+                     colors: Mapping[str, Sequence[int]] | None = None) -> None:
+    """Log static ``SeriesLines`` names (and colours) of series, ``{entity: name(s)}``."""
+    colors = colors or {}
+    for entity, name in names.items():
+        rec.log(entity, rr.SeriesLines(names=name, colors=colors.get(entity)), static=True)
+
+
+def send_series(rec: rr.RecordingStream, entity: str, indexes: Iterable[rr.TimeColumn],
+                values: Sequence[float] | np.ndarray) -> None:
+    """Send a whole scalar series in one ``send_columns`` call.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    entity : str
+    indexes : iterable of rerun.TimeColumn
+        The time of each row, on one or more timelines.
+    values : array-like of shape (n,) or (n, k)
+        One scalar per row, or ``k`` scalars per row (``k`` lines).
+    """
+    values = np.asarray(values, float)
+    if values.ndim not in (1, 2):
+        raise ValueError(f"values must have shape (n,) or (n, k); got {values.shape}")
+    if len(values) == 0:
+        return
+    columns = rr.Scalars.columns(scalars=values)
+    if values.ndim == 2:
+        columns = columns.partition([values.shape[1]] * len(values))
+    rec.send_columns(entity, indexes=list(indexes), columns=columns)

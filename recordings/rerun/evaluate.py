@@ -1,0 +1,310 @@
+"""Log a sorting evaluation (the Sawyer executing a policy) to Rerun, under one entity root.
+
+:class:`EvaluationLogger` takes each action of the evaluation (its ``on_step``, passed to
+:func:`robot.evaluation.evaluate_policy`) and logs the images and the decision at once; the
+scalar series are buffered and sent whole by :meth:`EvaluationLogger.close`, one
+``send_columns`` call per series. This module does not import ``robot``: what it reads of an
+evaluation step is stated by :class:`EvaluationEvent` (``robot.evaluation.EvaluationStep``
+satisfies it). Entity paths, under ``root`` (the ``prefix``, ``evaluate`` by default; one
+prefix per evaluated policy lets two share a recording)::
+
+    <root>/camera                      Pinhole (static), when the camera's K is given
+    <root>/camera/color                Image (JPEG) of the main camera, when rendering
+    <root>/camera/depth                DepthImage (metres), when rendering
+    <root>/inspection                  Image of the inspection view, on steps that inspect
+    <root>/inspection/detections       Boxes2D of the detector, when a detector is given
+    <root>/decisions                   TextLog: one line per action (WARN: perception wrong)
+    <root>/metrics/{precision,recall}  Scalars: running precision and recall
+    <root>/counts/{tp,fp,tn,fn}        Scalars: running counts
+    <root>/mdp/{state,action}          Scalars: state index, action index
+    <root>/arm/joints                  Scalars: the Sawyer's 7 joint positions (rad)
+
+Timeline: ``step`` (the action number).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from irl.domains.onion_sorting import Prediction, SortAction, decode_state
+from recordings.rerun.common import (
+    close_recording,
+    enum_labels,
+    log_camera_images,
+    log_class_annotations,
+    log_pinhole,
+    log_series_names,
+    open_recording,
+    send_series,
+)
+from recordings.schema import CLASS_NAMES
+
+__all__ = [
+    "EVALUATE_ROOT",
+    "Detection",
+    "EvaluationEvent",
+    "EvaluationLogger",
+    "evaluation_blueprint",
+]
+
+logger = logging.getLogger(__name__)
+
+EVALUATE_ROOT = "evaluate"
+_TIMELINE = "step"
+_COUNT_COLORS = {"tp": (40, 180, 60), "fp": (230, 120, 30), "tn": (60, 120, 220),
+                 "fn": (220, 40, 40)}
+_N_JOINTS = 7
+
+
+class EvaluationEvent(Protocol):
+    """What the logger reads of one action of an evaluation
+    (``robot.evaluation.EvaluationStep`` satisfies it).
+
+    ``state``, ``action`` and ``next_state`` are flat indices; ``onion`` is the line-up index of
+    the onion in focus, ``blemished`` its true class, ``perceived`` the classifier's answer if
+    this action inspected it, ``fate`` (``"bin"`` or ``"line"``) where this action decided it;
+    ``tp`` .. ``recall`` are running over the decided onions. ``color`` (H, W, 3) uint8 RGB and
+    ``depth`` (H, W) float metres are there when the evaluation renders, ``inspection``
+    (h, w, 3) uint8 RGB on inspecting actions; ``q`` (7,) the Sawyer's joint positions.
+    """
+
+    @property
+    def step(self) -> int: ...
+    @property
+    def state(self) -> int: ...
+    @property
+    def action(self) -> int: ...
+    @property
+    def next_state(self) -> int: ...
+    @property
+    def onion(self) -> int | None: ...
+    @property
+    def blemished(self) -> bool | None: ...
+    @property
+    def perceived(self) -> int | None: ...
+    @property
+    def fate(self) -> str | None: ...
+    @property
+    def tp(self) -> int: ...
+    @property
+    def fp(self) -> int: ...
+    @property
+    def tn(self) -> int: ...
+    @property
+    def fn(self) -> int: ...
+    @property
+    def precision(self) -> float: ...
+    @property
+    def recall(self) -> float: ...
+    @property
+    def color(self) -> np.ndarray | None: ...
+    @property
+    def depth(self) -> np.ndarray | None: ...
+    @property
+    def inspection(self) -> np.ndarray | None: ...
+    @property
+    def q(self) -> np.ndarray: ...
+
+
+class Detection(Protocol):
+    """A detector's answer on one image: ``boxes`` (n, 4) XYXY pixels, ``classes`` (n,) class
+    ids, ``scores`` (n,)."""
+
+    @property
+    def boxes(self) -> Any: ...
+    @property
+    def classes(self) -> Any: ...
+    @property
+    def scores(self) -> Any: ...
+
+
+#: ``detect(images) -> one Detection per image`` (images: list of (h, w, 3) uint8 RGB).
+Detect = Callable[[list[np.ndarray]], Sequence[Detection]]
+
+
+def evaluation_blueprint(prefix: str = EVALUATE_ROOT) -> rrb.Blueprint:
+    """The layout: the station's camera and the inspection view, the decisions, the metrics,
+    the counts and the arm's joints."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial2DView(origin=f"{prefix}/camera",
+                                  contents=["$origin/**", "- $origin/depth"],
+                                  name="Sawyer station"),
+                rrb.Horizontal(
+                    rrb.Spatial2DView(origin=f"{prefix}/inspection", name="inspection"),
+                    rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
+                                      name="depth"),
+                ),
+                row_shares=[2, 1],
+            ),
+            rrb.Vertical(
+                rrb.TextLogView(origin=f"{prefix}/decisions", name="decisions"),
+                rrb.TimeSeriesView(origin=f"{prefix}/metrics", name="precision / recall"),
+                rrb.TimeSeriesView(origin=f"{prefix}/counts", name="TP / FP / TN / FN"),
+                rrb.TimeSeriesView(origin=f"{prefix}/mdp", name="state / action"),
+                rrb.TimeSeriesView(origin=f"{prefix}/arm", name="Sawyer joints (rad)"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+class EvaluationLogger:
+    """Logs one evaluation (or several, under different prefixes) to a Rerun recording.
+
+    Parameters
+    ----------
+    target : path-like or str
+        An ``.rrd`` file, ``"spawn"`` or a gRPC URL (see
+        :func:`recordings.rerun.common.open_recording`).
+    prefix : str
+        The entity root of this evaluation.
+    detector : callable or object with ``detect``, or None
+        ``detect(images) -> detections`` (each with ``boxes`` (n, 4) XYXY, ``classes``,
+        ``scores``), run on the inspection view to show the boxes behind a decision; an object
+        with a ``detect`` method (the perception detector) is taken too.
+    camera_K : array-like of shape (3, 3) or None
+        The main camera's intrinsics: ``<root>/camera`` becomes a pinhole.
+    application_id : str
+
+    Examples
+    --------
+    >>> with EvaluationLogger("runs/eval/evaluation.rrd", detector=det) as log:  # doctest: +SKIP
+    ...     evaluate_policy(..., render=True, on_step=log.on_step)
+    """
+
+    def __init__(self, target: str | Path, prefix: str = EVALUATE_ROOT,
+                 detector: Detect | Any | None = None, *, camera_K: Any = None,
+                 application_id: str = "onionsort_evaluate") -> None:
+        prefix = str(prefix).strip("/")
+        if not prefix:
+            raise ValueError(f"prefix must name an entity path; got {prefix!r}")
+        if detector is not None and not callable(detector):
+            detect = getattr(detector, "detect", None)
+            if not callable(detect):
+                raise ValueError(f"detector must be a callable detect(images) or have a "
+                                 f"detect method; got {type(detector).__name__}")
+            detector = detect
+        self.prefix = prefix
+        self.detect: Detect | None = detector
+        self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
+        self.rec = open_recording(application_id, target, evaluation_blueprint(prefix))
+        log_class_annotations(self.rec)
+        self._log_series_names()
+        self._rows: dict[str, list] = {}
+        self._steps: list[int] = []
+        self._pinhole = False
+        self._closed = False
+
+    def __enter__(self) -> EvaluationLogger:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    def _log_series_names(self) -> None:
+        p = self.prefix
+        names: dict[str, str | list[str]] = {
+            f"{p}/metrics/precision": "precision", f"{p}/metrics/recall": "recall",
+            f"{p}/mdp/state": "state index",
+            f"{p}/mdp/action": f"action ({enum_labels(SortAction)})",
+            f"{p}/arm/joints": [f"right_j{j}" for j in range(_N_JOINTS)],
+        }
+        names.update({f"{p}/counts/{n}": n.upper() for n in _COUNT_COLORS})
+        log_series_names(self.rec, names,
+                         colors={f"{p}/counts/{n}": c for n, c in _COUNT_COLORS.items()})
+
+    def on_step(self, event: EvaluationEvent) -> None:
+        """Log one action: images and the decision now, its scalars at :meth:`close`."""
+        if self._closed:
+            raise ValueError("on_step called on a closed EvaluationLogger")
+        p, rec = self.prefix, self.rec
+        rec.set_time(_TIMELINE, sequence=int(event.step))
+        if event.color is not None:
+            color = np.asarray(event.color)
+            if self.camera_K is not None and not self._pinhole:
+                log_pinhole(rec, p, self.camera_K, color.shape[1], color.shape[0])
+                self._pinhole = True
+            log_camera_images(rec, p, color=color, jpeg_quality=90)
+        if event.depth is not None:
+            log_camera_images(rec, p, depth=np.asarray(event.depth, np.float32),
+                              depth_meter=1.0)
+        if event.inspection is not None:
+            view = np.asarray(event.inspection)
+            rec.log(f"{p}/inspection", rr.Image(view))
+            if self.detect is not None:
+                rec.log(f"{p}/inspection/detections", _boxes(self.detect([view])[0]))
+        text, level = _describe(event)
+        rec.log(f"{p}/decisions", rr.TextLog(text, level=level))
+        self._buffer(event)
+
+    def _buffer(self, event: EvaluationEvent) -> None:
+        p = self.prefix
+        q = np.asarray(event.q, float).reshape(-1)
+        if q.shape != (_N_JOINTS,):
+            raise ValueError(f"event.q must hold {_N_JOINTS} joint positions; got shape "
+                             f"{q.shape} at step {event.step}")
+        row = {f"{p}/metrics/precision": float(event.precision),
+               f"{p}/metrics/recall": float(event.recall),
+               f"{p}/mdp/state": float(event.state), f"{p}/mdp/action": float(event.action),
+               f"{p}/arm/joints": q}
+        row.update({f"{p}/counts/{n}": float(getattr(event, n)) for n in _COUNT_COLORS})
+        for entity, value in row.items():
+            self._rows.setdefault(entity, []).append(value)
+        self._steps.append(int(event.step))
+
+    def close(self) -> None:
+        """Send the buffered series and flush everything to the file or viewer; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._steps:
+                index = [rr.TimeColumn(_TIMELINE, sequence=self._steps)]
+                for entity, values in self._rows.items():
+                    send_series(self.rec, entity, index, np.asarray(values, float))
+        finally:
+            close_recording(self.rec)
+
+
+def _boxes(det: Detection) -> rr.Boxes2D:
+    boxes = np.asarray(det.boxes, float).reshape(-1, 4)
+    classes = np.asarray(det.classes).astype(int).reshape(-1)
+    scores = np.asarray(det.scores, float).reshape(-1)
+    return rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, class_ids=classes,
+                      labels=[f"{CLASS_NAMES.get(int(c), c)} {s:.2f}"
+                              for c, s in zip(classes, scores, strict=True)])
+
+
+def _describe(event: EvaluationEvent) -> tuple[str, str]:
+    """The decision line of ``event`` and its level."""
+    s, s_next = decode_state(int(event.state)), decode_state(int(event.next_state))
+    action = SortAction(int(event.action)).name.lower()
+
+    def name(x) -> str:
+        return f"{x.onion.name.lower()}, {x.end_effector.name.lower()}, " \
+               f"{x.prediction.name.lower()}"
+
+    text = f"#{event.step} {action}: ({name(s)}) -> ({name(s_next)})"
+    level = rr.TextLogLevel.INFO
+    if event.onion is not None:
+        truth = "blemished" if event.blemished else "good"
+        text += f" · onion {event.onion} ({truth})"
+    if event.perceived is not None:
+        text += f" · perceived {Prediction(int(event.perceived)).name.lower()}"
+        if (int(event.perceived) == Prediction.BAD) != bool(event.blemished):
+            level = rr.TextLogLevel.WARN
+    if event.fate is not None:
+        text += f" · fate: {event.fate}"
+    if s_next == s:
+        text += " · (no effect)"
+    return text, level

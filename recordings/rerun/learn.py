@@ -1,0 +1,100 @@
+"""Log a learning run (MMAP-BIRL and the other learners) to Rerun, under ``learn/``.
+
+Entity paths::
+
+    learn/objective     Scalars: the objective per iteration (``value``, the log posterior, or
+                        ``log_likelihood``, whichever the history records), one send_columns
+    learn/theta         TextDocument (static): the learned reward weights
+    learn/policy        TextDocument (static): the learned policy, ``state -> action``
+
+Timeline: ``iteration``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+import rerun as rr
+import rerun.blueprint as rrb
+
+from recordings.rerun.common import (
+    close_recording,
+    log_series_names,
+    open_recording,
+    send_series,
+)
+
+__all__ = ["LEARN_ROOT", "OBJECTIVE_KEYS", "learn_blueprint", "log_learning", "objective"]
+
+logger = logging.getLogger(__name__)
+
+LEARN_ROOT = "learn"
+#: Keys of a history entry holding the objective, in order of preference.
+OBJECTIVE_KEYS = ("value", "log_likelihood")
+
+
+def learn_blueprint() -> rrb.Blueprint:
+    """The layout: the objective curve beside the learned reward and policy."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.TimeSeriesView(origin=f"{LEARN_ROOT}/objective", name="objective"),
+            rrb.Vertical(
+                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/theta", name="reward weights"),
+                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/policy", name="policy"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+def objective(history: Sequence[dict]) -> tuple[str | None, list[float]]:
+    """The objective's key (the first of :data:`OBJECTIVE_KEYS` in ``history[0]``) and its
+    value per iteration; ``(None, [])`` if the history records neither."""
+    key = next((k for k in OBJECTIVE_KEYS if history and k in history[0]), None)
+    return key, ([float(h[key]) for h in history] if key else [])
+
+
+def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
+                 application_id: str = "onionsort_learn") -> None:
+    """Log a learned model and its learning curve to a new recording.
+
+    Parameters
+    ----------
+    target : path-like or str
+        An ``.rrd`` file, ``"spawn"`` or a gRPC URL (see
+        :func:`recordings.rerun.common.open_recording`).
+    model : dict
+        The learned model: ``theta`` (dict of feature name -> weight) and ``policy`` (list of
+        dicts with ``state`` and ``action``).
+    history : sequence of dict
+        One entry per iteration, with the objective under ``value`` or ``log_likelihood``.
+    application_id : str
+
+    Raises
+    ------
+    ValueError
+        If ``model`` lacks ``theta`` or ``policy``, or ``target`` is not a valid target.
+    """
+    missing = [k for k in ("theta", "policy") if k not in model]
+    if missing:
+        raise ValueError(f"model must have 'theta' and 'policy'; missing {missing} in keys "
+                         f"{sorted(model)}")
+    rec = open_recording(application_id, target, learn_blueprint())
+    try:
+        key, values = objective(history)
+        if key is None:
+            logger.warning("the learning history records no objective (%s); logging the "
+                           "model alone", " or ".join(OBJECTIVE_KEYS))
+        else:
+            log_series_names(rec, {f"{LEARN_ROOT}/objective": f"objective ({key})"})
+            send_series(rec, f"{LEARN_ROOT}/objective",
+                        [rr.TimeColumn("iteration", sequence=range(len(values)))], values)
+        rec.log(f"{LEARN_ROOT}/theta", rr.TextDocument("\n".join(
+            f"{name}: {float(w):+.3f}" for name, w in model["theta"].items())), static=True)
+        rec.log(f"{LEARN_ROOT}/policy", rr.TextDocument("\n".join(
+            f"{row['state']} -> {row['action']}" for row in model["policy"])), static=True)
+    finally:
+        close_recording(rec)

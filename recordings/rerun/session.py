@@ -1,0 +1,246 @@
+"""Log recorded sessions to Rerun under the entity root ``record/``.
+
+Only what a session has is logged: colour always, depth where the sensor gave it, the
+inspection view where there is one, and the ground-truth side only in a session that carries
+it. A perceived session's perception topics are logged too, under ``perceive/``
+(:mod:`recordings.rerun.perceive`). Entity paths::
+
+    record/camera                    Pinhole (static): the main camera's intrinsics
+    record/camera/color              EncodedImage (JPEG), every frame
+    record/camera/depth              DepthImage (uint16 millimetres, meter=1000), with depth
+    record/camera/color/truth_boxes  Boxes2D (XYXY, class_ids), with ground truth
+    record/inspection                EncodedImage (PNG), on a step's first frame
+    record/session                   TextDocument: which session is playing
+    record/truth/state               TextDocument: the true state, action, occlusion per frame
+    record/truth/factors/*           Scalars per step: onion, end_effector, prediction, action
+    record/truth/occlusion/*         Scalars per step: fraction (largest view fraction covered
+                                     in the step), occluded (0/1)
+
+Timelines: ``frame`` and ``step`` (both counted across every session logged to the stream) and
+``time`` (the recording time of a frame, a duration). Series are sent whole, one
+``send_columns`` call per series and session, on all three timelines (a step at its first
+frame); their names, with the labels of the values, are logged static once.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from irl.domains.onion_sorting import Location, Prediction, SortAction, decode_state
+from recordings.reader import FrameRecord, Session
+from recordings.rerun.common import (
+    close_recording,
+    enum_labels,
+    log_camera_images,
+    log_class_annotations,
+    log_pinhole,
+    log_series_names,
+    open_recording,
+    send_series,
+)
+from recordings.rerun.perceive import PerceptionLogger, perception_views
+
+__all__ = ["RECORD_ROOT", "SessionLogger", "session_blueprint"]
+
+logger = logging.getLogger(__name__)
+
+RECORD_ROOT = "record"
+_TRUTH = f"{RECORD_ROOT}/truth"
+_FACTORS = {"onion": Location, "end_effector": Location, "prediction": Prediction,
+            "action": SortAction}
+
+
+def session_blueprint() -> rrb.Blueprint:
+    """The layout of logged sessions: camera with ground-truth boxes, depth, inspection view,
+    the true state as text and series, and what perception saw."""
+    camera = f"{RECORD_ROOT}/camera"
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial2DView(origin=camera, contents=["$origin/**", "- $origin/depth"],
+                                  name="camera + ground-truth boxes"),
+                rrb.Horizontal(
+                    rrb.Spatial2DView(origin=camera, contents=["$origin/depth"], name="depth"),
+                    rrb.Spatial2DView(origin=f"{RECORD_ROOT}/inspection", name="inspection"),
+                ),
+                row_shares=[2, 1],
+            ),
+            rrb.Vertical(
+                rrb.TextDocumentView(origin=f"{RECORD_ROOT}/session", name="session"),
+                rrb.TextDocumentView(origin=f"{_TRUTH}/state", name="true state"),
+                rrb.TimeSeriesView(origin=f"{_TRUTH}/factors", name="true state factors"),
+                rrb.TimeSeriesView(origin=f"{_TRUTH}/occlusion", name="occlusion"),
+                row_shares=[1, 2, 3, 2],
+            ),
+            rrb.Tabs(*perception_views(), name="perception"),
+            column_shares=[3, 2, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+class SessionLogger:
+    """Logs sessions to one Rerun recording, one after the other.
+
+    Parameters
+    ----------
+    target : path-like or str
+        An ``.rrd`` file, ``"spawn"`` or a gRPC URL (see
+        :func:`recordings.rerun.common.open_recording`).
+    application_id : str
+    perception : bool
+        Also log the perception topics of perceived sessions (``perceive/``).
+
+    Examples
+    --------
+    >>> with SessionLogger("runs/rec/sessions.rrd") as log:  # doctest: +SKIP
+    ...     for i, path in enumerate(paths):
+    ...         log.log_session(open_session(path), i)
+    """
+
+    def __init__(self, target: str | Path, application_id: str = "onionsort", *,
+                 perception: bool = True) -> None:
+        self.rec = open_recording(application_id, target, session_blueprint())
+        self.log_perception = perception
+        log_class_annotations(self.rec)
+        names = {f"{_TRUTH}/factors/{name}": f"{name} ({enum_labels(enum)})"
+                 for name, enum in _FACTORS.items()}
+        names[f"{_TRUTH}/occlusion/fraction"] = "fraction of the view covered"
+        names[f"{_TRUTH}/occlusion/occluded"] = "occluded step (0/1)"
+        log_series_names(self.rec, names)
+        self._perception: PerceptionLogger | None = None
+        self._frame = 0
+        self._step = 0
+        self._closed = False
+
+    def __enter__(self) -> SessionLogger:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    def log_session(self, session: Session, index: int) -> None:
+        """Log every frame of ``session`` (the ``index``-th of the stream) after those logged
+        before it."""
+        if self._closed:
+            raise ValueError("log_session called on a closed SessionLogger")
+        frames = list(session.frames())
+        if not frames:
+            logger.warning("%s: no complete frame to log", session.path)
+            return
+        frame0, step0 = self._frame, self._step
+        self._log_camera(session, frames[0])
+        for n, frame in enumerate(frames):
+            self._set_time(frame, frame0, step0)
+            if n == 0:
+                self.rec.log(f"{RECORD_ROOT}/session", rr.TextDocument(
+                    _session_text(session, index), media_type="text/markdown"))
+            self._log_frame(session, frame)
+        if session.has_ground_truth:
+            self._log_truth_series(session, frames, frame0, step0)
+        if self.log_perception and session.perception:
+            if self._perception is None:
+                self._perception = PerceptionLogger(self.rec)
+            self._perception.log_session(session, frame_offset=frame0, step_offset=step0)
+        self._frame = frame0 + max(f.index for f in frames) + 1
+        self._step = step0 + max(max(f.step for f in frames) + 1, len(session.steps))
+
+    def _log_camera(self, session: Session, first: FrameRecord) -> None:
+        K = session.metadata.get("camera_K")
+        if K is None:
+            logger.warning("%s: no camera_K in the session record; the camera is logged "
+                           "without intrinsics", session.path)
+            return
+        h, w = first.color.shape[:2]
+        log_pinhole(self.rec, RECORD_ROOT, K, w, h)
+
+    def _set_time(self, frame: FrameRecord, frame0: int, step0: int) -> None:
+        self.rec.set_time("frame", sequence=frame0 + frame.index)
+        self.rec.set_time("step", sequence=step0 + frame.step)
+        self.rec.set_time("time", duration=np.timedelta64(int(frame.time_ns), "ns"))
+
+    def _log_frame(self, session: Session, frame: FrameRecord) -> None:
+        rec = self.rec
+        depth = None
+        if frame.depth_raw is not None:
+            depth = np.frombuffer(frame.depth_raw, dtype="<u2").reshape(frame.depth_shape)
+        log_camera_images(rec, RECORD_ROOT, color_jpeg=frame.color_jpeg, depth=depth,
+                          depth_meter=1000.0)
+        if frame.inspection_png is not None:
+            rec.log(f"{RECORD_ROOT}/inspection",
+                    rr.EncodedImage(contents=frame.inspection_png, media_type="image/png"))
+        if frame.boxes is not None:
+            boxes = frame.boxes
+            rec.log(f"{RECORD_ROOT}/camera/color/truth_boxes", rr.Boxes2D(
+                array=np.array([[b["x_min"], b["y_min"], b["x_max"], b["y_max"]]
+                                for b in boxes], float).reshape(-1, 4),
+                array_format=rr.Box2DFormat.XYXY,
+                class_ids=[int(b["class_id"]) for b in boxes],
+                labels=[f"{b.get('label', '')} #{b.get('onion_id', '?')}" for b in boxes],
+            ))
+        if frame.state is not None:
+            rec.log(f"{_TRUTH}/state", rr.TextDocument(_state_text(frame),
+                                                       media_type="text/markdown"))
+
+    def _log_truth_series(self, session: Session, frames: list[FrameRecord], frame0: int,
+                          step0: int) -> None:
+        first: dict[int, FrameRecord] = {}
+        covered: dict[int, float] = {}
+        for f in frames:
+            first.setdefault(f.step, f)
+            if f.state is not None:
+                covered[f.step] = max(covered.get(f.step, 0.0),
+                                      float(f.state.get("occluded_fraction", 0.0)))
+        steps = [s for s in session.steps if s.step in first]
+        if not steps:
+            return
+        indexes = [
+            rr.TimeColumn("step", sequence=[step0 + s.step for s in steps]),
+            rr.TimeColumn("frame", sequence=[frame0 + first[s.step].index for s in steps]),
+            rr.TimeColumn("time", duration=np.array([first[s.step].time_ns for s in steps],
+                                                    "timedelta64[ns]")),
+        ]
+        states = [decode_state(s.state) for s in steps]
+        values = {"onion": [int(x.onion) for x in states],
+                  "end_effector": [int(x.end_effector) for x in states],
+                  "prediction": [int(x.prediction) for x in states],
+                  "action": [s.action for s in steps]}
+        for name, series in values.items():
+            send_series(self.rec, f"{_TRUTH}/factors/{name}", indexes, series)
+        send_series(self.rec, f"{_TRUTH}/occlusion/fraction", indexes,
+                    [covered.get(s.step, 0.0) for s in steps])
+        send_series(self.rec, f"{_TRUTH}/occlusion/occluded", indexes,
+                    [float(s.occluded) for s in steps])
+
+    def close(self) -> None:
+        """Flush everything to the file or viewer; idempotent."""
+        if not self._closed:
+            close_recording(self.rec)
+            self._closed = True
+
+
+def _session_text(session: Session, index: int) -> str:
+    sides = ["colour"] + (["depth"] if session.has_depth else [])
+    sides += ["ground truth"] if session.has_ground_truth else ["no ground truth"]
+    if session.perception:
+        sides.append("perceived")
+    return (f"**session {index}** `{Path(session.path).name}` ({session.status})\n\n"
+            f"{session.n_frames} frames, {session.frames_per_step} per step; "
+            + ", ".join(sides))
+
+
+def _state_text(frame: FrameRecord) -> str:
+    st = frame.state
+    s = decode_state(int(st["state"]))
+    action = SortAction(int(st["action"])).name.lower()
+    return (f"**frame** {frame.index} · **step** {frame.step} (phase {frame.phase})\n\n"
+            f"**state** {st['state']}: onion={s.onion.name.lower()}, "
+            f"hand={s.end_effector.name.lower()}, prediction={s.prediction.name.lower()}\n\n"
+            f"**action** {action}\n\n"
+            f"**occluded step** {bool(st['occluded'])} "
+            f"({100 * float(st.get('occluded_fraction', 0.0)):.0f}% of the view covered)")

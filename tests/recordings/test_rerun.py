@@ -1,0 +1,245 @@
+"""The Rerun loggers of ``recordings.rerun``: what each writes, read back from its .rrd file."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from recordings import SessionWriter, open_session
+from recordings.perception import add_perception
+from recordings.rerun import (
+    EvaluationLogger,
+    SessionLogger,
+    log_learning,
+    open_recording,
+)
+
+rr_chunk = pytest.importorskip("rerun.chunk")
+
+K = np.array([[100.0, 0.0, 16.0], [0.0, 100.0, 12.0], [0.0, 0.0, 1.0]])
+FPS = 2
+
+
+def summary(path) -> dict[str, dict]:
+    """Per entity path (no leading slash): temporal rows and chunks, static rows, whether any
+    data is static, timelines, columns."""
+    out: dict[str, dict] = defaultdict(lambda: {"rows": 0, "chunks": 0, "static_rows": 0,
+                                                "static": set(), "timelines": set(),
+                                                "cols": set()})
+    for chunk in rr_chunk.RrdReader(path).store().stream():
+        e = out[chunk.entity_path.lstrip("/") or "/"]
+        if chunk.is_static:
+            e["static_rows"] += chunk.num_rows
+        else:
+            e["rows"] += chunk.num_rows
+            e["chunks"] += 1
+        e["static"].add(chunk.is_static)
+        e["timelines"].update(chunk.timeline_names)
+        e["cols"].update(chunk.to_record_batch().schema.names)
+    return dict(out)
+
+
+def assert_series(s: dict, entity: str, n: int) -> None:
+    """``entity`` holds ``n`` rows sent in one send_columns call, and its static name."""
+    assert s[entity]["rows"] == n, entity
+    assert s[entity]["chunks"] == 1, entity
+    assert s[entity]["static_rows"] == 1, entity  # the SeriesLines name
+
+
+def verify(path) -> None:
+    exe = shutil.which("rerun")
+    if exe is None:
+        return  # the CLI comes with the SDK; without it only the reading back is checked
+    done = subprocess.run([exe, "rrd", "verify", str(path)], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+
+
+def simulated_session(path, n_steps=5):
+    """A short simulated session with depth and ground truth."""
+    from robot.camera import intrinsics
+    from robot.simulation import SessionConfig, SortingSession, expert_model
+
+    policy, initial = expert_model()
+    config = SessionConfig(n_steps=n_steps, occlusion=0.3, frames_per_step=FPS)
+    with SortingSession(config, policy, initial, 4) as sim, SessionWriter(
+        path, {"seed": 4, "config": config.to_dict()}, intrinsics(config.camera),
+        intrinsics(config.inspection), frames_per_step=FPS,
+    ) as writer:
+        for frame in sim.frames():
+            writer.write_frame(frame)
+    return open_session(path)
+
+
+def sensor_session(path, n_steps=3):
+    """A camera-only session: colour and the step clock, no depth, no ground truth."""
+    rng = np.random.default_rng(0)
+    with SessionWriter(path, {"source": "test"}, K, None, frames_per_step=FPS,
+                       ground_truth=False, depth=False) as writer:
+        for i in range(n_steps * FPS):
+            writer.write_sensor_frame(index=i, step=i // FPS, phase=i % FPS,
+                                      time_ns=i * 50_000_000,
+                                      color=rng.integers(0, 255, (24, 32, 3), np.uint8))
+    return open_session(path)
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("rerun")
+    return simulated_session(folder / "sim.mcap"), sensor_session(folder / "sensor.mcap")
+
+
+def test_open_recording_refuses_unknown_targets(tmp_path):
+    for target in (tmp_path / "out.txt", "http://localhost:9876", "viewer"):
+        with pytest.raises(ValueError, match="target must be"):
+            open_recording("test", target)
+    with pytest.raises(ValueError, match="application_id"):
+        open_recording("", tmp_path / "x.rrd")
+
+
+def test_rgbd_session_with_ground_truth(sessions, tmp_path):
+    sim, _ = sessions
+    out = tmp_path / "sim.rrd"
+    with SessionLogger(out) as log:
+        log.log_session(sim, 0)
+    s = summary(out)
+    assert {"record/camera", "record/camera/color", "record/camera/depth",
+            "record/camera/color/truth_boxes", "record/truth/state",
+            "record/inspection"} <= set(s)
+    assert s["record/camera"]["static"] == {True}
+    assert s["/"]["static"] == {True} and any("AnnotationContext" in c for c in s["/"]["cols"])
+    assert s["record/camera/color"]["rows"] == sim.n_frames
+    assert s["record/camera/color"]["timelines"] >= {"frame", "step", "time"}
+    for name in ("onion", "end_effector", "prediction", "action"):
+        assert_series(s, f"record/truth/factors/{name}", len(sim.steps))
+    assert_series(s, "record/truth/occlusion/fraction", len(sim.steps))
+    assert s["record/truth/factors/onion"]["timelines"] >= {"frame", "step", "time"}
+    assert not any(e.startswith("perceive") for e in s)
+    assert len(rr_chunk.RrdReader(out).blueprints()) == 1
+    verify(out)
+
+
+def test_sensor_only_session_has_no_ground_truth_entities(sessions, tmp_path):
+    _, sensor = sessions
+    out = tmp_path / "sensor.rrd"
+    with SessionLogger(out) as log:
+        log.log_session(sensor, 0)
+        log.log_session(sensor, 1)  # steps and frames count on across sessions
+    s = summary(out)
+    assert s["record/camera/color"]["rows"] == 2 * sensor.n_frames
+    assert "record/camera" in s
+    assert not any(e.startswith(("record/truth/state", "record/camera/depth",
+                                 "record/camera/color/truth_boxes", "record/inspection"))
+                   for e in s)
+    assert all(s[e]["rows"] == 0 for e in s if e.startswith("record/truth/"))  # names only
+    verify(out)
+
+
+def test_perceived_session_is_logged_under_perceive(sessions, tmp_path):
+    _, sensor = sessions
+    path = tmp_path / "perceived.mcap"
+    shutil.copy(sensor.path, path)
+    frames = list(sensor.frames())
+    steps = sorted({f.step for f in frames})
+    docs = [{"step": t, "frame": t * FPS, "occluded": t == 1, "p_occluded": 0.9 if t == 1
+             else 0.1, "onion": 1, "end_effector": 1, "action": 0, "prediction": 2,
+             "state": 11, "observation": None if t == 1 else 55, "inspected": None,
+             "probs": {}} for t in steps]
+    add_perception(path, docs, detections={f.index: [(1, 2, 10, 12, 1, 0.9)] for f in frames},
+                   inspection={}, frame_times={f.index: f.time_ns for f in frames},
+                   models={"test": True})
+    perceived = open_session(path)
+    out = tmp_path / "perceived.rrd"
+    with SessionLogger(out) as log:
+        log.log_session(perceived, 0)
+    s = summary(out)
+    for name in ("onion", "end_effector", "prediction", "action"):
+        assert_series(s, f"perceive/factors/{name}", len(steps))
+    assert_series(s, "perceive/occlusion/p_occluded", len(steps))
+    assert s["perceive/observation"]["rows"] == len(steps)
+    assert s["perceive/camera/color/detections"]["rows"] == len(steps)
+    verify(out)
+
+
+def test_learning(tmp_path):
+    out = tmp_path / "learn.rrd"
+    model = {"theta": {"good_on_line": 1.5, "bad_in_bin": -0.5},
+             "policy": [{"state": "s0", "action": "pick"}]}
+    log_learning(out, model, [{"log_likelihood": -10.0 + k} for k in range(7)])
+    s = summary(out)
+    assert_series(s, "learn/objective", 7)
+    assert "iteration" in s["learn/objective"]["timelines"]
+    assert s["learn/theta"]["static"] == {True} and s["learn/policy"]["static"] == {True}
+    verify(out)
+    with pytest.raises(ValueError, match="theta"):
+        log_learning(tmp_path / "bad.rrd", {"policy": []}, [])
+
+
+@dataclass(frozen=True)
+class FakeStep:
+    step: int
+    state: int
+    action: int
+    next_state: int
+    onion: int | None = 0
+    blemished: bool | None = True
+    perceived: int | None = None
+    fate: str | None = None
+    tp: int = 0
+    fp: int = 0
+    tn: int = 0
+    fn: int = 0
+    color: np.ndarray | None = field(default=None, repr=False)
+    depth: np.ndarray | None = field(default=None, repr=False)
+    inspection: np.ndarray | None = field(default=None, repr=False)
+    q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+
+    @property
+    def precision(self) -> float:
+        return self.tp / (self.tp + self.fp) if self.tp + self.fp else 0.0
+
+    @property
+    def recall(self) -> float:
+        return self.tp / (self.tp + self.fn) if self.tp + self.fn else 0.0
+
+
+@dataclass
+class FakeDetection:
+    boxes: np.ndarray
+    classes: np.ndarray
+    scores: np.ndarray
+
+
+def test_evaluation(tmp_path):
+    out = tmp_path / "eval.rrd"
+    calls = []
+
+    def detect(images):
+        calls.append(len(images))
+        return [FakeDetection(np.array([[1.0, 1.0, 5.0, 6.0]]), np.array([1]),
+                              np.array([0.8])) for _ in images]
+
+    n = 6
+    with EvaluationLogger(out, detector=detect, camera_K=K) as log:
+        for t in range(n):
+            log.on_step(FakeStep(
+                step=t, state=11, action=t % 5, next_state=17, perceived=0 if t == 2 else None,
+                fate="bin" if t == 3 else None, tp=t // 2, fp=t // 3,
+                color=np.zeros((24, 32, 3), np.uint8), depth=np.ones((24, 32), np.float32),
+                inspection=np.zeros((12, 16, 3), np.uint8) if t == 2 else None,
+                q=np.full(7, 0.1 * t)))
+    assert calls == [1]
+    s = summary(out)
+    for entity in ("metrics/precision", "metrics/recall", "counts/tp", "counts/fn",
+                   "mdp/state", "mdp/action", "arm/joints"):
+        assert_series(s, f"evaluate/{entity}", n)
+    assert {"evaluate/camera", "evaluate/camera/color", "evaluate/camera/depth",
+            "evaluate/inspection", "evaluate/inspection/detections"} <= set(s)
+    assert s["evaluate/decisions"]["rows"] == n
+    assert s["/"]["static"] == {True}
+    verify(out)
