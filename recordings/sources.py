@@ -43,6 +43,7 @@ __all__ = [
     "VideoFileSource",
     "default_intrinsics",
     "load_intrinsics",
+    "write_video",
 ]
 
 logger = logging.getLogger(__name__)
@@ -432,3 +433,46 @@ def load_intrinsics(path: str | Path) -> np.ndarray:
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise IntrinsicsError(f"{path}: fx and fy must be > 0; got {K[0, 0]}, {K[1, 1]}")
     return K
+
+
+def write_video(path: str | Path, frames, fps: float, fourcc: str = "mp4v") -> Path:
+    """Write RGB frames (each (H, W, 3) uint8, all one size) as a video file.
+
+    The inverse of :class:`VideoFileSource`: how a simulated session becomes the plain video a
+    real camera would give (MP4 with the ``mp4v`` codec by default; this OpenCV build has no
+    H.264 encoder). Written to a temporary name and renamed.
+
+    Raises
+    ------
+    ValueError
+        If there are no frames, ``fps`` is not positive, or OpenCV cannot write the codec.
+    """
+    import cv2
+
+    path = Path(path)
+    if not fps > 0:
+        raise ValueError(f"fps must be > 0; got {fps}")
+    tmp = path.with_name(path.stem + ".partial" + path.suffix)  # OpenCV picks the container
+    writer = None                                               # by the suffix
+    n = 0
+    try:
+        for rgb in frames:
+            rgb = np.asarray(rgb, np.uint8)
+            if writer is None:
+                h, w = rgb.shape[:2]
+                writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*fourcc), fps, (w, h))
+                if not writer.isOpened():
+                    raise ValueError(f"OpenCV cannot write {fourcc!r} video to {path}")
+            writer.write(np.ascontiguousarray(rgb[..., ::-1]))
+            n += 1
+        if writer is None:
+            raise ValueError(f"no frames to write to {path}")
+        writer.release()
+        writer = None
+        tmp.replace(path)
+    finally:
+        if writer is not None:
+            writer.release()
+        tmp.unlink(missing_ok=True)
+    logger.info("wrote %d frames to %s", n, path)
+    return path
