@@ -14,8 +14,18 @@ baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, on tabular MDPs with linear rew
 
 from irl import domains
 from irl.demonstrations import Demonstration, Trajectory
+from irl.domains import Domain, TaskDescription
 from irl.exceptions import ConvergenceWarning
-from irl.learners import MAPBIRL, MMAPBIRL, HiddenDataEM, MaxEntIRL
+from irl.learners import (
+    LEARNERS,
+    MAPBIRL,
+    MMAPBIRL,
+    HiddenDataEM,
+    LearnerSpec,
+    MaxEntIRL,
+    make_estimator,
+    register_learner,
+)
 from irl.mdp import TabularMDP
 from irl.metrics import (
     inverse_learning_error,
@@ -33,23 +43,29 @@ from irl.observation import (
 from irl.priors import GaussianPrior
 
 __all__ = [
+    "LEARNERS",
     "MAPBIRL",
     "MMAPBIRL",
     "ConvergenceWarning",
     "Demonstration",
+    "Domain",
     "GaussianPrior",
     "HiddenDataEM",
+    "LearnerSpec",
     "MaxEntIRL",
     "ObservationModel",
     "TabularMDP",
+    "TaskDescription",
     "Trajectory",
     "domains",
     "factored_observation_model",
     "identity_observation_model",
     "inverse_learning_error",
+    "make_estimator",
     "normalized_inverse_learning_error",
     "pair_observation_model",
     "policy_mismatch",
+    "register_learner",
     "reward_distance",
     "state_observation_model",
 ]

@@ -19,7 +19,7 @@ import numpy as np
 
 from irl.domains import Domain, forestworld, onion_sorting
 from irl.exceptions import ConvergenceWarning
-from irl.learners import MAPBIRL, MMAPBIRL, HiddenDataEM, MaxEntIRL
+from irl.learners.registry import LEARNERS, make_estimator
 from irl.metrics import inverse_learning_error, normalized_inverse_learning_error
 
 __all__ = [
@@ -40,7 +40,10 @@ DOMAINS: dict[str, Callable[..., Domain]] = {
     "forestworld": forestworld,
     "sorting": onion_sorting,
 }
-METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
+#: The paper's learners, in registration order; a sweep may also name any learner registered
+#: since (:func:`irl.learners.register_learner`; with ``workers > 1`` it must be registered on
+#: import of a module the workers import too).
+METHODS = tuple(LEARNERS)
 
 
 @dataclass(frozen=True)
@@ -59,9 +62,9 @@ class SweepConfig:
     def __post_init__(self) -> None:
         if self.domain not in DOMAINS:
             raise ValueError(f"domain must be one of {sorted(DOMAINS)}; got {self.domain!r}")
-        unknown = [m for m in self.methods if m not in METHODS]
+        unknown = [m for m in self.methods if m not in LEARNERS]
         if unknown:
-            raise ValueError(f"methods must be among {METHODS}; got {unknown}")
+            raise ValueError(f"methods must be among {tuple(LEARNERS)}; got {unknown}")
         for name in ("batches", "trajectories", "length"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
@@ -108,20 +111,6 @@ class TrialResult:
     seconds: float
     n_iter: int
     converged: bool
-
-
-def make_estimator(method: str, domain: Domain, *, seed=None):
-    """The estimator for ``method`` configured with the domain's settings."""
-    mdp, om = domain.mdp, domain.observation_model
-    if method == "mmap-birl":
-        return MMAPBIRL(mdp, om, beta=domain.beta, prior=domain.prior, seed=seed)
-    if method == "map-birl":
-        return MAPBIRL(mdp, om, beta=domain.beta, prior=domain.prior, seed=seed)
-    if method == "hidden-data-em":
-        return HiddenDataEM(mdp, om)
-    if method == "maxent":
-        return MaxEntIRL(mdp, om)
-    raise ValueError(f"method must be one of {METHODS}; got {method!r}")
 
 
 def run_trial(trial: Trial) -> TrialResult:

@@ -1,7 +1,15 @@
-"""The paper's benchmark domains: Forestworld and onion sorting."""
+"""The paper's benchmark domains: Forestworld and onion sorting, and tasks described as data."""
 
 from irl.domains.base import Domain
-from irl.domains.forestworld import forestworld
-from irl.domains.onion_sorting import onion_sorting
+from irl.domains.forestworld import FORESTWORLD_TASK, forestworld
+from irl.domains.onion_sorting import SORTING_TASK, onion_sorting
+from irl.domains.task import TaskDescription
 
-__all__ = ["Domain", "forestworld", "onion_sorting"]
+__all__ = [
+    "FORESTWORLD_TASK",
+    "SORTING_TASK",
+    "Domain",
+    "TaskDescription",
+    "forestworld",
+    "onion_sorting",
+]

@@ -8,6 +8,7 @@ import numpy as np
 
 from irl._random import check_random_state
 from irl.demonstrations import Demonstration, Trajectory, observe, sample_trajectory
+from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
 from irl.observation import ObservationModel
 from irl.priors import GaussianPrior
@@ -32,6 +33,10 @@ class Domain:
         Boltzmann rationality of the expert: ``pi(a|s) = softmax_a(beta * Q*(s, a))``.
     prior : GaussianPrior
         The prior the paper uses on this domain.
+    task : TaskDescription or None
+        The names and encodings of the domain's factored states, for applications; ``None`` for
+        a domain without factors. When given, its sizes and its action and feature names must
+        match ``mdp`` (state names may be spelled differently in ``mdp``).
     """
 
     name: str
@@ -40,6 +45,29 @@ class Domain:
     observation_model: ObservationModel
     beta: float
     prior: GaussianPrior
+    task: TaskDescription | None = None
+
+    def __post_init__(self) -> None:
+        task = self.task
+        if task is None:
+            return
+        if not isinstance(task, TaskDescription):
+            raise TypeError(f"task must be a TaskDescription or None; got {type(task).__name__}")
+        mdp = self.mdp
+        if (task.n_states, task.n_actions, task.n_features) != (
+            mdp.n_states, mdp.n_actions, mdp.n_features
+        ):
+            raise ValueError(
+                f"task must match mdp in (n_states, n_actions, n_features) = "
+                f"{(mdp.n_states, mdp.n_actions, mdp.n_features)}; got "
+                f"{(task.n_states, task.n_actions, task.n_features)}"
+            )
+        for attr in ("action_names", "feature_names"):
+            if tuple(getattr(mdp, attr)) != getattr(task, attr):
+                raise ValueError(
+                    f"task.{attr} must equal mdp.{attr} {tuple(getattr(mdp, attr))}; got "
+                    f"{getattr(task, attr)}"
+                )
 
     @property
     def state_names(self) -> list[str]:

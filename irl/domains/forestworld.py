@@ -15,17 +15,29 @@ from __future__ import annotations
 import numpy as np
 
 from irl.domains.base import Domain
+from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
 from irl.observation import pair_observation_model
 from irl.priors import GaussianPrior
 
-__all__ = ["ACTIONS", "GRID", "forestworld", "sector"]
+__all__ = ["ACTIONS", "FORESTWORLD_TASK", "GRID", "forestworld", "sector"]
 
 GRID = 4
 ACTIONS = {"north": (0, 1), "east": (1, 0), "south": (0, -1), "west": (-1, 0)}
 AVOIDABLE = ((1, 1), (3, 2))
 GOAL = (3, 3)
 TUNNEL = (2, 3)
+FEATURE_NAMES = ("avoidable_state(1,1)", "avoidable_state(3,2)", "goal_state(3,3)")
+
+#: Forestworld as data: factors ``x`` then ``y`` (``s = x * 4 + y``, so ``x`` is the most
+#: significant), values named by their coordinate. The task names states ``"(x, y)"``; the MDP
+#: keeps its compact ``"(x,y)"``.
+FORESTWORLD_TASK = TaskDescription(
+    name="forestworld",
+    factors={"x": tuple(str(i) for i in range(GRID)), "y": tuple(str(i) for i in range(GRID))},
+    action_names=tuple(ACTIONS),
+    feature_names=FEATURE_NAMES,
+)
 
 #: High negative on the avoidable sectors, high positive on the goal, on the scale of the paper's
 #: prior N(-1, 0.5). With beta = 1.5 the fugitive takes its greedy move about 77% of the time.
@@ -100,7 +112,7 @@ def forestworld(
         initial=initial,
         state_names=[f"({x},{y})" for x in range(GRID) for y in range(GRID)],
         action_names=list(ACTIONS),
-        feature_names=["avoidable_state(1,1)", "avoidable_state(3,2)", "goal_state(3,3)"],
+        feature_names=list(FEATURE_NAMES),
     )
     return Domain(
         name="forestworld",
@@ -109,4 +121,5 @@ def forestworld(
         observation_model=pair_observation_model(tunnel_confusion(noise), n_actions=len(ACTIONS)),
         beta=beta,
         prior=GaussianPrior(mean=-1.0, std=np.sqrt(0.5)),
+        task=FORESTWORLD_TASK,
     )

@@ -1,7 +1,9 @@
 """The onion-sorting MDP: the one definition of its states, actions and features.
 
 The simulator (``robot/``), the perception pipeline (``state_abstraction/``), the recordings and
-the robot all import the encoding from here; nobody re-declares it.
+the robot all take the encoding from here; nobody re-declares it. :data:`SORTING_TASK` is the
+same task as data (a :class:`~irl.domains.task.TaskDescription` built from the enums below), for
+code that should not depend on the enums.
 
 State factors (the paper's text; 4 x 4 x 3 = 48 states, see docs/paper-errata.md on "144"):
 
@@ -42,6 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from irl.domains.base import Domain
+from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
 from irl.observation import ObservationModel, factored_observation_model
 from irl.priors import GaussianPrior
@@ -50,6 +53,7 @@ __all__ = [
     "FACTOR_SIZES",
     "N_ACTIONS",
     "N_STATES",
+    "SORTING_TASK",
     "FeatureName",
     "Location",
     "Prediction",
@@ -111,22 +115,35 @@ class SortingState(NamedTuple):
     prediction: Prediction
 
 
-FACTOR_SIZES = (len(Location), len(Location), len(Prediction))
-N_STATES = int(np.prod(FACTOR_SIZES))
-N_ACTIONS = len(SortAction)
+_FACTOR_ENUMS = (Location, Location, Prediction)
+
+#: The sorting task as data: factors ``onion``, ``end_effector``, ``prediction`` (in the order of
+#: :class:`SortingState`, the first most significant) with the lowercased enum names as values,
+#: and the lowercased :class:`SortAction` and :class:`FeatureName` names.
+SORTING_TASK = TaskDescription(
+    name="onion-sorting",
+    factors={
+        field: tuple(v.name.lower() for v in enum)
+        for field, enum in zip(SortingState._fields, _FACTOR_ENUMS, strict=True)
+    },
+    action_names=tuple(a.name.lower() for a in SortAction),
+    feature_names=tuple(f.name.lower() for f in FeatureName),
+)
+
+FACTOR_SIZES = SORTING_TASK.factor_sizes
+N_STATES = SORTING_TASK.n_states
+N_ACTIONS = SORTING_TASK.n_actions
 
 
 def encode_state(state: SortingState | tuple[int, int, int]) -> int:
     """Flat state index of ``(onion, end_effector, prediction)``."""
-    return int(np.ravel_multi_index(tuple(int(x) for x in state), FACTOR_SIZES))
+    return SORTING_TASK.encode(tuple(int(x) for x in state))
 
 
 def decode_state(index: int) -> SortingState:
     """The factored state of a flat index."""
-    if not 0 <= int(index) < N_STATES:
-        raise ValueError(f"state index must be in [0, {N_STATES}); got {index}")
-    o, e, p = np.unravel_index(int(index), FACTOR_SIZES)
-    return SortingState(Location(o), Location(e), Prediction(p))
+    values = SORTING_TASK.decode(int(index)).values()
+    return SortingState(*(enum(v) for enum, v in zip(_FACTOR_ENUMS, values, strict=True)))
 
 
 def _holding(s: SortingState) -> bool:
@@ -204,8 +221,8 @@ def sorting_features() -> np.ndarray:
 
 
 def state_name(index: int) -> str:
-    s = decode_state(index)
-    return f"({s.onion.name.lower()}, {s.end_effector.name.lower()}, {s.prediction.name.lower()})"
+    """``"(onion, end_effector, prediction)"`` in lowercase, e.g. ``"(conveyor, hover, good)"``."""
+    return SORTING_TASK.state_name(int(index))
 
 
 def reachable_states() -> list[int]:
@@ -298,9 +315,9 @@ def onion_sorting(
         features=sorting_features(),
         discount=discount,
         initial=initial,
-        state_names=[state_name(s) for s in range(N_STATES)],
-        action_names=[a.name.lower() for a in SortAction],
-        feature_names=[f.name.lower() for f in FeatureName],
+        state_names=list(SORTING_TASK.state_names),
+        action_names=list(SORTING_TASK.action_names),
+        feature_names=list(SORTING_TASK.feature_names),
     )
     return Domain(
         name="onion-sorting",
@@ -309,4 +326,5 @@ def onion_sorting(
         observation_model=sorting_observation_model(noise),
         beta=beta,
         prior=GaussianPrior(mean=0.0, std=3.0),
+        task=SORTING_TASK,
     )

@@ -1,6 +1,23 @@
-"""IRL learners: MMAP-BIRL and the baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL."""
+"""IRL learners: MMAP-BIRL and the baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, by name."""
 
 from irl.learners.birl import MAPBIRL, MMAPBIRL
 from irl.learners.maxent import HiddenDataEM, MaxEntIRL
+from irl.learners.registry import (
+    LEARNERS,
+    LearnerSpec,
+    make_estimator,
+    register_learner,
+    unregister_learner,
+)
 
-__all__ = ["MAPBIRL", "MMAPBIRL", "HiddenDataEM", "MaxEntIRL"]
+__all__ = [
+    "LEARNERS",
+    "MAPBIRL",
+    "MMAPBIRL",
+    "HiddenDataEM",
+    "LearnerSpec",
+    "MaxEntIRL",
+    "make_estimator",
+    "register_learner",
+    "unregister_learner",
+]
