@@ -1,19 +1,27 @@
-"""Detector data: letterboxing onto the input canvas, augmentation, dataset loading.
+"""Detector data: letterboxing onto the input canvas, augmentation, samples of labelled images.
 
 Layouts: images (H, W, 3) uint8 RGB; boxes ``[G, 4]`` float (x_min, y_min, x_max, y_max)
 pixels; classes ``[G]`` int (0 good, 1 blemished); tensors ``x[n, 3, H, W]`` in [0, 1].
+
+This package reads no dataset: training takes labelled images, ``(image, boxes, classes)``
+triples; which images of a dataset to train on is the ``train`` stage's choice
+(:mod:`onionsort.stages.train`).
 """
 
 from __future__ import annotations
 
-import json
+from collections.abc import Iterable
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
-__all__ = ["Letterbox", "Sample", "augment", "letterbox", "load_samples"]
+__all__ = ["LabelledImage", "Letterbox", "Sample", "augment", "letterbox", "to_canvas",
+           "to_samples"]
+
+#: A labelled image: (image (H, W, 3) uint8 RGB, boxes ``[G, 4]`` pixels, classes ``[G]``).
+LabelledImage = tuple[np.ndarray, ArrayLike, ArrayLike]
 
 PAD_VALUE = 114
 
@@ -99,33 +107,31 @@ def augment(sample: Sample, rng: np.random.Generator, *, scale: tuple[float, flo
     return Sample(img, boxes[keep], sample.classes[keep])
 
 
-def load_samples(root: Path | str, split: str, width: int, height: int,
-                 empty_inspection_share: float = 0.15, inspection_repeat: int = 1,
-                 seed: int = 0) -> list[Sample]:
-    """Canvas samples of a dataset split: every camera frame and the inspection views.
+def to_samples(images: Iterable[LabelledImage], width: int, height: int) -> list[Sample]:
+    """Canvas samples of labelled images, in order.
 
-    Inspection views without an onion are many (the onion is in view only while it is
-    inspected); ``empty_inspection_share`` of them are kept as negatives. Views with an onion
-    are few next to the camera frames; ``inspection_repeat`` repeats them (for training).
+    Parameters
+    ----------
+    images : iterable of (image, boxes, classes)
+        ``image`` (H, W, 3) uint8 RGB, ``boxes`` ``[G, 4]`` pixels (may be empty), ``classes``
+        ``[G]``. The same triple object given several times (to oversample it) becomes the same
+        :class:`Sample`, so repeats cost no memory.
+    width, height : int
+        The canvas.
+
+    Returns
+    -------
+    list of Sample
     """
-    from recordings.dataset import read_split
-
-    root = Path(root)
-    if not (root / "dataset.json").is_file():
-        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json); render one "
-                                "with `onionsort dataset`")
-    views = json.loads((root / "dataset.json").read_text()).get("views", ["camera"])
-    rng = np.random.default_rng(seed)
-    samples = [to_canvas(f.color, f.record["boxes"], f.record["classes"], width, height)
-               for f in read_split(root, split)]
-    if "inspection" in views:
-        for f in read_split(root, split, view="inspection"):
-            if f.record["boxes"]:
-                sample = to_canvas(f.color, f.record["boxes"], f.record["classes"], width,
-                                   height)
-                samples.extend([sample] * inspection_repeat)
-            elif rng.random() < empty_inspection_share:
-                samples.append(to_canvas(f.color, [], [], width, height))
-    if not samples:
-        raise ValueError(f"split {split!r} of {root} holds no frames")
+    if width < 1 or height < 1:
+        raise ValueError(f"width and height must be >= 1; got {width}, {height}")
+    made: dict[int, Sample] = {}
+    samples = []
+    for triple in images:
+        if id(triple) not in made:
+            image, boxes, classes = triple
+            if np.ndim(image) != 3 or np.shape(image)[2] != 3:
+                raise ValueError(f"images must be (H, W, 3) RGB; got shape {np.shape(image)}")
+            made[id(triple)] = to_canvas(image, boxes, classes, width, height)
+        samples.append(made[id(triple)])
     return samples

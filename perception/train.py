@@ -1,8 +1,11 @@
-"""Training and evaluation of the detector from scratch on a rendered dataset.
+"""Training and evaluation of the detector from scratch on labelled images.
 
 Checkpoints: ``OUT/detector_last.pt`` after every epoch (network, EMA, optimiser, scheduler,
 epoch, configuration: what ``resume`` continues from), ``OUT/detector.pt`` the EMA weights of the
 best epoch by validation mAP@0.5:0.95, and ``OUT/detector_metrics.json``.
+
+The images come as ``(image, boxes, classes)`` triples (:data:`perception.data.LabelledImage`);
+the ``train`` stage (:mod:`onionsort.stages.train`) reads them from a dataset.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import copy
 import json
 import logging
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -18,7 +22,7 @@ import numpy as np
 import torch
 
 from perception.assign import detection_loss
-from perception.data import Sample, augment, load_samples
+from perception.data import LabelledImage, Sample, augment, to_samples
 from perception.detector import Detector, postprocess, save_weights
 from perception.metrics import mean_average_precision
 from perception.model import DetectorConfig, DetectorNet, grid_points
@@ -88,30 +92,52 @@ def _schedule(step: int, total: int, warmup: int) -> float:
     return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * (step - warmup) / max(1, total - warmup)))
 
 
-def train_detector(data: Path | str, out: Path | str, config: TrainConfig = TrainConfig(),
+def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
+                   test: Sequence[LabelledImage], config: TrainConfig, out: Path | str,
                    net_config: DetectorConfig | None = None, *, resume: bool = False,
-                   progress: bool = True) -> dict:
-    """Train on ``data``'s train split; keep the best epoch on val; report val and test mAP.
+                   on_epoch: Callable[[dict], None] | None = None) -> dict:
+    """Train on ``train``; keep the best epoch on ``val``; report val and test mAP.
 
-    Returns the metrics written to ``out/detector_metrics.json``.
+    Parameters
+    ----------
+    train, val, test : sequence of (image, boxes, classes)
+        Labelled images (:data:`perception.data.LabelledImage`); ``train`` may repeat an image
+        to oversample it. ``test`` may be empty (no test mAP).
+    config : TrainConfig
+    out : path
+        Run folder for the checkpoints and ``detector_metrics.json`` (created).
+    net_config : DetectorConfig, optional
+        The network (default :class:`DetectorConfig`).
+    resume : bool
+        Continue the run in ``out`` from ``detector_last.pt``, exactly (same images, same
+        configuration).
+    on_epoch : callable, optional
+        Called after each epoch with its history record (``epoch``, ``train_loss``, val mAP),
+        e.g. to draw a progress bar; ``epoch`` counts from 0 (from the resumed epoch on
+        ``resume``).
+
+    Returns
+    -------
+    dict
+        The metrics written to ``out/detector_metrics.json``.
     """
-    from tqdm import tqdm
-
     net_config = DetectorConfig() if net_config is None else net_config
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     last = out / "detector_last.pt"
     if resume and not last.is_file():
         raise FileNotFoundError(f"cannot resume: {last} does not exist")
+    for name, images in (("train", train), ("val", val)):
+        if not len(images):
+            raise ValueError(f"{name} must hold at least one labelled image; got none")
+    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    train = load_samples(data, "train", net_config.width, net_config.height,
-                         inspection_repeat=3, seed=config.seed)
-    val = load_samples(data, "val", net_config.width, net_config.height, seed=config.seed)
+    train_samples = to_samples(train, net_config.width, net_config.height)
+    val_samples = to_samples(val, net_config.width, net_config.height)
     net = DetectorNet(net_config)
     ema = copy.deepcopy(net).eval()
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    n_epoch = min(config.images_per_epoch, len(train))
+    n_epoch = min(config.images_per_epoch, len(train_samples))
     per_epoch = math.ceil(n_epoch / config.batch_size)
     total, warmup = config.epochs * per_epoch, int(config.warmup_epochs * per_epoch)
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: _schedule(k, total, warmup))
@@ -131,13 +157,13 @@ def train_detector(data: Path | str, out: Path | str, config: TrainConfig = Trai
         logger.info("resuming from epoch %d of %d", start, config.epochs)
     points, strides = grid_points(net_config.height, net_config.width)
     step = start * per_epoch
-    for epoch in tqdm(range(start, config.epochs), desc="detector", unit="epoch",
-                      initial=start, total=config.epochs, disable=not progress):
+    for epoch in range(start, config.epochs):
         net.train()
-        order = rng.permutation(len(train))[:n_epoch]
+        order = rng.permutation(len(train_samples))[:n_epoch]
         losses = []
         for i in range(0, len(order), config.batch_size):
-            x, targets = _batch([augment(train[j], rng) for j in order[i:i + config.batch_size]])
+            x, targets = _batch([augment(train_samples[j], rng)
+                                 for j in order[i:i + config.batch_size]])
             logits, ltrb = net(x)
             loss, _ = detection_loss(logits, ltrb, points, strides, targets)
             opt.zero_grad()
@@ -155,10 +181,12 @@ def train_detector(data: Path | str, out: Path | str, config: TrainConfig = Trai
                     else:
                         e.copy_(p)
             losses.append(loss.item())
-        metrics = evaluate_detector(ema, val)
+        metrics = evaluate_detector(ema, val_samples)
         history.append({"epoch": epoch, "train_loss": float(np.mean(losses)),
                         **{f"val_{k}": v for k, v in metrics.items()}})
         logger.info("epoch %d: %s", epoch, history[-1])
+        if on_epoch is not None:
+            on_epoch(history[-1])
         if metrics["map50_95"] > best:
             best = metrics["map50_95"]
             save_weights(ema, out / "detector.pt")
@@ -171,10 +199,11 @@ def train_detector(data: Path | str, out: Path | str, config: TrainConfig = Trai
                    tmp)
         tmp.replace(last)
     best_net = Detector.load(out / "detector.pt").net
-    test = load_samples(data, "test", net_config.width, net_config.height, seed=config.seed)
-    result = {"val": evaluate_detector(best_net, val), "test": evaluate_detector(best_net, test),
+    test_samples = to_samples(test, net_config.width, net_config.height)
+    result = {"val": evaluate_detector(best_net, val_samples),
+              "test": evaluate_detector(best_net, test_samples) if test_samples else None,
               "history": history, "config": net_config.to_dict(), "train": asdict(config),
-              "n_train_images": len(train), "n_test_images": len(test)}
+              "n_train_images": len(train_samples), "n_test_images": len(test_samples)}
     tmp = out / "detector_metrics.json.partial"
     tmp.write_text(json.dumps(result, indent=1))
     tmp.replace(out / "detector_metrics.json")

@@ -19,6 +19,7 @@ on the detector's.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -31,22 +32,29 @@ from irl.domains.onion_sorting import (
     SortingState,
     encode_state,
 )
-from state_abstraction.classifier import FACTOR_HEADS, StateClassifier, step_input
+from state_abstraction.classifier import (
+    FACTOR_HEADS,
+    OCCLUDED_THRESHOLD,
+    StateClassifier,
+    step_input,
+)
 
 __all__ = [
+    "OCCLUDED_THRESHOLD",
     "PerceivedStep",
     "inspected_class",
     "perceive_steps",
     "track_predictions",
 ]
 
+logger = logging.getLogger(__name__)
+
 #: Minimum detector score for an onion in the inspection view to count as seen.
 INSPECTION_SCORE = 0.2
-#: A step is called occluded when ``P(occluded) >= OCCLUDED_THRESHOLD``. Below 0.5 on purpose:
-#: a missed occlusion feeds the learner a garbage observation, a false alarm only drops one
-#: (MMAP-BIRL marginalizes it). On the training and validation splits no unoccluded step
-#: scores above 0.04, so the threshold costs no precision there.
-OCCLUDED_THRESHOLD = 0.2
+# OCCLUDED_THRESHOLD (imported above, defined in the classifier so that its evaluation uses the
+# same call): a step is called occluded when ``P(occluded) >= OCCLUDED_THRESHOLD``, 0.2. Below
+# 0.5 on purpose: a missed occlusion feeds the learner a garbage observation, a false alarm
+# only drops one (MMAP-BIRL marginalizes it).
 
 
 @dataclass(frozen=True)
@@ -146,7 +154,8 @@ def inspected_class(detections, min_score: float = INSPECTION_SCORE) -> int | No
 
 def perceive_steps(
     classifier: StateClassifier,
-    steps: Sequence[tuple[Sequence[np.ndarray], Sequence[np.ndarray], np.ndarray | None]],
+    steps: Sequence[tuple[Sequence[np.ndarray], Sequence[np.ndarray | None] | None,
+                          np.ndarray | None]],
     detect: Callable[[list[np.ndarray]], list] | None,
     *, first_step: int = 0,
 ) -> list[PerceivedStep]:
@@ -158,6 +167,10 @@ def perceive_steps(
     steps : sequence of (colors, depths, inspection)
         Per step, in order: its frames' colour images (H, W, 3) uint8 RGB and depths (H, W)
         metres, in time order, and the inspection view (h, w, 3) of its first frame (or None).
+        ``depths`` may be None, or hold None for a frame, where there is no depth (a plain
+        video): the classifier then reads that depth channel as zeros
+        (:func:`~state_abstraction.classifier.step_input`), as a model trained with
+        ``depth_dropout > 0`` has learned to (a warning is logged for one trained without).
     detect : callable or None
         The detector, ``detect(list of images) -> list of detections``; None treats every
         inspection view as empty (every prediction stays UNKNOWN).
@@ -166,6 +179,11 @@ def perceive_steps(
     """
     if not steps:
         return []
+    no_depth = sum(d is None or any(f is None for f in d) for _, d, _ in steps)
+    if no_depth and classifier.config.depth_dropout == 0:
+        logger.warning("%d of %d steps have no depth, but this state classifier was trained "
+                       "without depth dropout: its estimates of them are unreliable",
+                       no_depth, len(steps))
     x = np.stack([step_input(c, d, classifier.config) for c, d, _ in steps])
     probs = classifier.predict(x)
     views = [(t, v) for t, (_, _, v) in enumerate(steps) if v is not None]

@@ -11,12 +11,9 @@ Examples
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
 __all__ = ["register"]
-
-logger = logging.getLogger(__name__)
 
 
 def register(subparsers) -> None:
@@ -28,52 +25,43 @@ def register(subparsers) -> None:
     models = parser.add_subparsers(dest="model", metavar="MODEL", required=True)
     sc = models.add_parser("state-classifier",
                            help="the SA-Net-style classifier: onion/hand location, occluded")
-    sc.add_argument("--data", type=Path, required=True, help="dataset folder")
-    sc.add_argument("--out", type=Path, required=True, help="run folder for the checkpoint")
-    sc.add_argument("--epochs", type=int, default=12)
-    sc.add_argument("--batch-size", type=int, default=32)
-    sc.add_argument("--seed", type=int, default=0)
-    sc.set_defaults(func=run_state_classifier)
     det = models.add_parser("detector", help="the YOLO-style onion detector (good / blemished)")
-    det.add_argument("--data", type=Path, required=True, help="dataset folder")
-    det.add_argument("--out", type=Path, required=True, help="run folder for the checkpoints")
-    det.add_argument("--epochs", type=int, default=24)
+    for p, epochs, batch_size in ((sc, 12, 32), (det, 24, 16)):
+        p.add_argument("--data", type=Path, required=True, help="dataset folder")
+        p.add_argument("--out", type=Path, required=True, help="run folder for the checkpoints")
+        p.add_argument("--epochs", type=int, default=epochs)
+        p.add_argument("--batch-size", type=int, default=batch_size)
+        p.add_argument("--seed", type=int, default=0)
+    sc.add_argument("--depth-dropout", type=float, default=0.5,
+                    help="probability that a training step's depth is zeroed, so the model "
+                         "also reads steps without depth (0.5)")
+    sc.set_defaults(func=run_state_classifier)
     det.add_argument("--images-per-epoch", type=int, default=1600)
-    det.add_argument("--batch-size", type=int, default=16)
-    det.add_argument("--seed", type=int, default=0)
     det.add_argument("--resume", action="store_true",
                      help="continue the run in --out from its last checkpoint")
     det.set_defaults(func=run_detector)
 
 
 def run_state_classifier(args: argparse.Namespace) -> int:
-    import torch
+    from onionsort.stages.train import ClassifierTrainConfig, train_state_classifier
 
-    from state_abstraction.classifier import ClassifierConfig, train_classifier
-
-    torch.set_num_threads(2)
-    if args.epochs < 1:
-        raise ValueError(f"--epochs must be >= 1; got {args.epochs}")
-    config = ClassifierConfig(epochs=args.epochs, batch_size=args.batch_size, seed=args.seed)
-    logger.info("training the state classifier on %s: %s", args.data, config)
-    metrics = train_classifier(args.data, args.out, config)
-    test = metrics["test"]
-    print("state classifier, test split: " + ", ".join(f"{k} {v:.3f}" for k, v in test.items()))
+    metrics = train_state_classifier(ClassifierTrainConfig(
+        data=args.data, out=args.out, epochs=args.epochs, batch_size=args.batch_size,
+        seed=args.seed, depth_dropout=args.depth_dropout))
+    for key, label in (("test", ""), ("test_without_depth", " without depth")):
+        if metrics.get(key):
+            print(f"state classifier, test split{label}: "
+                  + ", ".join(f"{k} {v:.3f}" for k, v in metrics[key].items()))
     print(f"wrote {args.out / 'state_classifier.pt'}")
     return 0
 
 
 def run_detector(args: argparse.Namespace) -> int:
-    import torch
+    from onionsort.stages.train import DetectorTrainConfig, train_detector
 
-    from perception.train import TrainConfig, train_detector
-
-    torch.set_num_threads(2)
-    config = TrainConfig(epochs=args.epochs, images_per_epoch=args.images_per_epoch,
-                         batch_size=args.batch_size, seed=args.seed)
-    logger.info("training the detector on %s: %s", args.data, config)
-    metrics = train_detector(args.data, args.out, config, resume=args.resume)
-    test = metrics["test"]
+    test = train_detector(DetectorTrainConfig(
+        data=args.data, out=args.out, epochs=args.epochs, images_per_epoch=args.images_per_epoch,
+        batch_size=args.batch_size, seed=args.seed, resume=args.resume))["test"]
     print(f"detector, test split: mAP@0.5 {test['map50']:.3f}, mAP@0.5:0.95 "
           f"{test['map50_95']:.3f}")
     print(f"wrote {args.out / 'detector.pt'}")

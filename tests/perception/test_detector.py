@@ -1,13 +1,18 @@
-"""The detector: assignment, augmentation, decoding and NMS, training, checkpoints and resume."""
+"""The detector: assignment, augmentation, decoding and NMS, training on labelled images,
+checkpoints and resume, and the ``train`` stage that reads them from a dataset."""
+
+import json
 
 import numpy as np
 import pytest
 import torch
 
 from onionsort.cli import main
+from onionsort.stages.train import DetectorTrainConfig, detector_images
+from onionsort.stages.train import train_detector as train_stage
 from perception import Detector, DetectorConfig, DetectorNet
 from perception.assign import assign, decode, detection_loss
-from perception.data import Sample, augment, letterbox, to_canvas
+from perception.data import Sample, augment, letterbox, to_canvas, to_samples
 from perception.detector import postprocess
 from perception.model import grid_points
 from perception.train import TrainConfig, train_detector
@@ -22,6 +27,13 @@ def tiny_dataset(tmp_path_factory):
                  "--steps-per-session", "5", "--frames-per-step",
                  "2", "--occlusion", "0.3", "--seed", "3", "--out", str(out)]) == 0
     return out
+
+
+@pytest.fixture(scope="module")
+def tiny_images(tiny_dataset):
+    """The stage's choice of labelled images of each split, as ``train_detector`` takes them."""
+    return {split: detector_images(tiny_dataset, split, inspection_repeat=3 if split == "train"
+                                   else 1, seed=1) for split in ("train", "val", "test")}
 
 
 def test_every_box_gets_a_positive_on_its_level_and_points_take_the_smaller_box():
@@ -99,11 +111,14 @@ def test_loss_is_finite_and_falls_on_one_batch():
     assert losses[-1] < 0.5 * losses[0]
 
 
-def test_tiny_training_run_checkpoints_and_resumes_exactly(tiny_dataset, tmp_path, monkeypatch):
+def test_tiny_training_run_checkpoints_and_resumes_exactly(tiny_images, tmp_path, monkeypatch):
     import perception.train as train_module
 
     config = TrainConfig(epochs=4, images_per_epoch=16, batch_size=4, lr=1e-2, seed=1)
-    full = train_detector(tiny_dataset, tmp_path / "a", config, TINY, progress=False)
+    splits = tiny_images["train"], tiny_images["val"], tiny_images["test"]
+    epochs = []
+    full = train_detector(*splits, config, tmp_path / "a", TINY, on_epoch=epochs.append)
+    assert [e["epoch"] for e in epochs] == [0, 1, 2, 3]
     losses = [h["train_loss"] for h in full["history"]]
     assert losses[-1] < losses[0]
     assert set(full["test"]) >= {"map50", "map50_95"}
@@ -118,10 +133,9 @@ def test_tiny_training_run_checkpoints_and_resumes_exactly(tiny_dataset, tmp_pat
 
     monkeypatch.setattr(train_module, "evaluate_detector", interrupt_after_two_epochs)
     with pytest.raises(KeyboardInterrupt):
-        train_detector(tiny_dataset, tmp_path / "b", config, TINY, progress=False)
+        train_detector(*splits, config, tmp_path / "b", TINY)
     monkeypatch.setattr(train_module, "evaluate_detector", real)
-    resumed = train_detector(tiny_dataset, tmp_path / "b", config, TINY, resume=True,
-                             progress=False)
+    resumed = train_detector(*splits, config, tmp_path / "b", TINY, resume=True)
     assert [h["train_loss"] for h in resumed["history"]] == pytest.approx(losses, rel=1e-5)
     a = torch.load(tmp_path / "a" / "detector_last.pt", weights_only=False)["model"]
     b = torch.load(tmp_path / "b" / "detector_last.pt", weights_only=False)["model"]
@@ -139,10 +153,18 @@ def test_tiny_training_run_checkpoints_and_resumes_exactly(tiny_dataset, tmp_pat
 
 
 def test_resume_without_a_checkpoint_and_bad_checkpoints_are_clear_errors(tmp_path):
+    image = (np.zeros((24, 32, 3), np.uint8), [[1, 2, 9, 9]], [0])
     with pytest.raises(FileNotFoundError, match="cannot resume"):
-        train_detector(tmp_path, tmp_path / "x", TrainConfig(epochs=1), TINY, resume=True)
+        train_detector([image], [image], [], TrainConfig(epochs=1), tmp_path / "x", TINY,
+                       resume=True)
+    with pytest.raises(ValueError, match="val must hold at least one labelled image"):
+        train_detector([image], [], [], TrainConfig(epochs=1), tmp_path / "x", TINY)
     with pytest.raises(FileNotFoundError, match="not a dataset folder"):
-        train_detector(tmp_path, tmp_path / "x", TrainConfig(epochs=1), TINY)
+        train_stage(DetectorTrainConfig(data=tmp_path, out=tmp_path / "x"))
+    with pytest.raises(FileNotFoundError, match="cannot resume"):
+        train_stage(DetectorTrainConfig(data=tmp_path, out=tmp_path / "x", resume=True))
+    with pytest.raises(ValueError, match="images_per_epoch must be >= 1; got 0"):
+        DetectorTrainConfig(data=tmp_path, out=tmp_path / "x", images_per_epoch=0)
     with pytest.raises(FileNotFoundError, match="no detector checkpoint"):
         Detector.load(tmp_path / "missing.pt")
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
@@ -152,3 +174,37 @@ def test_resume_without_a_checkpoint_and_bad_checkpoints_are_clear_errors(tmp_pa
         TrainConfig(epochs=0)
     with pytest.raises(ValueError, match="images must be"):
         Detector(DetectorNet(TINY)).detect([np.zeros((10, 10), np.uint8)])
+
+
+def test_samples_of_labelled_images_share_repeats():
+    img = np.zeros((120, 160, 3), np.uint8)
+    triple = (img, [[10, 20, 30, 40]], [1])
+    samples = to_samples([triple, triple, (img, [], [])], 320, 256)
+    assert samples[0] is samples[1] and samples[2] is not samples[0]
+    np.testing.assert_allclose(samples[0].boxes, [[20, 48, 60, 88]])
+    assert samples[2].boxes.shape == (0, 4) and samples[0].classes.tolist() == [1]
+    with pytest.raises(ValueError, match="images must be"):
+        to_samples([(np.zeros((10, 10)), [], [])], 320, 256)
+
+
+def test_the_stage_reads_camera_frames_and_inspection_views(tiny_dataset, tiny_images):
+    from recordings.dataset import read_split
+
+    camera = list(read_split(tiny_dataset, "train"))
+    views = list(read_split(tiny_dataset, "train", view="inspection"))
+    with_onion = [v for v in views if v.record["boxes"]]
+    train = tiny_images["train"]
+    assert len(train) >= len(camera) + 3 * len(with_onion)
+    assert len(train) <= len(camera) + 3 * len(with_onion) + len(views) - len(with_onion)
+    assert len({id(t) for t in train}) == len(train) - 2 * len(with_onion)  # repeats shared
+
+
+def test_the_stage_trains_and_resumes_through_the_cli(tiny_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["train", "detector", "--data", str(tiny_dataset), "--out", str(out), "--epochs",
+            "1", "--images-per-epoch", "4", "--batch-size", "4"]
+    assert main(args) == 0
+    assert "detector, test split: mAP@0.5" in capsys.readouterr().out
+    assert (out / "detector.pt").is_file() and (out / "detector_last.pt").is_file()
+    assert main([*args, "--resume"]) == 0  # nothing left to do: same metrics file
+    assert json.loads((out / "detector_metrics.json").read_text())["train"]["epochs"] == 1

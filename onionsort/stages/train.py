@@ -1,0 +1,208 @@
+"""The ``train`` stage: read a labelled dataset, train the state classifier or the detector.
+
+The libraries (:mod:`state_abstraction`, :mod:`perception`) train on samples held in memory and
+read no dataset; this stage reads them with :mod:`recordings.dataset` and chooses which
+images the detector trains on. Both write into ``out`` (checkpoints, a metrics file).
+
+Examples
+--------
+::
+
+    from onionsort.stages.train import ClassifierTrainConfig, train_state_classifier
+    metrics = train_state_classifier(ClassifierTrainConfig(data=Path("runs/data"),
+                                                           out=Path("runs/models"), epochs=14))
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import check_output_folder, log_config
+
+__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
+           "train_detector", "train_state_classifier"]
+
+logger = logging.getLogger(__name__)
+
+#: Inspection views without an onion are many (the onion is in view only while it is
+#: inspected): this share of them is kept as negatives.
+EMPTY_INSPECTION_SHARE = 0.15
+#: Inspection views with an onion are few next to the camera frames: repeated this many times
+#: in the training split.
+INSPECTION_REPEAT = 3
+
+
+def _check_positive(config, *names: str) -> None:
+    for name in names:
+        if getattr(config, name) < 1:
+            raise ValueError(f"{name} must be >= 1; got {getattr(config, name)}")
+
+
+@dataclass(frozen=True)
+class ClassifierTrainConfig:
+    """``onionsort train state-classifier``: dataset folder, run folder, hyperparameters.
+
+    ``depth_dropout``: probability that a training step's depth is zeroed
+    (:class:`state_abstraction.classifier.ClassifierConfig`).
+    """
+
+    data: Path
+    out: Path
+    epochs: int = 12
+    batch_size: int = 32
+    seed: int = 0
+    depth_dropout: float = 0.5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "data", Path(self.data))
+        object.__setattr__(self, "out", Path(self.out))
+        _check_positive(self, "epochs", "batch_size")
+        if not 0.0 <= self.depth_dropout <= 1.0:
+            raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
+
+
+@dataclass(frozen=True)
+class DetectorTrainConfig:
+    """``onionsort train detector``: dataset folder, run folder, hyperparameters, ``resume``
+    (continue the run in ``out`` from its last checkpoint)."""
+
+    data: Path
+    out: Path
+    epochs: int = 24
+    images_per_epoch: int = 1600
+    batch_size: int = 16
+    seed: int = 0
+    resume: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "data", Path(self.data))
+        object.__setattr__(self, "out", Path(self.out))
+        _check_positive(self, "epochs", "images_per_epoch", "batch_size")
+
+
+class _EpochBar:
+    """A progress bar over epochs, moved by the trainers' ``on_epoch`` records (so a resumed
+    run starts where it left off)."""
+
+    def __init__(self, desc: str, epochs: int) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=epochs, desc=desc, unit="epoch")
+
+    def update(self, record: dict) -> None:
+        self.bar.n = int(record["epoch"]) + 1
+        self.bar.refresh()
+
+    def __enter__(self) -> _EpochBar:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.bar.close()
+
+
+def _metadata(root: Path) -> dict:
+    path = root / "dataset.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json); render one "
+                                "with `onionsort dataset`")
+    return json.loads(path.read_text())
+
+
+def train_state_classifier(config: ClassifierTrainConfig) -> dict:
+    """Train the state classifier on ``config.data``'s train split, pick the epoch on val.
+
+    Returns
+    -------
+    dict
+        The metrics of :func:`state_abstraction.classifier.train_classifier` (``test``,
+        ``test_without_depth``, ``history``, ...); the checkpoint is
+        ``config.out / "state_classifier.pt"``.
+    """
+    import torch
+
+    from recordings.dataset import read_steps
+    from state_abstraction.classifier import ClassifierConfig, train_classifier
+
+    log_config("train state-classifier", config)
+    meta = _metadata(config.data)
+    check_output_folder(config.out)
+    torch.set_num_threads(2)
+    model = ClassifierConfig(frames=int(meta.get("config", {}).get("frames_per_step", 3)),
+                             epochs=config.epochs, batch_size=config.batch_size,
+                             seed=config.seed, depth_dropout=config.depth_dropout)
+    splits = {}
+    for split in ("train", "val", "test"):
+        splits[split] = [step for session in read_steps(config.data, split, model.frames)
+                         for step in session]
+        logger.info("%s: %d steps of %d frames", split, len(splits[split]), model.frames)
+    for split in ("train", "val"):
+        if not splits[split]:
+            raise ValueError(f"split {split!r} of {config.data} holds no complete step of "
+                             f"{model.frames} frames")
+    with _EpochBar("state classifier", model.epochs) as bar:
+        return train_classifier(splits["train"], splits["val"], splits["test"], model,
+                                config.out, on_epoch=bar.update)
+
+
+def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
+                    empty_inspection_share: float = EMPTY_INSPECTION_SHARE, seed: int = 0
+                    ) -> list[tuple[np.ndarray, list, list]]:
+    """The labelled images the detector uses from a dataset split: ``(image, boxes, classes)``.
+
+    Every camera frame; inspection views with an onion (each ``inspection_repeat`` times, the
+    same triple object); ``empty_inspection_share`` of the views without one (chosen with
+    ``seed``).
+    """
+    from recordings.dataset import read_split
+
+    root = Path(root)
+    views = _metadata(root).get("views", ["camera"])
+    rng = np.random.default_rng(seed)
+    images = [(f.color, f.record["boxes"], f.record["classes"]) for f in read_split(root, split)]
+    if "inspection" in views:
+        for f in read_split(root, split, view="inspection"):
+            if f.record["boxes"]:
+                images.extend([(f.color, f.record["boxes"], f.record["classes"])]
+                              * inspection_repeat)
+            elif rng.random() < empty_inspection_share:
+                images.append((f.color, [], []))
+    if not images:
+        raise ValueError(f"split {split!r} of {root} holds no frames")
+    return images
+
+
+def train_detector(config: DetectorTrainConfig) -> dict:
+    """Train the detector on ``config.data`` (or resume the run in ``config.out``).
+
+    Returns
+    -------
+    dict
+        The metrics of :func:`perception.train.train_detector` (``val``, ``test`` mAP,
+        ``history``, ...); the checkpoint is ``config.out / "detector.pt"``.
+    """
+    import torch
+
+    from perception.train import TrainConfig
+    from perception.train import train_detector as train
+
+    log_config("train detector", config)
+    if config.resume and not (config.out / "detector_last.pt").is_file():
+        raise FileNotFoundError(f"cannot resume: {config.out / 'detector_last.pt'} does not "
+                                "exist")
+    _metadata(config.data)
+    check_output_folder(config.out)
+    torch.set_num_threads(2)
+    images = {split: detector_images(config.data, split, seed=config.seed,
+                                     inspection_repeat=INSPECTION_REPEAT if split == "train"
+                                     else 1)
+              for split in ("train", "val", "test")}
+    model = TrainConfig(epochs=config.epochs, images_per_epoch=config.images_per_epoch,
+                        batch_size=config.batch_size, seed=config.seed)
+    with _EpochBar("detector", model.epochs) as bar:
+        return train(images["train"], images["val"], images["test"], model, config.out,
+                     resume=config.resume, on_epoch=bar.update)
