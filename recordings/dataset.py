@@ -2,7 +2,7 @@
 
 Layout of a dataset folder ``DIR``::
 
-    DIR/dataset.json                 format, seed, configuration, classes, factors, splits
+    DIR/dataset.json                 format, seed, configuration, classes, task, splits
     DIR/<split>/color/NNNNNN.png     RGB frames (stored as PNG, BGR on disk as OpenCV writes)
     DIR/<split>/depth/NNNNNN.png     16-bit depth in millimetres
     DIR/<split>/labels.json          one record per frame (below)
@@ -14,9 +14,12 @@ correlated, so a split never shares a session with another). A frame record hold
 ``depth`` (paths relative to the split folder), ``boxes`` (``[x_min, y_min, x_max, y_max]`` in
 pixels, exclusive max, of the onions with at least ``MIN_VISIBLE_PIXELS`` visible pixels),
 ``classes`` (0 good, 1 blemished), the true
-``state`` and its factors ``onion``, ``end_effector``, ``prediction`` (encodings of
-``irl.domains.onion_sorting``), ``action``, ``occluded`` (the passer-by crossed during the step),
-``occluded_fraction``, ``phase`` (0 = the state at rest), ``step``, ``session`` and ``frame``.
+``state`` and the value index of each of its factors under the factor's name (the task's
+``decode``; for onion sorting ``onion``, ``end_effector``, ``prediction``), ``action``,
+``occluded`` (the passer-by crossed during the step), ``occluded_fraction``, ``phase`` (0 = the
+state at rest), ``step``, ``session`` and ``frame``. ``dataset.json`` holds the task
+(``task.to_dict()``, under ``"task"``; :func:`dataset_task` reads it back, the onion-sorting
+task for datasets that predate the field).
 
 ``dataset.json`` lists its ``views``: ``camera`` (the main RGB-D camera) and ``inspection`` (the
 close view where the sorter, or the robot, looks at the onion in hand; boxes there are in that
@@ -36,12 +39,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from irl.domains.onion_sorting import decode_state
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.frames import TruthFrame
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
-           "read_split", "read_steps", "split_names"]
+           "dataset_task", "read_split", "read_steps", "split_names"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -50,17 +54,32 @@ VIEWS = ("camera", "inspection")
 _LABELS = {"camera": "labels.json", "inspection": "inspection.json"}
 MIN_VISIBLE_PIXELS = 25
 """Onions with fewer visible pixels (slivers behind the hand or the passer-by) get no box."""
+_RECORD_KEYS = ("color", "depth", "source", "boxes", "classes", "state", "action", "occluded",
+                "occluded_fraction", "phase", "step", "session", "frame", "lineup", "index")
+"""Keys of a frame record besides the task's factors; a factor may not take one of these."""
 
 
-def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera") -> dict:
-    """The JSON record of one frame in ``view`` (see the module docstring)."""
+def _check_task(task: TaskDescription) -> TaskDescription:
+    if not isinstance(task, TaskDescription):
+        raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
+    clash = [f for f in task.factor_names if f in _RECORD_KEYS]
+    if clash:
+        raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of a frame "
+                         f"record {_RECORD_KEYS}; rename them")
+    return task
+
+
+def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera",
+                 task: TaskDescription = SORTING_TASK) -> dict:
+    """The JSON record of one frame in ``view`` (see the module docstring); the state's
+    factors are those of ``task``."""
     boxes, classes = [], []
     onions = frame.onions if view == "camera" else frame.inspection_onions
     for onion in onions:
         if onion.box is not None and onion.visible_pixels >= MIN_VISIBLE_PIXELS:
             boxes.append([int(v) for v in onion.box])
             classes.append(int(onion.blemished))
-    state = decode_state(frame.step.state)
+    factors = task.decode(int(frame.step.state))
     images = ({"color": f"color/{name}.png", "depth": f"depth/{name}.png"} if view == "camera"
               else {"color": f"inspection/{name}.png"})
     return {
@@ -69,9 +88,7 @@ def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera
         "boxes": boxes,
         "classes": classes,
         "state": int(frame.step.state),
-        "onion": int(state.onion),
-        "end_effector": int(state.end_effector),
-        "prediction": int(state.prediction),
+        **factors,
         "action": int(frame.step.action),
         "occluded": bool(frame.step.occluded),
         "occluded_fraction": float(frame.occluded_fraction),
@@ -86,15 +103,21 @@ class DatasetWriter:
     """Writes frames into a new dataset folder; refuses to overwrite an existing one.
 
     ``labels.json`` of each split is rewritten (atomically) as frames arrive, so an interrupted
-    run leaves a readable dataset of the frames written so far.
+    run leaves a readable dataset of the frames written so far. ``task`` (the onion-sorting task
+    by default) names the factors of the records and is stored in ``dataset.json`` under
+    ``"task"``.
     """
 
-    def __init__(self, root: Path | str, metadata: dict) -> None:
+    def __init__(self, root: Path | str, metadata: dict, *,
+                 task: TaskDescription = SORTING_TASK) -> None:
         self.root = Path(root)
         if (self.root / "dataset.json").exists():
             raise FileExistsError(f"{self.root} already holds a dataset; choose a new --out")
+        if "task" in metadata:
+            raise ValueError("metadata must not hold 'task'; pass the task as task=")
+        self.task = _check_task(task)
         self.metadata = {"format": FORMAT, "classes": list(CLASSES), "views": list(VIEWS),
-                         **metadata}
+                         **metadata, "task": self.task.to_dict()}
         self._records = {(s, v): [] for s in SPLITS for v in VIEWS}
         for split in SPLITS:
             for sub in ("color", "depth", "inspection"):
@@ -109,12 +132,13 @@ class DatasetWriter:
         _write_rgb(folder / "color" / f"{name}.png", frame.color)
         depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
         cv2.imwrite(str(folder / "depth" / f"{name}.png"), depth_mm)
-        records.append(frame_record(frame, session, name))
+        records.append(frame_record(frame, session, name, task=self.task))
         if frame.inspection is not None:
             close = self._records[split, "inspection"]
             name = f"{len(close):06d}"
             _write_rgb(folder / "inspection" / f"{name}.png", frame.inspection)
-            close.append(frame_record(frame, session, name, view="inspection"))
+            close.append(frame_record(frame, session, name, view="inspection",
+                                      task=self.task))
 
     def add_robot_view(self, split: str, rgb: np.ndarray,
                        labels: list[tuple[tuple[int, int, int, int], bool, int]],
@@ -193,6 +217,21 @@ def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[L
             color=cv2.cvtColor(color, cv2.COLOR_BGR2RGB),
             depth=None if depth is None else depth.astype(np.float32) / 1000.0, record=rec,
         )
+
+
+def dataset_task(root: Path | str) -> TaskDescription:
+    """The task of a dataset folder's records: ``dataset.json``'s ``"task"``, or the
+    onion-sorting task for a dataset written before the field."""
+    meta_path = Path(root) / "dataset.json"
+    if not meta_path.exists():
+        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json)")
+    doc = json.loads(meta_path.read_text()).get("task")
+    if doc is None:
+        return SORTING_TASK
+    try:
+        return TaskDescription.from_dict(doc)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{meta_path}: 'task' is not a task description ({exc})") from None
 
 
 def split_names(split: str) -> tuple[str, ...]:

@@ -25,7 +25,8 @@ from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from irl.demonstrations import Demonstration, Trajectory
-from irl.domains.onion_sorting import N_ACTIONS
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
 from recordings.schema import (
     END_METADATA,
@@ -152,6 +153,9 @@ class Session:
         not perceived; see :mod:`recordings.perception`).
     perception_models : dict or None
         The ``onionsort.perception`` record: which models perceived the session.
+    task : TaskDescription
+        The task of the session's states and actions: the session record's ``"task"``, or the
+        onion-sorting task in files that predate the field.
     """
 
     path: Path
@@ -165,6 +169,7 @@ class Session:
     problem: str | None = None
     perception: dict[int, dict] = field(default_factory=dict, repr=False)
     perception_models: dict | None = None
+    task: TaskDescription = SORTING_TASK
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -223,15 +228,16 @@ class Session:
     def demonstration(self) -> Demonstration:
         """The session as a demonstration of ``(s, a)`` pairs from ground truth.
 
-        Observation ``o = s * 5 + a`` (the identity observation model of
+        Observation ``o = task.pair(s, a) = s * A + a`` (the identity observation model of
         :meth:`irl.demonstrations.Demonstration.from_pairs`), None at occluded steps.
         """
-        traj = self.trajectory()
-        return Demonstration.from_pairs(traj.states, traj.actions, N_ACTIONS,
-                                        occluded=self.occluded)
+        traj, task = self.trajectory(), self.task
+        return Demonstration([None if occluded else task.pair(int(s), int(a))
+                              for s, a, occluded in zip(traj.states, traj.actions,
+                                                        self.occluded, strict=True)])
 
     def perceived_demonstration(self) -> Demonstration:
-        """The session as perception saw it: pair observations ``o = s * 5 + a`` of the
+        """The session as perception saw it: pair observations ``o = s * A + a`` of the
         perceived state and action, None exactly where the classifier said occluded.
 
         Uses only the sensor side and the perception topics, never ground truth.
@@ -340,6 +346,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
         raise NotASessionError(f"{path} is an onionsort session of format version {version!r}; "
                                f"this version of onionsort reads {READABLE_VERSIONS}")
     layout = _layout(metadata, version, path)
+    task = _task(metadata, path)
     frames = [_assemble(i, parts[i], version) for i in sorted(parts)
               if _complete(parts[i], version, layout["depth"])]
     truth = version == "1" or bool(metadata.get("ground_truth", False))
@@ -357,7 +364,20 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     return Session(path=path, metadata=metadata, status=status,
                    frames_per_step=layout["frames_per_step"], has_depth=layout["depth"],
                    has_ground_truth=truth, steps=complete_steps, _frames=frames,
-                   problem=problem, perception=perception, perception_models=models)
+                   problem=problem, perception=perception, perception_models=models,
+                   task=task)
+
+
+def _task(metadata: dict, path: Path) -> TaskDescription:
+    """The session record's task, or the onion-sorting task for files without one."""
+    doc = metadata.get("task")
+    if doc is None:
+        return SORTING_TASK
+    try:
+        return TaskDescription.from_dict(doc)
+    except (TypeError, ValueError) as exc:
+        raise NotASessionError(f"{path}: the session record's task is not a task "
+                               f"description ({exc})") from None
 
 
 def _layout(metadata: dict, version: str, path: Path) -> dict:

@@ -28,7 +28,8 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from irl.domains.onion_sorting import SortAction, decode_state
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.frames import TruthFrame
 from recordings.schema import (
     CLASS_COLORS,
@@ -59,6 +60,10 @@ _PROTO_TOPICS = {
     Topic.ANNOTATIONS: ImageAnnotations,
 }
 _RGBA = {k: (*(c / 255.0 for c in rgb), 1.0) for k, rgb in CLASS_COLORS.items()}
+#: Keys of a ``/ground_truth/state`` message besides the task's factors (which sit between
+#: ``state`` and ``action``); a factor may not take one of these names.
+_STATE_KEYS = ("frame", "step", "phase", "time_s", "state", "action", "occluded",
+               "occluded_fraction")
 
 
 def _stamp(msg, time_ns: int) -> None:
@@ -119,6 +124,14 @@ def box_annotations(boxes: list[tuple[int, int, int, int, int]], time_ns: int
     return msg
 
 
+def _action_name(task: TaskDescription, action: int) -> str:
+    """The name of action index ``action`` of ``task``; ValueError outside ``[0, A)``."""
+    if not 0 <= int(action) < task.n_actions:
+        raise ValueError(f"action must be in [0, {task.n_actions}) for task {task.name!r}; "
+                         f"got {action}")
+    return task.action_names[int(action)]
+
+
 class SessionWriter:
     """Writes one session's MCAP file; use as a context manager.
 
@@ -141,17 +154,30 @@ class SessionWriter:
         Whether frames come with ground truth (:meth:`write_frame`) or not
         (:meth:`write_sensor_frame` only).
     overwrite : bool
+    task : TaskDescription
+        The task the steps belong to: the names of the ground-truth states and actions, and the
+        encoding of the step's ``state`` and ``action``. Stored (``task.to_dict()``) in the
+        session record under ``"task"``; the onion-sorting task by default.
     """
 
     def __init__(self, path: str | Path, metadata: dict[str, Any], camera_K: np.ndarray,
                  inspection_K: np.ndarray | None = None, *, frames_per_step: int,
                  depth: bool = True, ground_truth: bool = True,
-                 overwrite: bool = False) -> None:
+                 overwrite: bool = False, task: TaskDescription = SORTING_TASK) -> None:
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise FileExistsError(f"{self.path} exists; choose another --out or remove it")
         if int(frames_per_step) < 1:
             raise ValueError(f"frames_per_step must be >= 1; got {frames_per_step}")
+        if not isinstance(task, TaskDescription):
+            raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
+        clash = [f for f in task.factor_names if f in _STATE_KEYS]
+        if clash:
+            raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of a "
+                             f"ground-truth state message {_STATE_KEYS}; rename them")
+        if "task" in metadata:
+            raise ValueError("metadata must not hold 'task'; pass the task as task=")
+        self.task = task
         self.metadata = dict(metadata)
         self.camera_K = np.asarray(camera_K, float)
         self.inspection_K = None if inspection_K is None else np.asarray(inspection_K, float)
@@ -178,6 +204,7 @@ class SessionWriter:
                                         "inspection": self.inspection_K is not None})
         record["ground_truth"] = json.dumps(self.ground_truth)
         record["camera_K"] = json.dumps(self.camera_K.tolist())
+        record["task"] = json.dumps(self.task.to_dict(), sort_keys=True)
         if self.inspection_K is not None:
             record["inspection_K"] = json.dumps(self.inspection_K.tolist())
         self._writer.add_metadata(SESSION_METADATA, record)
@@ -300,17 +327,16 @@ class SessionWriter:
         self.n_frames += 1
 
     def _truth_side(self, frame: TruthFrame, t: int, i: int) -> None:
-        step = frame.step
+        step, task = frame.step, self.task
         if frame.phase == 0:
             self._write_json(Topic.ACTION, {
                 "step": step.step, "frame": i, "state": step.state, "action": step.action,
-                "action_name": SortAction(step.action).name.lower(),
+                "action_name": _action_name(task, step.action),
                 "next_state": step.next_state, "occluded": step.occluded}, t, step.step)
-        s = decode_state(step.state)
+        factors = {f: task.value_name(f, v) for f, v in task.decode(step.state).items()}
         self._write_json(Topic.STATE, {
             "frame": i, "step": step.step, "phase": frame.phase, "time_s": frame.time_s,
-            "state": step.state, "onion": s.onion.name.lower(),
-            "end_effector": s.end_effector.name.lower(), "prediction": s.prediction.name.lower(),
+            "state": step.state, **factors,
             "action": step.action, "occluded": step.occluded,
             "occluded_fraction": round(frame.occluded_fraction, 5)}, t, i)
         self._write_json(Topic.BOXES, {"frame": i, "boxes": [

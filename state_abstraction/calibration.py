@@ -2,8 +2,9 @@
 
 Layouts: ``counts[true, predicted]``; ``C[true, predicted] = P(predicted | true)``.
 
-Perception reports, for every unoccluded frame, an estimate of each state factor of the
-onion-sorting MDP (onion location, end-effector location, prediction) and of the action. Run on
+Perception reports, for every unoccluded frame, an estimate of each state factor of the task
+(:class:`irl.domains.task.TaskDescription`; for onion sorting the onion location, the
+end-effector location and the prediction) and of the action. Run on
 held-out labelled frames, those estimates give one confusion matrix per factor. Assuming the
 errors of different factors are independent given the truth, their Kronecker product is the
 state confusion, and with the action's confusion it is ``O[s, a, o]`` over pair observations
@@ -23,14 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from irl.domains.onion_sorting import (
-    FACTOR_SIZES,
-    N_ACTIONS,
-    N_STATES,
-    Location,
-    Prediction,
-    SortAction,
-)
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from irl.observation import ObservationModel, factored_observation_model
 
 __all__ = [
@@ -38,17 +33,26 @@ __all__ = [
     "Calibration",
     "ConfusionMatrix",
     "calibrate",
+    "calibration_factors",
     "load_calibration",
 ]
 
-#: The calibrated factors, in the order of the state encoding, then the action.
-FACTORS: dict[str, list[str]] = {
-    "onion": [x.name.lower() for x in Location],
-    "end_effector": [x.name.lower() for x in Location],
-    "prediction": [x.name.lower() for x in Prediction],
-    "action": [x.name.lower() for x in SortAction],
-}
 FORMAT = "onionsort.calibration/1"
+
+
+def calibration_factors(task: TaskDescription) -> dict[str, list[str]]:
+    """The calibrated factors of ``task``: each state factor's value names, in the order of
+    the state encoding, then ``"action"`` with the action names."""
+    if not isinstance(task, TaskDescription):
+        raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
+    if "action" in task.factors:
+        raise ValueError(f"task {task.name!r} has a state factor named 'action', which the "
+                         "action's confusion would shadow; rename it")
+    return {**{f: list(v) for f, v in task.factors.items()}, "action": list(task.action_names)}
+
+
+#: The calibrated factors of the onion-sorting task (:func:`calibration_factors`).
+FACTORS: dict[str, list[str]] = calibration_factors(SORTING_TASK)
 
 
 @dataclass(frozen=True)
@@ -121,9 +125,9 @@ class Calibration:
     Attributes
     ----------
     factors : dict of str -> ConfusionMatrix
-        One per entry of :data:`FACTORS`.
+        One per entry of :func:`calibration_factors` of ``task``.
     joint_state : ConfusionMatrix
-        The confusion of the whole state (48 x 48).
+        The confusion of the whole state (S x S; 48 x 48 for onion sorting).
     pair_correct : int
         Steps whose state and action were both right.
     smoothing : float
@@ -133,6 +137,9 @@ class Calibration:
     depth : bool or None
         Whether the classifier was given depth (RGB-D) or colour alone; a calibration holds
         only for the mode it was measured in. None in files that predate the field.
+    task : TaskDescription
+        The task measured: its factors, in the order of the state encoding, and its sizes
+        (the onion-sorting task by default).
     """
 
     factors: dict[str, ConfusionMatrix]
@@ -141,6 +148,34 @@ class Calibration:
     smoothing: float = 1.0
     models: dict | None = None
     depth: bool | None = None
+    task: TaskDescription = SORTING_TASK
+
+    def __post_init__(self) -> None:
+        expected = calibration_factors(self.task)
+        if set(self.factors) != set(expected):
+            raise ValueError(f"factors must be {list(expected)} (task {self.task.name!r}); "
+                             f"got {sorted(self.factors)}")
+        for k, labels in expected.items():
+            if len(self.factors[k].labels) != len(labels):
+                raise ValueError(f"factor {k!r} must have {len(labels)} values {labels} "
+                                 f"(task {self.task.name!r}); got {self.factors[k].labels}")
+        n = self.task.n_states
+        if self.joint_state.counts.shape != (n, n):
+            raise ValueError(f"joint_state must be {n} x {n} (task {self.task.name!r}); got "
+                             f"{self.joint_state.counts.shape}")
+
+    @property
+    def task_name(self) -> str:
+        """The name of the task measured."""
+        return self.task.name
+
+    @property
+    def n_states(self) -> int:
+        return self.task.n_states
+
+    @property
+    def n_actions(self) -> int:
+        return self.task.n_actions
 
     def with_smoothing(self, smoothing: float) -> Calibration:
         """The same counts with another smoothing."""
@@ -149,10 +184,10 @@ class Calibration:
         return replace(self, smoothing=float(smoothing))
 
     def observation_model(self, smoothing: float | None = None) -> ObservationModel:
-        """The learners' ``O[s, a, o]`` (48 states x 5 actions, pair observations)."""
+        """The learners' ``O[s, a, o]`` (S states x A actions, pair observations
+        ``o = task.pair(s', a')``)."""
         smoothing = self.smoothing if smoothing is None else smoothing
-        mats = [self.factors[name].probabilities(smoothing)
-                for name in ("onion", "end_effector", "prediction")]
+        mats = [self.factors[name].probabilities(smoothing) for name in self.task.factor_names]
         return factored_observation_model(mats, self.factors["action"].probabilities(smoothing))
 
     @property
@@ -179,8 +214,8 @@ class Calibration:
         path = Path(path)
         doc = {**(extra or {}),
             "format": FORMAT,
-            "n_states": N_STATES,
-            "n_actions": N_ACTIONS,
+            "n_states": self.task.n_states,
+            "n_actions": self.task.n_actions,
             "factors": {k: {"labels": m.labels, "counts": m.counts.tolist()}
                         for k, m in self.factors.items()},
             "joint_state_counts": self.joint_state.counts.tolist(),
@@ -196,34 +231,41 @@ class Calibration:
         return path
 
 
-def calibrate(true: dict[str, Sequence[int]], predicted: dict[str, Sequence[int]]) -> Calibration:
+def calibrate(true: dict[str, Sequence[int]], predicted: dict[str, Sequence[int]], *,
+              task: TaskDescription = SORTING_TASK) -> Calibration:
     """Confusion matrices from true and predicted factor values of unoccluded frames.
 
     Parameters
     ----------
     true, predicted : dict of str -> sequence of int
-        One entry per factor in :data:`FACTORS` (``onion``, ``end_effector``, ``prediction``,
-        ``action``), each of length n_frames, in the encodings of ``irl.domains.onion_sorting``.
+        One entry per factor of :func:`calibration_factors` of ``task`` (for onion sorting,
+        :data:`FACTORS`: ``onion``, ``end_effector``, ``prediction``, ``action``), each of
+        length n_frames, value indices in the task's encoding.
+    task : TaskDescription
+        The task measured; the onion-sorting task by default.
     """
-    missing = [k for k in FACTORS if k not in true or k not in predicted]
+    expected = calibration_factors(task)
+    missing = [k for k in expected if k not in true or k not in predicted]
     if missing:
-        raise ValueError(f"true and predicted must both give the factors {list(FACTORS)}; "
+        raise ValueError(f"true and predicted must both give the factors {list(expected)}; "
                          f"missing {missing}")
     factors = {k: ConfusionMatrix(_counts(true[k], predicted[k], len(labels), k), labels)
-               for k, labels in FACTORS.items()}
-    state_true = np.ravel_multi_index(
-        [np.asarray(true[k]) for k in ("onion", "end_effector", "prediction")], FACTOR_SIZES)
-    state_pred = np.ravel_multi_index(
-        [np.asarray(predicted[k]) for k in ("onion", "end_effector", "prediction")], FACTOR_SIZES)
-    joint = ConfusionMatrix(_counts(state_true, state_pred, N_STATES, "state"),
-                            [str(s) for s in range(N_STATES)])
+               for k, labels in expected.items()}
+    state_true = task.encode_array(
+        np.stack([np.asarray(true[k], dtype=np.int64) for k in task.factor_names], axis=-1))
+    state_pred = task.encode_array(
+        np.stack([np.asarray(predicted[k], dtype=np.int64) for k in task.factor_names], axis=-1))
+    joint = ConfusionMatrix(_counts(state_true, state_pred, task.n_states, "state"),
+                            [str(s) for s in range(task.n_states)])
     pair_correct = int(np.sum((state_true == state_pred)
                               & (np.asarray(true["action"]) == np.asarray(predicted["action"]))))
-    return Calibration(factors=factors, joint_state=joint, pair_correct=pair_correct)
+    return Calibration(factors=factors, joint_state=joint, pair_correct=pair_correct, task=task)
 
 
-def load_calibration(path: Path | str) -> Calibration:
-    """Read a calibration written by :meth:`Calibration.save`; clear errors on bad files."""
+def load_calibration(path: Path | str, *, task: TaskDescription = SORTING_TASK) -> Calibration:
+    """Read a calibration written by :meth:`Calibration.save` for ``task`` (the onion-sorting
+    task by default); clear errors on bad files."""
+    expected = calibration_factors(task)
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
@@ -233,18 +275,24 @@ def load_calibration(path: Path | str) -> Calibration:
         raise ValueError(f"{path} is not a calibration file (not JSON: {exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ValueError(f"{path} is not a calibration file (format must be {FORMAT!r})")
-    if (doc.get("n_states"), doc.get("n_actions")) != (N_STATES, N_ACTIONS):
+    sizes = (task.n_states, task.n_actions)
+    if (doc.get("n_states"), doc.get("n_actions")) != sizes:
         raise ValueError(
             f"{path} was calibrated for an MDP with (S, A) = ({doc.get('n_states')}, "
-            f"{doc.get('n_actions')}), not the onion-sorting MDP's ({N_STATES}, {N_ACTIONS})"
+            f"{doc.get('n_actions')}), not the {task.name} MDP's {sizes}"
         )
     factors = {k: ConfusionMatrix(np.array(v["counts"]), list(v["labels"]))
                for k, v in doc["factors"].items()}
-    if set(factors) != set(FACTORS):
-        raise ValueError(f"{path}: factors must be {list(FACTORS)}; got {sorted(factors)}")
-    joint = ConfusionMatrix(np.array(doc["joint_state_counts"]), [str(s) for s in range(N_STATES)])
+    if set(factors) != set(expected):
+        raise ValueError(f"{path}: factors must be {list(expected)}; got {sorted(factors)}")
+    for k, labels in expected.items():
+        if factors[k].labels != labels:
+            raise ValueError(f"{path}: the values of factor {k!r} must be {labels} (task "
+                             f"{task.name!r}); got {factors[k].labels}")
+    joint = ConfusionMatrix(np.array(doc["joint_state_counts"]),
+                            [str(s) for s in range(task.n_states)])
     depth = doc.get("depth")
     return Calibration(factors=factors, joint_state=joint,
                        pair_correct=int(doc.get("pair_correct", 0)),
                        smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
-                       depth=None if depth is None else bool(depth))
+                       depth=None if depth is None else bool(depth), task=task)

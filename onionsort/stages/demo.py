@@ -114,7 +114,7 @@ def _ile(model: dict) -> float:
     from irl.metrics import inverse_learning_error
 
     domain = onion_sorting()
-    theta = np.array([model["theta"][name] for name in domain.feature_names])
+    theta = np.array([model["theta"][name] for name in domain.task.feature_names])
     return float(inverse_learning_error(domain.mdp, domain.true_theta, theta))
 
 

@@ -63,14 +63,19 @@ class EvaluateConfig:
 
 
 def inspection_classifier(detector):
-    """``classify(rgb) -> Prediction`` from the detector's best box in the inspection view."""
-    from irl.domains.onion_sorting import Prediction
+    """``classify(rgb) -> prediction`` from the detector's best box in the inspection view: the
+    index of ``bad`` (class 1, blemished), ``good`` or ``unknown`` (no onion found) among the
+    values of the sorting task's ``prediction`` factor (``robot.station`` reads it as a
+    ``Prediction``)."""
+    from irl.domains.onion_sorting import SORTING_TASK
     from state_abstraction.perceive import inspected_class
+
+    good, bad, unknown = (SORTING_TASK.value_index("prediction", v)
+                          for v in ("good", "bad", "unknown"))
 
     def classify(rgb):
         cls = inspected_class(detector.detect([rgb])[0])
-        return Prediction.UNKNOWN if cls is None else Prediction(
-            Prediction.BAD if cls == 1 else Prediction.GOOD)
+        return unknown if cls is None else (bad if cls == 1 else good)
 
     return classify
 

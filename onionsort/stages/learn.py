@@ -22,11 +22,15 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from onionsort.stages.base import check_output_folder, log_config, write_json
 from onionsort.stages.models import model_mismatch
+
+if TYPE_CHECKING:
+    from irl.domains.task import TaskDescription
 
 __all__ = ["MODEL_FILE", "LearnConfig", "learn", "load_policy"]
 
@@ -107,15 +111,19 @@ def learn(config: LearnConfig) -> dict:
 
     log_config("learn", config)
     check_output_folder(config.out)
-    calibration = load_calibration(config.calibration)
+    base = onion_sorting()
+    calibration = load_calibration(config.calibration, task=base.task)
     sessions = [open_session(p) for p in config.sessions]
+    for session in sessions:
+        if session.task != base.task:
+            raise ValueError(f"{session.path} records the task {session.task.name!r}, not "
+                             f"{base.task.name!r} that learn fits")
     if not config.allow_model_mismatch:
         for session in sessions:
             if session.perception:
                 _check_provenance(session, calibration, config.calibration)
     demos = [s.perceived_demonstration() for s in sessions]
-    domain = dataclasses.replace(onion_sorting(),
-                                 observation_model=calibration.observation_model())
+    domain = dataclasses.replace(base, observation_model=calibration.observation_model())
     estimator = make_estimator(config.method, domain, seed=config.seed)
     estimator.fit(demos)
     theta = np.asarray(estimator.theta_, float)
@@ -151,13 +159,16 @@ def objective_curve(history: list[dict]) -> list[float]:
     return [float(h[key]) for h in history] if key else []
 
 
-def load_policy(run_dir: Path):
-    """The greedy policy ``actions[s]`` (48,) of a learning run and its model.json, with clear
-    errors."""
+def load_policy(run_dir: Path, task: TaskDescription | None = None):
+    """The greedy policy ``actions[s]`` (S,) of a learning run and its model.json, with clear
+    errors; ``task`` (the onion-sorting task by default) gives the numbers of states and
+    actions."""
     import json
 
-    from irl.domains.onion_sorting import N_ACTIONS, N_STATES
+    from irl.domains.onion_sorting import SORTING_TASK
 
+    task = SORTING_TASK if task is None else task
+    n_states, n_actions = task.n_states, task.n_actions
     path = Path(run_dir) / MODEL_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} holds no learned model (no {MODEL_FILE}); run "
@@ -167,7 +178,7 @@ def load_policy(run_dir: Path):
         actions = np.asarray(doc["policy_indices"], dtype=np.int64)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path} is not a learned model ({exc})") from None
-    if actions.shape != (N_STATES,) or actions.min() < 0 or actions.max() >= N_ACTIONS:
-        raise ValueError(f"{path}: the policy must give one action in [0, {N_ACTIONS}) for each "
-                         f"of the {N_STATES} onion-sorting states; got shape {actions.shape}")
+    if actions.shape != (n_states,) or actions.min() < 0 or actions.max() >= n_actions:
+        raise ValueError(f"{path}: the policy must give one action in [0, {n_actions}) for each "
+                         f"of the {n_states} {task.name} states; got shape {actions.shape}")
     return actions, doc

@@ -25,6 +25,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from irl.domains.task import TaskDescription
 from recordings.schema import CLASS_COLORS, CLASS_NAMES
 
 __all__ = [
@@ -32,12 +33,14 @@ __all__ = [
     "class_annotations",
     "close_recording",
     "enum_labels",
+    "factor_values",
     "log_camera_images",
     "log_class_annotations",
     "log_pinhole",
     "log_series_names",
     "open_recording",
     "send_series",
+    "value_labels",
 ]
 
 logger = logging.getLogger(__name__)
@@ -168,6 +171,20 @@ def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray |
 def enum_labels(enum: type[IntEnum]) -> str:
     """``"0=name, 1=name, ..."``: the value labels of a series of enum indices."""
     return ", ".join(f"{m.value}={m.name.lower()}" for m in enum)
+
+
+def value_labels(names: Sequence[str]) -> str:
+    """``"0=name, 1=name, ..."``: the value labels of a series of indices into ``names``."""
+    return ", ".join(f"{i}={name}" for i, name in enumerate(names))
+
+
+def factor_values(task: TaskDescription) -> dict[str, tuple[str, ...]]:
+    """The series of a step of ``task``: each state factor's value names, in the order of the
+    state encoding, then ``"action"`` with the action names."""
+    if "action" in task.factors:
+        raise ValueError(f"task {task.name!r} has a state factor named 'action', which would "
+                         "hide the action series; rename it")
+    return {**task.factors, "action": task.action_names}
 
 
 def log_series_names(rec: rr.RecordingStream, names: Mapping[str, str | Sequence[str]],

@@ -33,16 +33,17 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from irl.domains.onion_sorting import Prediction, SortAction, decode_state
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.rerun.common import (
     close_recording,
-    enum_labels,
     log_camera_images,
     log_class_annotations,
     log_pinhole,
     log_series_names,
     open_recording,
     send_series,
+    value_labels,
 )
 from recordings.schema import CLASS_NAMES
 
@@ -61,15 +62,19 @@ _TIMELINE = "step"
 _COUNT_COLORS = {"tp": (40, 180, 60), "fp": (230, 120, 30), "tn": (60, 120, 220),
                  "fn": (220, 40, 40)}
 _N_JOINTS = 7
+#: The factor of the task whose values an event's ``perceived`` holds, and the value that means
+#: the onion was seen blemished (a decision the truth contradicts is logged as a warning).
+_PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED = "prediction", "bad"
 
 
 class EvaluationEvent(Protocol):
     """What the logger reads of one action of an evaluation
     (``robot.evaluation.EvaluationStep`` satisfies it).
 
-    ``state``, ``action`` and ``next_state`` are flat indices; ``onion`` is the line-up index of
-    the onion in focus, ``blemished`` its true class, ``perceived`` the classifier's answer if
-    this action inspected it, ``fate`` (``"bin"`` or ``"line"``) where this action decided it;
+    ``state``, ``action`` and ``next_state`` are flat indices of the logger's task; ``onion`` is
+    the line-up index of the onion in focus, ``blemished`` its true class, ``perceived`` the
+    classifier's answer (a value index of the task's ``prediction`` factor) if this action
+    inspected it, ``fate`` (``"bin"`` or ``"line"``) where this action decided it;
     ``tp`` .. ``recall`` are running over the decided onions. ``color`` (H, W, 3) uint8 RGB and
     ``depth`` (H, W) float metres are there when the evaluation renders, ``inspection``
     (h, w, 3) uint8 RGB on inspecting actions; ``q`` (7,) the Sawyer's joint positions.
@@ -175,6 +180,9 @@ class EvaluationLogger:
     camera_K : array-like of shape (3, 3) or None
         The main camera's intrinsics: ``<root>/camera`` becomes a pinhole.
     application_id : str
+    task : TaskDescription
+        The task of the events' states and actions (names in the decisions and the action
+        series); the onion-sorting task by default.
 
     Examples
     --------
@@ -184,7 +192,8 @@ class EvaluationLogger:
 
     def __init__(self, target: str | Path, prefix: str = EVALUATE_ROOT,
                  detector: Detect | Any | None = None, *, camera_K: Any = None,
-                 application_id: str = "onionsort_evaluate") -> None:
+                 application_id: str = "onionsort_evaluate",
+                 task: TaskDescription = SORTING_TASK) -> None:
         prefix = str(prefix).strip("/")
         if not prefix:
             raise ValueError(f"prefix must name an entity path; got {prefix!r}")
@@ -195,6 +204,7 @@ class EvaluationLogger:
                                  f"detect method; got {type(detector).__name__}")
             detector = detect
         self.prefix = prefix
+        self.task = task
         self.detect: Detect | None = detector
         self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
         self.rec = open_recording(application_id, target, evaluation_blueprint(prefix))
@@ -216,7 +226,7 @@ class EvaluationLogger:
         names: dict[str, str | list[str]] = {
             f"{p}/metrics/precision": "precision", f"{p}/metrics/recall": "recall",
             f"{p}/mdp/state": "state index",
-            f"{p}/mdp/action": f"action ({enum_labels(SortAction)})",
+            f"{p}/mdp/action": f"action ({value_labels(self.task.action_names)})",
             f"{p}/arm/joints": [f"right_j{j}" for j in range(_N_JOINTS)],
         }
         names.update({f"{p}/counts/{n}": n.upper() for n in _COUNT_COLORS})
@@ -243,7 +253,7 @@ class EvaluationLogger:
             rec.log(f"{p}/inspection", rr.Image(view))
             if self.detect is not None:
                 rec.log(f"{p}/inspection/detections", _boxes(self.detect([view])[0]))
-        text, level = _describe(event)
+        text, level = _describe(event, self.task)
         rec.log(f"{p}/decisions", rr.TextLog(text, level=level))
         self._buffer(event)
 
@@ -285,26 +295,26 @@ def _boxes(det: Detection) -> rr.Boxes2D:
                               for c, s in zip(classes, scores, strict=True)])
 
 
-def _describe(event: EvaluationEvent) -> tuple[str, str]:
-    """The decision line of ``event`` and its level."""
-    s, s_next = decode_state(int(event.state)), decode_state(int(event.next_state))
-    action = SortAction(int(event.action)).name.lower()
-
-    def name(x) -> str:
-        return f"{x.onion.name.lower()}, {x.end_effector.name.lower()}, " \
-               f"{x.prediction.name.lower()}"
-
-    text = f"#{event.step} {action}: ({name(s)}) -> ({name(s_next)})"
+def _describe(event: EvaluationEvent, task: TaskDescription = SORTING_TASK) -> tuple[str, str]:
+    """The decision line of ``event`` (states and actions of ``task``) and its level."""
+    s, s_next, a = int(event.state), int(event.next_state), int(event.action)
+    if not 0 <= a < task.n_actions:
+        raise ValueError(f"event.action must be in [0, {task.n_actions}) of task "
+                         f"{task.name!r}; got {a} at step {event.step}")
+    text = (f"#{event.step} {task.action_names[a]}: {task.state_name(s)} -> "
+            f"{task.state_name(s_next)}")
     level = rr.TextLogLevel.INFO
     if event.onion is not None:
         truth = "blemished" if event.blemished else "good"
         text += f" · onion {event.onion} ({truth})"
     if event.perceived is not None:
-        text += f" · perceived {Prediction(int(event.perceived)).name.lower()}"
-        if (int(event.perceived) == Prediction.BAD) != bool(event.blemished):
+        perceived = int(event.perceived)
+        text += f" · perceived {task.value_name(_PERCEIVED_FACTOR, perceived)}"
+        bad = task.value_index(_PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED)
+        if (perceived == bad) != bool(event.blemished):
             level = rr.TextLogLevel.WARN
     if event.fate is not None:
         text += f" · fate: {event.fate}"
-    if s_next == s:
+    if s_next == s:  # flat indices: equal exactly when the factored states are
         text += " · (no effect)"
     return text, level

@@ -13,7 +13,8 @@ Reads the perception topics ``onionsort perceive`` added to a session
     perceive/inspection/detections      Boxes2D of the detector on the inspection view
     perceive/observation                TextLog per step: estimates and the pair observation
                                         (WARN where the step was called occluded)
-    perceive/factors/*                  Scalars per step: onion, end_effector, prediction, action
+    perceive/factors/*                  Scalars per step: each state factor of the session's
+                                        task (onion, end_effector, prediction), and action
     perceive/occlusion/*                Scalars per step: p_occluded, occluded (0/1)
 
 Timelines as in :mod:`recordings.rerun.session`: ``step``, ``frame`` (the step's first frame)
@@ -30,10 +31,17 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from irl.domains.onion_sorting import Location, Prediction, SortAction
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.perception import PerceptionTopic
 from recordings.reader import FrameRecord, Session
-from recordings.rerun.common import enum_labels, log_pinhole, log_series_names, send_series
+from recordings.rerun.common import (
+    factor_values,
+    log_pinhole,
+    log_series_names,
+    send_series,
+    value_labels,
+)
 from recordings.schema import CLASS_NAMES
 
 __all__ = ["PERCEIVE_ROOT", "PerceptionLogger", "perception_views", "read_detections"]
@@ -41,8 +49,6 @@ __all__ = ["PERCEIVE_ROOT", "PerceptionLogger", "perception_views", "read_detect
 logger = logging.getLogger(__name__)
 
 PERCEIVE_ROOT = "perceive"
-_FACTORS = {"onion": Location, "end_effector": Location, "prediction": Prediction,
-            "action": SortAction}
 
 #: A stored detection: (x_min, y_min, x_max, y_max, class_id, score).
 Detections = dict[int, list[tuple[float, float, float, float, int, float]]]
@@ -103,16 +109,29 @@ class PerceptionLogger:
         annotation context logged.
     images : bool
         Log each step's first frame and inspection view with the detector's boxes.
+    task : TaskDescription
+        The task whose factor series are named now (the onion-sorting task by default); a
+        session of another task gets its series named when it is logged.
     """
 
-    def __init__(self, rec: rr.RecordingStream, *, images: bool = True) -> None:
+    def __init__(self, rec: rr.RecordingStream, *, images: bool = True,
+                 task: TaskDescription = SORTING_TASK) -> None:
         self.rec = rec
         self.images = images
-        names = {f"{PERCEIVE_ROOT}/factors/{name}": f"perceived {name} ({enum_labels(enum)})"
-                 for name, enum in _FACTORS.items()}
-        names[f"{PERCEIVE_ROOT}/occlusion/p_occluded"] = "P(occluded)"
-        names[f"{PERCEIVE_ROOT}/occlusion/occluded"] = "called occluded (0/1)"
+        self._named: set[TaskDescription] = set()
+        self._name_series(task)
+        names = {f"{PERCEIVE_ROOT}/occlusion/p_occluded": "P(occluded)",
+                 f"{PERCEIVE_ROOT}/occlusion/occluded": "called occluded (0/1)"}
         log_series_names(rec, names)
+
+    def _name_series(self, task: TaskDescription) -> None:
+        """Log the names of ``task``'s factor series, once per task."""
+        if task in self._named:
+            return
+        self._named.add(task)
+        log_series_names(self.rec, {
+            f"{PERCEIVE_ROOT}/factors/{name}": f"perceived {name} ({value_labels(values)})"
+            for name, values in factor_values(task).items()})
 
     def log_session(self, session: Session, *, frame_offset: int = 0,
                     step_offset: int = 0) -> int:
@@ -138,11 +157,13 @@ class PerceptionLogger:
                            session.path, len(msgs) - len(keep))
         if not keep:
             return 0
+        values = factor_values(session.task)
+        self._name_series(session.task)
         if self.images:
             self._log_images(session, keep, frame_offset, step_offset)
         for msg, frame in keep:
             self._set_time(frame, int(msg["step"]), frame_offset, step_offset)
-            text, level = _observation_text(msg)
+            text, level = _observation_text(msg, values)
             self.rec.log(f"{PERCEIVE_ROOT}/observation", rr.TextLog(text, level=level))
         indexes = [
             rr.TimeColumn("step", sequence=[step_offset + int(m["step"]) for m, _ in keep]),
@@ -150,7 +171,7 @@ class PerceptionLogger:
             rr.TimeColumn("time", duration=np.array([f.time_ns for _, f in keep],
                                                     "timedelta64[ns]")),
         ]
-        for name in _FACTORS:
+        for name in values:
             send_series(self.rec, f"{PERCEIVE_ROOT}/factors/{name}", indexes,
                         [float(m.get(name, np.nan)) for m, _ in keep])
         send_series(self.rec, f"{PERCEIVE_ROOT}/occlusion/p_occluded", indexes,
@@ -199,19 +220,30 @@ def _boxes(dets: list[tuple]) -> rr.Boxes2D:
                       labels=[f"{CLASS_NAMES.get(int(d[4]), d[4])} {d[5]:.2f}" for d in dets])
 
 
-def _observation_text(msg: dict) -> tuple[str, str]:
-    """The observation line of a perceived step and its level."""
+def _observation_text(msg: dict, values: dict[str, tuple[str, ...]] | None = None
+                      ) -> tuple[str, str]:
+    """The observation line of a perceived step and its level; ``values`` are the value names
+    of each factor and the action (:func:`~recordings.rerun.common.factor_values`, the
+    onion-sorting task's by default)."""
+    values = factor_values(SORTING_TASK) if values is None else values
     step = int(msg["step"])
     p = msg.get("p_occluded")
     p_text = "" if p is None else f" (P(occluded) {float(p):.2f})"
     if msg["occluded"]:
         return f"#{step} called occluded{p_text}: no observation", rr.TextLogLevel.WARN
     names = []
-    for name, enum in _FACTORS.items():
+    for name, labels in values.items():
         if msg.get(name) is not None:
-            names.append(f"{name}={enum(int(msg[name])).name.lower()}")
+            names.append(f"{name}={_label(labels, int(msg[name]), name)}")
     inspected = msg.get("inspected")
     seen = "" if inspected is None else \
         f" · inspection saw {CLASS_NAMES.get(int(inspected), inspected)}"
     return (f"#{step} observation {msg['observation']}: state {msg.get('state', '?')} "
             f"({', '.join(names)}){p_text}{seen}", rr.TextLogLevel.INFO)
+
+
+def _label(labels: tuple[str, ...], index: int, name: str) -> str:
+    """``labels[index]``; ValueError outside ``[0, len(labels))``."""
+    if not 0 <= index < len(labels):
+        raise ValueError(f"{name} must be in [0, {len(labels)}); got {index}")
+    return labels[index]

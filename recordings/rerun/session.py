@@ -12,7 +12,8 @@ it. A perceived session's perception topics are logged too, under ``perceive/``
     record/inspection                EncodedImage (PNG), on a step's first frame
     record/session                   TextDocument: which session is playing
     record/truth/state               TextDocument: the true state, action, occlusion per frame
-    record/truth/factors/*           Scalars per step: onion, end_effector, prediction, action
+    record/truth/factors/*           Scalars per step: each state factor of the session's task
+                                     (onion, end_effector, prediction), and action
     record/truth/occlusion/*         Scalars per step: fraction (largest view fraction covered
                                      in the step), occluded (0/1)
 
@@ -31,17 +32,19 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from irl.domains.onion_sorting import Location, Prediction, SortAction, decode_state
+from irl.domains.onion_sorting import SORTING_TASK
+from irl.domains.task import TaskDescription
 from recordings.reader import FrameRecord, Session
 from recordings.rerun.common import (
     close_recording,
-    enum_labels,
+    factor_values,
     log_camera_images,
     log_class_annotations,
     log_pinhole,
     log_series_names,
     open_recording,
     send_series,
+    value_labels,
 )
 from recordings.rerun.perceive import PerceptionLogger, perception_views
 
@@ -51,8 +54,6 @@ logger = logging.getLogger(__name__)
 
 RECORD_ROOT = "record"
 _TRUTH = f"{RECORD_ROOT}/truth"
-_FACTORS = {"onion": Location, "end_effector": Location, "prediction": Prediction,
-            "action": SortAction}
 
 
 def session_blueprint() -> rrb.Blueprint:
@@ -95,6 +96,10 @@ class SessionLogger:
     application_id : str
     perception : bool
         Also log the perception topics of perceived sessions (``perceive/``).
+    task : TaskDescription
+        The task whose factor series are named when the stream opens (the onion-sorting task by
+        default); each session is logged with its own task (``Session.task``), and a session of
+        another task gets its series named when it is logged.
 
     Examples
     --------
@@ -104,19 +109,29 @@ class SessionLogger:
     """
 
     def __init__(self, target: str | Path, application_id: str = "onionsort", *,
-                 perception: bool = True) -> None:
+                 perception: bool = True, task: TaskDescription = SORTING_TASK) -> None:
         self.rec = open_recording(application_id, target, session_blueprint())
         self.log_perception = perception
+        self.task = task
         log_class_annotations(self.rec)
-        names = {f"{_TRUTH}/factors/{name}": f"{name} ({enum_labels(enum)})"
-                 for name, enum in _FACTORS.items()}
-        names[f"{_TRUTH}/occlusion/fraction"] = "fraction of the view covered"
-        names[f"{_TRUTH}/occlusion/occluded"] = "occluded step (0/1)"
-        log_series_names(self.rec, names)
+        self._named: set[TaskDescription] = set()
+        self._name_series(task)
+        log_series_names(self.rec, {
+            f"{_TRUTH}/occlusion/fraction": "fraction of the view covered",
+            f"{_TRUTH}/occlusion/occluded": "occluded step (0/1)"})
         self._perception: PerceptionLogger | None = None
         self._frame = 0
         self._step = 0
         self._closed = False
+
+    def _name_series(self, task: TaskDescription) -> None:
+        """Log the names of ``task``'s factor series, once per task."""
+        if task in self._named:
+            return
+        self._named.add(task)
+        log_series_names(self.rec, {
+            f"{_TRUTH}/factors/{name}": f"{name} ({value_labels(values)})"
+            for name, values in factor_values(task).items()})
 
     def __enter__(self) -> SessionLogger:
         return self
@@ -145,7 +160,7 @@ class SessionLogger:
             self._log_truth_series(session, frames, frame0, step0)
         if self.log_perception and session.perception:
             if self._perception is None:
-                self._perception = PerceptionLogger(self.rec)
+                self._perception = PerceptionLogger(self.rec, task=self.task)
             self._perception.log_session(session, frame_offset=frame0, step_offset=step0)
         self._frame = frame0 + max(f.index for f in frames) + 1
         self._step = step0 + max(max(f.step for f in frames) + 1, len(session.steps))
@@ -184,7 +199,7 @@ class SessionLogger:
                 labels=[f"{b.get('label', '')} #{b.get('onion_id', '?')}" for b in boxes],
             ))
         if frame.state is not None:
-            rec.log(f"{_TRUTH}/state", rr.TextDocument(_state_text(frame),
+            rec.log(f"{_TRUTH}/state", rr.TextDocument(_state_text(frame, session.task),
                                                        media_type="text/markdown"))
 
     def _log_truth_series(self, session: Session, frames: list[FrameRecord], frame0: int,
@@ -205,11 +220,12 @@ class SessionLogger:
             rr.TimeColumn("time", duration=np.array([first[s.step].time_ns for s in steps],
                                                     "timedelta64[ns]")),
         ]
-        states = [decode_state(s.state) for s in steps]
-        values = {"onion": [int(x.onion) for x in states],
-                  "end_effector": [int(x.end_effector) for x in states],
-                  "prediction": [int(x.prediction) for x in states],
-                  "action": [s.action for s in steps]}
+        task = session.task
+        self._name_series(task)
+        states = task.decode_array(np.array([s.state for s in steps], np.int64))
+        values = {name: [int(v) for v in states[:, k]]
+                  for k, name in enumerate(task.factor_names)}
+        values["action"] = [s.action for s in steps]
         for name, series in values.items():
             send_series(self.rec, f"{_TRUTH}/factors/{name}", indexes, series)
         send_series(self.rec, f"{_TRUTH}/occlusion/fraction", indexes,
@@ -234,13 +250,16 @@ def _session_text(session: Session, index: int) -> str:
             + ", ".join(sides))
 
 
-def _state_text(frame: FrameRecord) -> str:
+def _state_text(frame: FrameRecord, task: TaskDescription = SORTING_TASK) -> str:
     st = frame.state
-    s = decode_state(int(st["state"]))
-    action = SortAction(int(st["action"])).name.lower()
+    factors = task.decode(int(st["state"]))
+    state = ", ".join(f"{f}={task.value_name(f, v)}" for f, v in factors.items())
+    action = int(st["action"])
+    if not 0 <= action < task.n_actions:
+        raise ValueError(f"frame {frame.index}: action must be in [0, {task.n_actions}) of "
+                         f"task {task.name!r}; got {action}")
     return (f"**frame** {frame.index} · **step** {frame.step} (phase {frame.phase})\n\n"
-            f"**state** {st['state']}: onion={s.onion.name.lower()}, "
-            f"hand={s.end_effector.name.lower()}, prediction={s.prediction.name.lower()}\n\n"
-            f"**action** {action}\n\n"
+            f"**state** {st['state']}: {state}\n\n"
+            f"**action** {task.action_names[action]}\n\n"
             f"**occluded step** {bool(st['occluded'])} "
             f"({100 * float(st.get('occluded_fraction', 0.0)):.0f}% of the view covered)")

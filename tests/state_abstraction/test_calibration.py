@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 
 import irl
-from irl.domains.onion_sorting import factor_confusion
-from state_abstraction.calibration import FACTORS, calibrate, load_calibration
+from irl.domains.onion_sorting import SORTING_TASK, factor_confusion
+from irl.domains.task import TaskDescription
+from state_abstraction.calibration import (
+    FACTORS,
+    calibrate,
+    calibration_factors,
+    load_calibration,
+)
 
 SIZES = {k: len(v) for k, v in FACTORS.items()}
 
@@ -97,3 +103,91 @@ def test_bad_files_and_inputs_are_clear_errors(tmp_path, known):
     del true["action"]
     with pytest.raises(ValueError, match="missing"):
         calibrate(true, pred)
+
+
+# -- a made-up task: the calibration follows the task description --------------------------
+
+TOY = TaskDescription("toy-room", {"light": ("off", "on"), "door": ("closed", "open", "ajar")},
+                      action_names=("wait", "toggle"), feature_names=("lit",))
+TOY_SIZES = {k: len(v) for k, v in calibration_factors(TOY).items()}
+
+
+def toy_data(seed, n_frames=4000, error=0.15):
+    rng = np.random.default_rng(seed)
+    true, pred = {}, {}
+    for k, n in TOY_SIZES.items():
+        C = factor_confusion(n, error)
+        true[k] = rng.integers(n, size=n_frames)
+        pred[k] = np.array([rng.choice(n, p=C[i]) for i in true[k]])
+    return true, pred
+
+
+def test_calibration_factors_of_a_task():
+    assert calibration_factors(TOY) == {"light": ["off", "on"],
+                                        "door": ["closed", "open", "ajar"],
+                                        "action": ["wait", "toggle"]}
+    assert calibration_factors(SORTING_TASK) == FACTORS
+    bad = TaskDescription("bad", {"action": ("a", "b")}, action_names=("x",),
+                          feature_names=("f",))
+    with pytest.raises(ValueError, match="state factor named 'action'"):
+        calibration_factors(bad)
+
+
+def test_a_calibration_of_a_two_factor_task():
+    true, pred = toy_data(7)
+    cal = calibrate(true, pred, task=TOY)
+    assert (cal.task, cal.task_name, cal.n_states, cal.n_actions) == (TOY, "toy-room", 6, 2)
+    assert list(cal.factors) == ["light", "door", "action"]
+    assert cal.joint_state.counts.shape == (6, 6)
+    s_true = [TOY.encode({"light": int(a), "door": int(b)})
+              for a, b in zip(true["light"], true["door"], strict=True)]
+    s_pred = [TOY.encode({"light": int(a), "door": int(b)})
+              for a, b in zip(pred["light"], pred["door"], strict=True)]
+    expected = np.zeros((6, 6), int)
+    np.add.at(expected, (s_true, s_pred), 1)
+    np.testing.assert_array_equal(cal.joint_state.counts, expected)
+    assert cal.state_error_rate == pytest.approx(np.mean(np.array(s_true) != np.array(s_pred)))
+    om = cal.observation_model(smoothing=1.0)
+    assert om.probs.shape == (6, 2, TOY.n_pairs)
+    np.testing.assert_allclose(om.probs.sum(axis=2), 1.0)
+    # P(o | s, a) of a pair o = TOY.pair(s', a') is the product of the factors' confusions
+    C = {k: cal.factors[k].probabilities(1.0) for k in TOY_SIZES}
+    s, a, s2, a2 = 4, 1, 3, 0
+    f, f2 = TOY.decode(s), TOY.decode(s2)
+    want = C["light"][f["light"], f2["light"]] * C["door"][f["door"], f2["door"]] \
+        * C["action"][a, a2]
+    assert om.probs[s, a, TOY.pair(s2, a2)] == pytest.approx(want)
+
+
+def test_a_two_factor_calibration_saves_and_loads_for_its_task(tmp_path):
+    cal = calibrate(*toy_data(8, 500), task=TOY)
+    path = cal.save(tmp_path / "toy.json")
+    doc = json.loads(path.read_text())
+    assert (doc["n_states"], doc["n_actions"]) == (6, 2)
+    back = load_calibration(path, task=TOY)
+    assert back.task == TOY
+    np.testing.assert_allclose(back.observation_model().probs, cal.observation_model().probs)
+    with pytest.raises(ValueError, match=r"\(S, A\) = \(6, 2\), not the onion-sorting MDP's "
+                                         r"\(48, 5\)"):
+        load_calibration(path)
+    renamed = TaskDescription("toy-room", {"light": ("dark", "bright"),
+                                           "door": ("closed", "open", "ajar")},
+                              action_names=("wait", "toggle"), feature_names=("lit",))
+    with pytest.raises(ValueError, match="the values of factor 'light' must be"):
+        load_calibration(path, task=renamed)
+    missing = {k: v for k, v in toy_data(9, 10)[0].items() if k != "door"}
+    with pytest.raises(ValueError, match=r"\['light', 'door', 'action'\]; missing \['door'\]"):
+        calibrate(missing, missing, task=TOY)
+
+
+def test_the_shipped_calibration_still_loads():
+    from pathlib import Path
+
+    import state_abstraction
+
+    shipped = Path(state_abstraction.__file__).parents[1] / "onionsort/models/calibration.json"
+    if not shipped.exists():
+        pytest.skip("no shipped calibration")
+    cal = load_calibration(shipped)
+    assert cal.task == SORTING_TASK
+    assert cal.observation_model().probs.shape == (48, 5, 240)
