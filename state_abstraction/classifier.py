@@ -42,7 +42,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from irl.domains.onion_sorting import Location, Prediction, SortAction
+from irl.domains.onion_sorting import SORTING_TASK
 
 __all__ = ["HEADS", "OCCLUDED_THRESHOLD", "ClassifierConfig", "LabelledStep", "StateClassifier",
            "drop_depth", "evaluate", "evaluate_steps", "step_input", "step_targets",
@@ -51,8 +51,12 @@ __all__ = ["HEADS", "OCCLUDED_THRESHOLD", "ClassifierConfig", "LabelledStep", "S
 logger = logging.getLogger(__name__)
 
 DEPTH_SCALE = 5.0
-HEADS = {"onion": len(Location), "end_effector": len(Location), "action": len(SortAction),
-         "waiting": 2, "occluded": 2}
+#: The task whose factors the camera shows (the prediction factor is read at inspection).
+TASK = SORTING_TASK
+#: Output heads and their sizes: the camera-visible factors and the action, from the task's
+#: description, then whether a claimed onion waits at the gate and whether the view is occluded.
+HEADS = {"onion": len(TASK.factors["onion"]), "end_effector": len(TASK.factors["end_effector"]),
+         "action": TASK.n_actions, "waiting": 2, "occluded": 2}
 #: Heads that are read only on unoccluded steps.
 FACTOR_HEADS = ("onion", "end_effector", "action", "waiting")
 #: A step is called occluded when ``P(occluded) >= OCCLUDED_THRESHOLD``. Below 0.5 on purpose:
@@ -249,7 +253,8 @@ def drop_depth(x: torch.Tensor, p: float, generator: torch.Generator | None = No
 
 def waiting(onion: int, prediction: int) -> int:
     """1 if a claimed onion waits at the gate (on the conveyor, not inspected), else 0."""
-    return int(onion == Location.CONVEYOR and prediction == Prediction.UNKNOWN)
+    return int(onion == TASK.value_index("onion", "conveyor")
+               and prediction == TASK.value_index("prediction", "unknown"))
 
 
 def step_targets(record: Mapping[str, Any]) -> dict[str, int]:

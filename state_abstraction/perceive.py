@@ -25,13 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from irl.domains.onion_sorting import (
-    N_ACTIONS,
-    Location,
-    Prediction,
-    SortingState,
-    encode_state,
-)
+from irl.domains.onion_sorting import SORTING_TASK, Location, Prediction
 from state_abstraction.classifier import (
     FACTOR_HEADS,
     OCCLUDED_THRESHOLD,
@@ -89,13 +83,13 @@ class PerceivedStep:
     @property
     def state(self) -> int:
         """The perceived state's index."""
-        return encode_state(SortingState(Location(self.onion), Location(self.end_effector),
-                                          Prediction(self.prediction)))
+        return SORTING_TASK.encode({"onion": self.onion, "end_effector": self.end_effector,
+                                    "prediction": self.prediction})
 
     @property
     def observation(self) -> int | None:
         """The pair observation ``s * A + a``, or None if the step was called occluded."""
-        return None if self.occluded else self.state * N_ACTIONS + self.action
+        return None if self.occluded else SORTING_TASK.pair(self.state, self.action)
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (the ``/perception/state`` message of a session)."""
