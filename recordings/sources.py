@@ -452,6 +452,7 @@ def write_video(path: str | Path, frames, fps: float, fourcc: str = "mp4v") -> P
     path = Path(path)
     if not fps > 0:
         raise ValueError(f"fps must be > 0; got {fps}")
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".partial" + path.suffix)  # OpenCV picks the container
     writer = None                                               # by the suffix
     n = 0

@@ -4,6 +4,8 @@ import doctest
 import re
 from pathlib import Path
 
+import pytest
+
 import irl
 
 ROOT = Path(__file__).parents[1]
@@ -22,3 +24,16 @@ def test_readme_library_example_runs(capsys):
 def test_package_docstring_example():
     failures, _ = doctest.testmod(irl, verbose=False)
     assert failures == 0
+
+
+@pytest.mark.slow
+def test_readme_stages_example_runs(tmp_path, monkeypatch):
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    example = next(b for b in blocks if "onionsort.stages import" in b)
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(example, "README.md", "exec"), scope)
+    assert len(scope["sessions"]) == 4
+    assert len(scope["model"]["policy_indices"]) == 48
+    assert (tmp_path / "runs/study/mmap/model.json").is_file()
