@@ -14,7 +14,8 @@ It reports, for each, the learned reward's ILE and normalized ILE, whether the g
 the expert's on every reachable state, and how many states' actions differ from the RGB-D
 policy; and the step-boundary precision and recall (within one frame) of the perceived-change
 segmentation against the true step boundaries. Every dataset and session is rendered here from
-its own seed; nothing is tuned on them.
+its own seed. The segmentation was developed on ``--seed 100``; the README reports the default,
+``--seed 200``, which nothing was tuned on.
 
 Usage::
 
@@ -47,10 +48,9 @@ from onionsort.stages import (
     record,
 )
 from onionsort.stages.base import write_json
-from onionsort.stages.import_video import perceived_labels, segmentation_scores
+from onionsort.stages.import_video import perceived_segmentation, segmentation_scores
 from onionsort.stages.models import PerceptionModels
 from recordings import open_session
-from recordings.segmentation import boundaries_from_labels, steps_from_boundaries
 from recordings.sources import VideoFileSource, write_video
 
 FPS = 1.5  # frames per second of the videos: 3 frames per 2-second step
@@ -79,7 +79,7 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/sensor-only"))
     parser.add_argument("--sessions", type=int, default=12)
-    parser.add_argument("--seed", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=200)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     out = args.out
@@ -106,8 +106,7 @@ def main() -> None:
             import_video(ImportConfig(out=target, video=video, step_seconds=seconds))
             imported[mode].append(target)
         with VideoFileSource(video) as source:
-            labels = perceived_labels(models.classifier, (f.color for f in source))
-        predicted = steps_from_boundaries(len(labels), boundaries_from_labels(labels, debounce=2))
+            predicted = perceived_segmentation(models.classifier, (f.color for f in source), 2)
         segmentation.append(segmentation_scores(predicted, truth, tolerance=1))
 
     perceive(PerceiveConfig(sessions=tuple(sessions)), models)

@@ -18,6 +18,7 @@ Frames are numbered ``0 .. n_frames - 1``; a "boundary" is the index of a step's
 
 from __future__ import annotations
 
+import itertools
 import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Hashable, Sequence
@@ -27,6 +28,7 @@ __all__ = [
     "boundary_scores",
     "fixed_clock",
     "resample_steps",
+    "split_long_steps",
     "steps_from_boundaries",
 ]
 
@@ -140,6 +142,44 @@ def steps_from_boundaries(n_frames: int, boundaries: Sequence[int]) -> list[int]
         end = b[k + 1] if k + 1 < len(b) else n_frames
         steps.extend([k] * (end - start))
     return steps
+
+
+def split_long_steps(boundaries: Sequence[int], n_frames: int, *,
+                     typical: float | None = None) -> list[int]:
+    """Cut segments that last several typical steps into that many equal steps.
+
+    Perceived changes miss the steps nobody can see: those during an occlusion, and those whose
+    action leaves the picture as it was. Each still takes the sorter about as long as any
+    other, so a segment ``k`` times the typical step length holds about ``k`` steps.
+
+    Parameters
+    ----------
+    boundaries : sequence of int
+        Strictly increasing frame indices where perceived steps start (0 implied).
+    n_frames : int
+    typical : float or None
+        The typical step length in frames; None: the median length of the segments found.
+
+    Returns
+    -------
+    list of int
+        The boundaries, with a segment of ``L`` frames cut into ``round(L / typical)`` steps of
+        (nearly) equal length where that is more than one.
+    """
+    starts = steps_from_boundaries(n_frames, boundaries)
+    edges = [i for i in range(n_frames) if i == 0 or starts[i] != starts[i - 1]] + [n_frames]
+    lengths = [b - a for a, b in itertools.pairwise(edges)]
+    if not lengths:
+        return []
+    if typical is None:
+        typical = float(sorted(lengths)[len(lengths) // 2])
+    if not typical > 0:
+        raise ValueError(f"typical must be > 0; got {typical}")
+    out = []
+    for start, length in zip(edges[:-1], lengths, strict=True):
+        parts = max(1, round(length / typical))
+        out.extend(start + (j * length) // parts for j in range(parts))
+    return out
 
 
 def resample_steps(step_of_frame: Sequence[int], frames_per_step: int) -> list[list[int]]:

@@ -10,9 +10,11 @@ that ``perceive``, ``calibrate --no-depth`` and ``learn`` then use like any othe
 - **perceived changes** (the default): the state classifier reads every window of
   ``frames_per_step`` consecutive frames (colour only); a new step starts where the perceived
   (onion, hand) locations change and the new reading holds for ``debounce`` windows. Windows the
-  classifier calls occluded keep the previous reading, so a passer-by does not cut steps. A step
-  whose action leaves the state unchanged (or changes only the sorter's prediction) makes no
-  visible change, so it merges with the next: measure it with :func:`segmentation_scores`.
+  classifier calls occluded keep the previous reading, so a passer-by does not cut steps. Steps
+  nobody can see (during an occlusion, or an action that leaves the picture as it was) still
+  take time, so a segment several typical steps long (the median segment) is cut into that
+  many equal steps (:func:`recordings.segmentation.split_long_steps`). Measure the result with
+  :func:`segmentation_scores`.
 
 Each step keeps ``frames_per_step`` frames spread over it (the first one always), as the state
 classifier reads them. Intrinsics come from ``intrinsics`` (JSON) or default to a 60-degree
@@ -36,7 +38,8 @@ import numpy as np
 
 from onionsort.stages.base import log_config
 
-__all__ = ["ImportConfig", "import_video", "perceived_labels", "segmentation_scores"]
+__all__ = ["ImportConfig", "import_video", "perceived_labels", "perceived_segmentation",
+           "segmentation_scores"]
 
 logger = logging.getLogger(__name__)
 
@@ -127,21 +130,29 @@ def perceived_labels(classifier, colors: Iterable[np.ndarray]) -> list[tuple[int
     return labels
 
 
-def _step_of_frame(config: ImportConfig, frames) -> list[int]:
+def perceived_segmentation(classifier, colors: Iterable[np.ndarray], debounce: int) -> list[int]:
+    """The step of each frame from perceived changes, long segments cut at the typical step
+    length (see the module docstring)."""
     from recordings.segmentation import (
         boundaries_from_labels,
-        fixed_clock,
+        split_long_steps,
         steps_from_boundaries,
     )
+
+    labels = perceived_labels(classifier, colors)
+    boundaries = boundaries_from_labels(labels, debounce=debounce)
+    return steps_from_boundaries(len(labels), split_long_steps(boundaries, len(labels)))
+
+
+def _step_of_frame(config: ImportConfig, frames) -> list[int]:
+    from recordings.segmentation import fixed_clock
 
     if config.step_seconds is not None:
         return fixed_clock([f.time_ns for f in frames], config.step_seconds)
     from onionsort.stages.models import PerceptionModels
 
     classifier = PerceptionModels.load(config.models).classifier
-    labels = perceived_labels(classifier, (f.color for f in frames))
-    return steps_from_boundaries(len(labels),
-                                 boundaries_from_labels(labels, debounce=config.debounce))
+    return perceived_segmentation(classifier, (f.color for f in frames), config.debounce)
 
 
 def import_video(config: ImportConfig):

@@ -16,6 +16,7 @@ from recordings.segmentation import (
     boundary_scores,
     fixed_clock,
     resample_steps,
+    split_long_steps,
     steps_from_boundaries,
 )
 from recordings.sources import (
@@ -375,3 +376,16 @@ def test_load_intrinsics_errors(tmp_path, content, match):
 def test_load_intrinsics_missing(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"nope\.json"):
         load_intrinsics(tmp_path / "nope.json")
+
+
+def test_long_segments_are_cut_into_typical_steps():
+    # segments of 3, 3, 9 (three unseen steps), 3 and 7 frames: the median is 3; the 9 frames
+    # become 3 steps, the last 7 frames round to 2 steps cut at 18 + 7 // 2
+    boundaries = [0, 3, 6, 15, 18]
+    assert split_long_steps(boundaries, 25) == [0, 3, 6, 9, 12, 15, 18, 21]
+    assert split_long_steps([0, 3], 6) == [0, 3]
+    assert split_long_steps([0], 12, typical=4) == [0, 4, 8]
+    assert split_long_steps([0], 5, typical=4) == [0]  # 1.25 steps rounds to one
+    assert split_long_steps([], 0) == []
+    with pytest.raises(ValueError, match="typical must be > 0"):
+        split_long_steps([0], 4, typical=0)
