@@ -1,36 +1,59 @@
-"""Sweeps of the paper's experiments: ILE and run time over occlusion x noise x batches.
+"""Sweeps of the paper's experiments: ILE, exact-policy recovery and run time, with intervals.
 
-A sweep is a list of :class:`Trial` (method, occlusion, noise, batch); each trial samples its
-own batch of demonstrations from a seed derived from (sweep seed, occlusion, noise, batch), so
-every method sees the same data and any trial can be re-run alone. Trials are independent and
-run on a process pool.
+A sweep is a list of :class:`Trial` (method, occlusion, noise, demonstrations, length, learner
+setting, batch). Each trial draws its batch of demonstrations from seeds derived from (sweep
+seed, occlusion, noise, length, batch, demonstration index), so every method and every learner
+setting sees the same data, a batch of ``n`` demonstrations is the first ``n`` of a larger one
+(a paired design along the number of demonstrations), and any trial can be re-run alone. Trials
+are independent and run on a process pool.
+
+The data always come from the domain's true expert (its ``beta``). The learners can be fitted
+with another beta: a :data:`learner setting <SweepConfig.learners>` is a number (the beta
+itself), a factor of the domain's beta written ``"x0.5"``, or ``"paper"`` (the paper's beta 0.03
+with the domain's prior). Learners without a ``beta`` (HiddenDataEM, MaxEnt IRL) are built the
+same way and simply have nothing to change; every method is run at every setting.
+
+:func:`summarize` reports, per (method, occlusion, noise, trajectories, length, learner setting),
+means over batches with percentile-bootstrap confidence intervals (:func:`irl.stats.bootstrap_ci`)
+seeded from the sweep seed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import math
 import time
 import warnings
+import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from irl.demonstrations import observe, sample_trajectory
 from irl.domains import Domain, forestworld, onion_sorting
+from irl.domains.onion_sorting import reachable_states as sorting_reachable_states
 from irl.exceptions import ConvergenceWarning
 from irl.learners.registry import LEARNERS, make_estimator
-from irl.metrics import inverse_learning_error, normalized_inverse_learning_error
+from irl.metrics import inverse_learning_error, normalized_inverse_learning_error, policy_mismatch
+from irl.stats import bootstrap_ci
 
 __all__ = [
     "DOMAINS",
     "METHODS",
+    "PAPER_BETA",
     "SweepConfig",
     "Trial",
     "TrialResult",
+    "learner_domain",
     "make_estimator",
+    "parse_learner_setting",
+    "result_rows",
     "run_sweep",
     "run_trial",
+    "sample_batch",
     "summarize",
 ]
 
@@ -40,23 +63,91 @@ DOMAINS: dict[str, Callable[..., Domain]] = {
     "forestworld": forestworld,
     "sorting": onion_sorting,
 }
+#: States on which a learned greedy policy must equal the expert's for ``exact_policy``: those
+#: reachable from the initial states where the domain defines them, all states otherwise.
+REACHABLE_STATES: dict[str, Callable[[], Sequence[int]]] = {
+    "sorting": sorting_reachable_states,
+}
 #: The paper's learners, in registration order; a sweep may also name any learner registered
 #: since (:func:`irl.learners.register_learner`; with ``workers > 1`` it must be registered on
 #: import of a module the workers import too).
 METHODS = tuple(LEARNERS)
+#: The Boltzmann rationality the paper uses for its learners (Section 5).
+PAPER_BETA = 0.03
+#: Bootstrap settings of :func:`summarize`.
+N_RESAMPLES = 2000
+CONFIDENCE = 0.95
+
+
+def parse_learner_setting(setting) -> str:
+    """The canonical label of one learner setting: ``"paper"``, ``"x<factor>"`` or a beta.
+
+    ``"x0.50"`` becomes ``"x0.5"``, ``1.5`` and ``"1.50"`` become ``"1.5"``. A ``ValueError``
+    names the value unless it is ``"paper"``, a positive finite factor or a positive finite beta.
+    """
+    text = str(setting).strip().lower()
+    if text == "paper":
+        return text
+    factor = text.startswith("x")
+    try:
+        value = float(text[1:] if factor else text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(
+            "learner_beta must be positive numbers (betas), factors of the domain's beta such "
+            f"as x0.5, or 'paper'; got {setting!r}"
+        )
+    return f"x{value:g}" if factor else f"{value:g}"
+
+
+def learner_domain(domain: Domain, setting: str) -> Domain:
+    """``domain`` as the learners are told it: the beta (and prior) of ``setting``.
+
+    ``"x<f>"`` multiplies the domain's beta by ``f``; a number replaces it; ``"paper"`` is the
+    paper's beta 0.03 with the domain's prior (on Forestworld the paper's N(-1, 0.5); the paper
+    names no prior for sorting). The true reward and the observation model are unchanged.
+    """
+    label = parse_learner_setting(setting)
+    if label == "paper":
+        beta = PAPER_BETA
+    elif label.startswith("x"):
+        beta = domain.beta * float(label[1:])
+    else:
+        beta = float(label)
+    return dataclasses.replace(domain, beta=beta)
 
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """What to sweep. ``points`` are the (occlusion, noise) pairs; each gets ``batches`` batches
-    of ``trajectories`` demonstrations of ``length`` steps."""
+    """What to sweep.
+
+    Attributes
+    ----------
+    domain : str
+        A key of :data:`DOMAINS`.
+    points : tuple of (occlusion, noise)
+    methods : tuple of str
+        Keys of :data:`irl.learners.LEARNERS`.
+    batches : int
+        Batches (independent data sets) per point.
+    trajectories : int or tuple of int
+        Demonstrations per batch; several values sweep the amount of data.
+    length : int or tuple of int
+        Steps per demonstration; several values sweep it.
+    learners : tuple of str
+        Learner settings (see :func:`parse_learner_setting`); ``("x1",)``: the true beta.
+    seed : int
+        Seeds the data of every batch and the bootstrap of :func:`summarize`.
+    """
 
     domain: str
     points: tuple[tuple[float, float], ...]
     methods: tuple[str, ...] = METHODS
     batches: int = 10
-    trajectories: int = 10
-    length: int = 20
+    trajectories: int | tuple[int, ...] = 10
+    length: int | tuple[int, ...] = 20
+    learners: tuple[str, ...] = ("x1",)
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -65,9 +156,23 @@ class SweepConfig:
         unknown = [m for m in self.methods if m not in LEARNERS]
         if unknown:
             raise ValueError(f"methods must be among {tuple(LEARNERS)}; got {unknown}")
-        for name in ("batches", "trajectories", "length"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+        if not self.methods:
+            raise ValueError("methods must name at least one learner; got none")
+        for name in ("trajectories", "length"):
+            values = getattr(self, name)
+            values = (values,) if isinstance(values, int | np.integer) else tuple(values)
+            if not values:
+                raise ValueError(f"{name} must have at least one value; got none")
+            for v in values:
+                if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                    raise ValueError(f"{name} must be integers >= 1; got {v!r}")
+            object.__setattr__(self, name, tuple(int(v) for v in dict.fromkeys(values)))
+        if self.batches < 1:
+            raise ValueError(f"batches must be >= 1; got {self.batches}")
+        if not self.learners:
+            raise ValueError("learners must have at least one setting; got none")
+        object.__setattr__(self, "learners", tuple(dict.fromkeys(
+            parse_learner_setting(s) for s in self.learners)))
         for occ, noise in self.points:
             if not 0.0 <= occ < 1.0:
                 raise ValueError(f"occlusion must be in [0, 1); got {occ}")
@@ -76,9 +181,12 @@ class SweepConfig:
 
     def trials(self) -> list[Trial]:
         return [
-            Trial(self.domain, m, occ, noise, b, self.trajectories, self.length, self.seed)
+            Trial(self.domain, m, occ, noise, b, n, length, self.seed, learner)
             for occ, noise in self.points
+            for length in self.length
+            for n in self.trajectories
             for b in range(self.batches)
+            for learner in self.learners
             for m in self.methods
         ]
 
@@ -93,10 +201,13 @@ class Trial:
     trajectories: int
     length: int
     seed: int
+    learner: str = "x1"
 
-    def data_seed(self) -> np.random.SeedSequence:
-        """Seed of the batch's data: shared by all methods of one (occlusion, noise, batch)."""
-        key = [self.seed, round(self.occlusion * 1000), round(self.noise * 1000), self.batch]
+    def data_seed(self, index: int) -> np.random.SeedSequence:
+        """Seed of the batch's ``index``-th demonstration: shared by all methods, all learner
+        settings and all batch sizes of one (occlusion, noise, length, batch)."""
+        key = [self.seed, round(self.occlusion * 1000), round(self.noise * 1000), self.length,
+               self.batch, index]
         return np.random.SeedSequence(key)
 
 
@@ -111,32 +222,53 @@ class TrialResult:
     seconds: float
     n_iter: int
     converged: bool
+    trajectories: int = 0
+    length: int = 0
+    learner: str = "x1"
+    learner_beta: float = math.nan
+    exact_policy: int = 0
+
+
+def sample_batch(domain: Domain, trial: Trial) -> list:
+    """The trial's demonstrations, each from its own seed (see :meth:`Trial.data_seed`)."""
+    policy = domain.expert_policy()
+    demos = []
+    for i in range(trial.trajectories):
+        rng = np.random.default_rng(trial.data_seed(i))
+        tr = sample_trajectory(domain.mdp, policy, trial.length, rng)
+        demos.append(observe(tr, domain.observation_model, trial.occlusion, rng))
+    return demos
 
 
 def run_trial(trial: Trial) -> TrialResult:
-    """Sample the trial's batch, fit its method, and score it."""
+    """Sample the trial's batch, fit its method with its learner setting, and score it."""
     domain = DOMAINS[trial.domain](noise=trial.noise)
-    data_rng = np.random.default_rng(trial.data_seed())
-    demos, _ = domain.sample(trial.trajectories, trial.length, trial.occlusion, data_rng)
-    est = make_estimator(trial.method, domain, seed=trial.batch)
+    demos = sample_batch(domain, trial)
+    told = learner_domain(domain, trial.learner)
+    est = make_estimator(trial.method, told, seed=trial.batch)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
         est.fit(demos)
     seconds = time.perf_counter() - start
     converged = not any(issubclass(w.category, ConvergenceWarning) for w in caught)
+    states = REACHABLE_STATES[trial.domain]() if trial.domain in REACHABLE_STATES else None
+    mdp, theta = domain.mdp, domain.true_theta
     return TrialResult(
         method=trial.method,
         occlusion=trial.occlusion,
         noise=trial.noise,
         batch=trial.batch,
-        ile=inverse_learning_error(domain.mdp, domain.true_theta, est.theta_),
-        normalized_ile=normalized_inverse_learning_error(
-            domain.mdp, domain.true_theta, est.theta_
-        ),
+        ile=inverse_learning_error(mdp, theta, est.theta_),
+        normalized_ile=normalized_inverse_learning_error(mdp, theta, est.theta_),
         seconds=seconds,
         n_iter=int(est.n_iter_),
         converged=converged,
+        trajectories=trial.trajectories,
+        length=trial.length,
+        learner=trial.learner,
+        learner_beta=float(told.beta),
+        exact_policy=int(policy_mismatch(mdp, theta, est.theta_, states) == 0),
     )
 
 
@@ -155,24 +287,75 @@ def run_sweep(config: SweepConfig, *, workers: int = 1) -> Iterator[TrialResult]
         yield from pool.map(run_trial, trials, chunksize=1)
 
 
-def summarize(results: Iterable[TrialResult]) -> list[dict]:
-    """Mean and standard deviation of ILE and run time per (method, occlusion, noise)."""
+#: The grouping of :func:`summarize`: one summary row per distinct value of these fields.
+GROUP_BY = ("method", "occlusion", "noise", "trajectories", "length", "learner")
+
+
+def _group_rng(seed: int, key: tuple) -> np.random.Generator:
+    """The bootstrap generator of one group: from the sweep seed and the group's data point
+    (occlusion, noise, trajectories, length) only. So a group's interval does not depend on
+    which other groups were swept, and every method and learner setting at a point resamples
+    the same batches (their intervals are paired, like their data)."""
+    fields = dict(zip(GROUP_BY, key, strict=True))
+    words = [zlib.crc32(repr(fields[k]).encode())
+             for k in ("occlusion", "noise", "trajectories", "length")]
+    return np.random.default_rng(np.random.SeedSequence([seed, *words]))
+
+
+def summarize(
+    results: Iterable[TrialResult],
+    *,
+    seed: int = 0,
+    n_resamples: int = N_RESAMPLES,
+    confidence: float = CONFIDENCE,
+) -> list[dict]:
+    """Per (method, occlusion, noise, trajectories, length, learner setting): means over batches
+    with percentile-bootstrap intervals over batches.
+
+    Each row holds the group's fields, ``learner_beta``, ``batches`` (n), ``normalized_ile_mean``
+    and ``normalized_ile_ci_low``/``_high``, ``exact_policy_rate`` and
+    ``exact_policy_ci_low``/``_high``, ``ile_mean``, ``ile_std``, ``ile_ci_low``/``_high``,
+    ``seconds_mean``, ``seconds_std``, ``seconds_ci_low``/``_high``, and ``converged`` (count).
+    Intervals are reproducible from ``seed`` (the sweep's seed).
+    """
     table: dict[tuple, list[TrialResult]] = {}
     for r in results:
-        table.setdefault((r.method, r.occlusion, r.noise), []).append(r)
+        table.setdefault(tuple(getattr(r, k) for k in GROUP_BY), []).append(r)
     rows = []
-    for (method, occ, noise), rs in sorted(table.items()):
+    for key, rs in sorted(table.items(), key=lambda kv: _sort_key(kv[0], kv[1][0])):
+        rng = _group_rng(seed, key)
+
+        def ci(values, rng=rng):
+            return bootstrap_ci(values, np.mean, n_resamples=n_resamples,
+                                confidence=confidence, rng=rng)
+
         ile = np.array([r.ile for r in rs])
         nile = np.array([r.normalized_ile for r in rs])
+        exact = np.array([r.exact_policy for r in rs], dtype=float)
         sec = np.array([r.seconds for r in rs])
-        rows.append({
-            "method": method, "occlusion": occ, "noise": noise, "batches": len(rs),
-            "ile_mean": float(ile.mean()), "ile_std": float(ile.std()),
+        row = dict(zip(GROUP_BY, key, strict=True))
+        nile_ci, exact_ci, ile_ci, sec_ci = ci(nile), ci(exact), ci(ile), ci(sec)
+        row.update({
+            "learner_beta": float(rs[0].learner_beta), "batches": len(rs),
             "normalized_ile_mean": float(nile.mean()),
+            "normalized_ile_ci_low": nile_ci[0], "normalized_ile_ci_high": nile_ci[1],
+            "exact_policy_rate": float(exact.mean()),
+            "exact_policy_ci_low": exact_ci[0], "exact_policy_ci_high": exact_ci[1],
+            "ile_mean": float(ile.mean()), "ile_std": float(ile.std()),
+            "ile_ci_low": ile_ci[0], "ile_ci_high": ile_ci[1],
             "seconds_mean": float(sec.mean()), "seconds_std": float(sec.std()),
+            "seconds_ci_low": sec_ci[0], "seconds_ci_high": sec_ci[1],
             "converged": int(sum(r.converged for r in rs)),
         })
+        rows.append(row)
     return rows
+
+
+def _sort_key(key: tuple, first: TrialResult) -> tuple:
+    method, *rest = key
+    order = list(LEARNERS).index(method) if method in LEARNERS else len(LEARNERS)
+    *point, learner = rest
+    return (order, method, *point, first.learner_beta, learner)
 
 
 def result_rows(results: Sequence[TrialResult]) -> list[dict]:

@@ -8,66 +8,220 @@ from pathlib import Path
 import numpy as np
 
 COLORS = {"mmap-birl": "C0", "map-birl": "C1", "hidden-data-em": "C3", "maxent": "C2"}
+MARKERS = {"mmap-birl": "o", "map-birl": "s", "hidden-data-em": "^", "maxent": "D"}
+
+#: What a summary row (``irl.experiments.summarize``) holds per plotted quantity: the key of the
+#: mean, the prefix of its bootstrap interval, the axis label and the y scale.
+METRICS = {
+    "ile": ("ile_mean", "ile_ci", "ILE", ("symlog", 0.01)),
+    # a batch's normalized ILE is 0 or tens of percent (a wrong action on a path): linear
+    "normalized_ile": ("normalized_ile_mean", "normalized_ile_ci", "normalized ILE (%)",
+                       ("linear", None)),
+    "exact_policy": ("exact_policy_rate", "exact_policy_ci", "exact-policy rate",
+                     ("linear", (-0.03, 1.03))),
+    "seconds": ("seconds_mean", "seconds_ci", "fit time (s)", ("symlog", 0.01)),
+}
 
 
-def _series(results, x_attr, y_attr, method, **fixed):
-    xs = sorted({getattr(r, x_attr) for r in results
-                 if r.method == method and all(getattr(r, k) == v for k, v in fixed.items())})
-    mean, low, high = [], [], []
-    for x in xs:
-        ys = [getattr(r, y_attr) for r in results if r.method == method
-              and getattr(r, x_attr) == x and all(getattr(r, k) == v for k, v in fixed.items())]
-        mean.append(np.mean(ys))
-        low.append(np.percentile(ys, 25))
-        high.append(np.percentile(ys, 75))
-    return np.array(xs), np.array(mean), np.array(low), np.array(high)
+def _rows(points, **fixed):
+    return [p for p in points if all(p[k] == v for k, v in fixed.items())]
 
 
-def _panel(ax, results, x_attr, y_attr, fixed, xlabel, ylabel):
-    for method in sorted({r.method for r in results}):
-        xs, m, lo, hi = _series(results, x_attr, y_attr, method, **fixed)
-        if len(xs) == 0:
+def _methods(points):
+    return list(dict.fromkeys(p["method"] for p in points))
+
+
+def _setting_label(p, keys) -> str:
+    names = {"occlusion": "occl.", "noise": "noise", "trajectories": "demos",
+             "length": "length", "learner": "learner beta"}
+    parts = []
+    for k in keys:
+        v = p[k]
+        if k in ("occlusion", "noise"):
+            parts.append(f"{names[k]} {v:.0%}")
+        elif k == "learner":
+            parts.append(f"{names[k]} {v} ({p['learner_beta']:.3g})")
+        else:
+            parts.append(f"{names[k]} {v}")
+    return ", ".join(parts)
+
+
+def _varying(points, keys) -> list[str]:
+    return [k for k in keys if len({p[k] for p in points}) > 1]
+
+
+def _set_yscale(ax, yscale) -> None:
+    kind, arg = yscale
+    if kind == "symlog":  # values span orders of magnitude between methods; 0 stays readable
+        ax.set_yscale("symlog", linthresh=arg)
+        ax.set_ylim(bottom=0)
+    elif arg is not None:
+        ax.set_ylim(*arg)
+    else:
+        ax.set_ylim(bottom=0)
+
+
+def _panel(ax, points, x_key, metric, *, x_scale=100.0, dodge=1.0):
+    """One line per method (mean over batches) with its 95% bootstrap band. ``dodge`` > 1
+    shifts the methods' markers apart multiplicatively (for a log x axis) so equal means stay
+    visible."""
+    mean_key, ci, ylabel, yscale = METRICS[metric]
+    methods = _methods(points)
+    for m, method in enumerate(methods):
+        rows = sorted(_rows(points, method=method), key=lambda p: p[x_key])
+        if not rows:
             continue
-        ax.plot(xs * 100, m, "o-", color=COLORS.get(method), label=method)
-        ax.fill_between(xs * 100, lo, hi, color=COLORS.get(method), alpha=0.15)
-    # ILE spans orders of magnitude between methods; symlog keeps 0 and outliers readable.
-    ax.set_yscale("symlog", linthresh=0.01 if y_attr == "ile" else 0.001)
-    ax.set_xlabel(xlabel)
+        xs = np.array([p[x_key] for p in rows], float) * x_scale
+        xs = xs * dodge ** (m - (len(methods) - 1) / 2)
+        color = COLORS.get(method)
+        ax.plot(xs, [p[mean_key] for p in rows], "-", marker=MARKERS.get(method, "o"),
+                color=color, label=method, ms=4)
+        ax.fill_between(xs, [p[f"{ci}_low"] for p in rows], [p[f"{ci}_high"] for p in rows],
+                        color=color, alpha=0.12, lw=0)
+    _set_yscale(ax, yscale)
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
 
 
-def plot_sweep(results: Sequence, out: Path, *, title: str = "") -> list[Path]:
-    """ILE vs occlusion per noise level, ILE vs noise without occlusion, and run time vs
-    occlusion: lines are means over batches, bands the interquartile range. Returns the files
-    written."""
+def _grid(points, row_keys, col_key, draw, title, path, plt):
+    """A figure with one row per combination of ``row_keys`` and one column per value of
+    ``col_key`` (one column if None); ``draw(ax, rows)`` fills each panel."""
+    row_combos = list(dict.fromkeys(tuple(p[k] for k in row_keys) for p in points))
+    cols = [None] if col_key is None else sorted({p[col_key] for p in points})
+    fig, axes = plt.subplots(len(row_combos), len(cols), squeeze=False,
+                             figsize=(4.6 * len(cols), 3.4 * len(row_combos)))
+    for i, combo in enumerate(row_combos):
+        for j, col in enumerate(cols):
+            fixed = dict(zip(row_keys, combo, strict=True))
+            if col_key is not None:
+                fixed[col_key] = col
+            sub = _rows(points, **fixed)
+            ax = axes[i][j]
+            draw(ax, sub)
+            label = _setting_label(sub[0], list(fixed)) if sub else ""
+            ax.set_title(f"{title}: {label}" if title and label else title or label,
+                         fontsize=9)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=7)
+    return _save_captioned(fig, points, path, plt)
+
+
+def _save_captioned(fig, points, path: Path, plt) -> Path:
+    """Save with a caption line on top saying what the lines and intervals are."""
+    n = sorted({p["batches"] for p in points})
+    batches = f"{n[0]}" if len(n) == 1 else f"{n[0]}-{n[-1]}"
+    fig.suptitle(f"mean over {batches} batches; 95% percentile-bootstrap interval over batches",
+                 fontsize=8, color="0.35", y=1 - 0.06 / fig.get_figheight(), va="top")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_sweep(results: Sequence, out: Path, *, title: str = "",
+               points: Sequence[dict] | None = None) -> list[Path]:
+    """The sweep's figures; lines are means over batches, bands their 95% bootstrap intervals.
+
+    - ``ile_vs_occlusion.png``, ``seconds_vs_occlusion.png``: per noise level (columns);
+    - ``ile_vs_noise.png``: without occlusion, when several noise levels were swept;
+    - ``normalized_ile_vs_demonstrations.png``, ``exact_policy_vs_demonstrations.png``,
+      ``seconds_vs_demonstrations.png``: against the number of demonstrations (log2 axis), per
+      noise level, when several numbers were swept;
+    - ``vs_learner_beta.png``: normalized ILE and exact-policy rate per learner setting, when
+      several were swept.
+
+    Other swept settings (length, learner beta, ...) get one row of panels each. ``points`` are
+    the rows of ``irl.experiments.summarize(results)`` (computed with seed 0 if not given).
+    Returns the files written.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if points is None:
+        from irl.experiments import summarize
+
+        points = summarize(results)
+    points = list(points)
     written = []
-    noises = sorted({r.noise for r in results if r.occlusion > 0})
-    occluded = [r for r in results if r.occlusion > 0]
-    for y_attr, ylabel, what, name in (
-        ("ile", "ILE", "", "ile_vs_occlusion.png"),
-        ("seconds", "fit time (s)", "run time, ", "seconds_vs_occlusion.png"),
-    ):
-        if not noises:
-            break
-        fig, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.6), squeeze=False)
-        for ax, noise in zip(axes[0], noises, strict=True):
-            _panel(ax, occluded, "occlusion", y_attr, {"noise": noise}, "occlusion (%)", ylabel)
-            ax.set_title(f"{title}: {what}noise {noise:.0%}")
-        written.append(_save(fig, out / name, plt))
-    if len({r.noise for r in results if r.occlusion == 0}) > 1:
-        fig, ax = plt.subplots(figsize=(4.5, 3.6))
-        _panel(ax, [r for r in results if r.occlusion == 0], "noise", "ile", {},
-               "observation noise (%)", "ILE")
-        ax.set_title(f"{title}: no occlusion")
-        written.append(_save(fig, out / "ile_vs_noise.png", plt))
+
+    occluded = [p for p in points if p["occlusion"] > 0]
+    other = _varying(occluded, ("trajectories", "length", "learner"))
+    if occluded and (len({p["occlusion"] for p in occluded}) > 1 or not other):
+        for metric, what, name in (("ile", "", "ile_vs_occlusion.png"),
+                                   ("seconds", "run time", "seconds_vs_occlusion.png")):
+            def draw(ax, sub, metric=metric):
+                _panel(ax, sub, "occlusion", metric)
+                ax.set_xlabel("occlusion (%)")
+            written.append(_grid(occluded, other, "noise", draw, f"{title} {what}".strip(),
+                                 out / name, plt))
+    clear = [p for p in points if p["occlusion"] == 0]
+    if len({p["noise"] for p in clear}) > 1:
+        keys = _varying(clear, ("trajectories", "length", "learner"))
+
+        def draw_noise(ax, sub):
+            _panel(ax, sub, "noise", "ile")
+            ax.set_xlabel("observation noise (%)")
+        label = f"{title}: no occlusion" if title else "no occlusion"
+        written.append(_grid(clear, keys, None, draw_noise, label, out / "ile_vs_noise.png",
+                             plt))
+
+    if len({p["trajectories"] for p in points}) > 1:
+        keys = _varying(points, ("occlusion", "length", "learner"))
+        for metric in ("normalized_ile", "exact_policy", "seconds"):
+            def draw_demos(ax, sub, metric=metric):
+                _panel(ax, sub, "trajectories", metric, x_scale=1.0, dodge=1.04)
+                ticks = sorted({p["trajectories"] for p in sub})
+                ax.set_xscale("log", base=2)
+                ax.set_xticks(ticks, [str(t) for t in ticks])
+                ax.set_xlabel("demonstrations per batch")
+            written.append(_grid(points, keys, "noise", draw_demos, title,
+                                 out / f"{metric}_vs_demonstrations.png", plt))
+
+    if len({p["learner"] for p in points}) > 1:
+        written.append(_learner_figure(points, title, out / "vs_learner_beta.png", plt))
     return written
+
+
+def _learner_figure(points, title, path, plt):
+    """Normalized ILE (top) and exact-policy rate (bottom) per learner setting, with 95%
+    bootstrap error bars; one column per other setting."""
+    keys = _varying(points, ("occlusion", "noise", "trajectories", "length")) or ["noise"]
+    combos = list(dict.fromkeys(tuple(p[k] for k in keys) for p in points))
+    settings = sorted({(p["learner_beta"], p["learner"]) for p in points})
+    labels = [f"{lab}\nβ={beta:.3g}" for beta, lab in settings]
+    methods = _methods(points)
+    fig, axes = plt.subplots(2, len(combos), squeeze=False, sharex=True,
+                             figsize=(max(4.6, 1.1 * len(settings) + 1.5) * len(combos), 6.4))
+    for j, combo in enumerate(combos):
+        sub = _rows(points, **dict(zip(keys, combo, strict=True)))
+        for i, metric in enumerate(("normalized_ile", "exact_policy")):
+            mean_key, ci, ylabel, yscale = METRICS[metric]
+            ax = axes[i][j]
+            for m, method in enumerate(methods):
+                xs, ys, lo, hi = [], [], [], []
+                for x, (_, lab) in enumerate(settings):
+                    rows = _rows(sub, method=method, learner=lab)
+                    if rows:
+                        xs.append(x + (m - (len(methods) - 1) / 2) * 0.12)
+                        ys.append(rows[0][mean_key])
+                        lo.append(rows[0][mean_key] - rows[0][f"{ci}_low"])
+                        hi.append(rows[0][f"{ci}_high"] - rows[0][mean_key])
+                ax.errorbar(xs, ys, yerr=[lo, hi], fmt=MARKERS.get(method, "o"),
+                            color=COLORS.get(method), label=method, capsize=3, ms=4)
+            _set_yscale(ax, yscale)
+            ax.set_ylabel(ylabel)
+            ax.grid(alpha=0.3)
+            ax.set_xticks(range(len(settings)), labels, fontsize=8)
+            if i == 0:
+                label = _setting_label(sub[0], keys)
+                ax.set_title(f"{title}: {label}" if title else label, fontsize=9)
+            else:
+                ax.set_xlabel("learner setting (data from the true beta)")
+        if j == 0:
+            axes[0][0].legend(fontsize=7)
+    return _save_captioned(fig, points, path, plt)
 
 
 def _save(fig, path: Path, plt) -> Path:

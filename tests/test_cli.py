@@ -45,6 +45,51 @@ def test_experiment_bad_input_is_a_clear_error(tmp_path, capsys, argv, message):
     assert message in capsys.readouterr().err
 
 
+def test_experiment_sweeps_demonstrations_lengths_and_learner_beta(tmp_path):
+    out = tmp_path / "eff"
+    code = main(["experiment", "sorting", "--occlusion", "0.2", "--noise", "0.45",
+                 "--trajectories", "1,2", "--length", "5,6", "--learner-beta", "x0.5,paper",
+                 "--batches", "2", "--methods", "mmap-birl,maxent", "--workers", "1",
+                 "--out", str(out)])
+    assert code == 0
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert rows[0].keys() >= {"method", "occlusion", "noise", "batch", "ile", "seconds",
+                              "normalized_ile", "n_iter", "converged", "trajectories", "length",
+                              "learner", "learner_beta", "exact_policy"}
+    assert len(rows) == 2 * 2 * 2 * 2 * 2  # demos x lengths x learners x batches x methods
+    assert {(r["trajectories"], r["length"]) for r in rows} == {
+        ("1", "5"), ("1", "6"), ("2", "5"), ("2", "6")}
+    assert {(r["learner"], float(r["learner_beta"])) for r in rows} == {
+        ("x0.5", 0.75), ("paper", 0.03)}
+    assert {r["exact_policy"] for r in rows} <= {"0", "1"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["trajectories"] == [1, 2]
+    assert summary["bootstrap"]["confidence"] == 0.95
+    assert len(summary["points"]) == 2 * 2 * 2 * 2
+    for p in summary["points"]:
+        assert p["normalized_ile_ci_low"] <= p["normalized_ile_mean"] <= p["normalized_ile_ci_high"]
+        rate = p["exact_policy_rate"]
+        assert 0 <= p["exact_policy_ci_low"] <= rate <= p["exact_policy_ci_high"] <= 1
+    for name in ("normalized_ile_vs_demonstrations.png", "exact_policy_vs_demonstrations.png",
+                 "vs_learner_beta.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("--trajectories", "1,0", "--trajectories must be comma-separated integers >= 1"),
+    ("--trajectories", "a,2", "--trajectories must be comma-separated integers >= 1"),
+    ("--trajectories", ",", "--trajectories must list at least one value"),
+    ("--length", "2.5", "--length must be comma-separated integers >= 1, e.g. 1,2,4,8; got '2.5'"),
+    ("--learner-beta", "x0.5,fast", "learner_beta must be positive numbers"),
+    ("--learner-beta", "x-1", "got 'x-1'"),
+])
+def test_experiment_bad_list_is_a_one_line_error(tmp_path, capsys, option, value, message):
+    assert main(["experiment", "sorting", option, value, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+
+
 def test_bad_number_list_is_rejected_by_the_parser(capsys):
     with pytest.raises(SystemExit):
         main(["experiment", "forestworld", "--noise", "a,b"])

@@ -41,7 +41,7 @@ class _BayesianIRL:
         mdp: TabularMDP,
         observation_model: ObservationModel,
         *,
-        beta: float = 0.03,
+        beta: float = 1.0,
         prior: GaussianPrior | None = None,
         optimizer: str = "lbfgs",
         n_restarts: int = 1,
@@ -179,8 +179,14 @@ class MMAPBIRL(_BayesianIRL):
     ----------
     mdp : TabularMDP
     observation_model : ObservationModel
-    beta : float, default 0.03
-        Boltzmann rationality of the expert (the paper's value).
+    beta : float, default 1.0
+        Boltzmann rationality assumed for the expert. Only ``beta * theta`` is identified from
+        behaviour, so beta sets the scale at which the prior is read: with the default standard
+        normal prior, beta = 1 puts ``beta * theta`` on the prior's scale. The paper's 0.03
+        makes that prior pin the weights near 0 (measured on onion sorting, 20 batches of 10
+        demonstrations at 30% noise, 20% occlusion: normalized ILE 14.7% at 0.03, 0 at 1.0;
+        Forestworld is insensitive). Pass the domain's beta (``domain.beta``) and prior when
+        known; see docs/paper-errata.md.
     prior : GaussianPrior, optional
         Prior on theta; standard normal per weight by default.
     optimizer : {"lbfgs", "gradient-ascent"}

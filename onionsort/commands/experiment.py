@@ -1,10 +1,14 @@
-"""``onionsort experiment``: the paper's sweeps (Fig. 1b-d on Forestworld, Fig. 3a-b on sorting).
+"""``onionsort experiment``: the paper's sweeps (Fig. 1b-d, 3a-b) and data-efficiency sweeps.
 
 Examples
 --------
     onionsort experiment forestworld --quick --out runs/forestworld-quick
     onionsort experiment forestworld --out runs/forestworld          # the paper's full sweep
     onionsort experiment sorting --occlusion 0.1,0.2,0.3,0.4 --noise 0.3 --out runs/sorting
+    onionsort experiment sorting --trajectories 1,2,4,8 --noise 0.3,0.45 --occlusion 0.2 \\
+        --batches 20 --out runs/efficiency                 # 95% bootstrap intervals per point
+    onionsort experiment sorting --trajectories 2,8 --noise 0.3 --occlusion 0.2 \\
+        --learner-beta x0.25,x1,x4,paper --batches 20 --out runs/beta   # misspecified beta
 """
 
 from __future__ import annotations
@@ -22,8 +26,10 @@ def register(subparsers) -> None:
     p.add_argument("--occlusion", type=floats, help="occlusion rates, e.g. 0.1,0.2,0.3")
     p.add_argument("--noise", type=floats, help="observation-noise levels, e.g. 0,0.3")
     p.add_argument("--batches", type=int, help="batches per point (default 10; quick 3)")
-    p.add_argument("--trajectories", type=int, help="demonstrations per batch (default 10)")
-    p.add_argument("--length", type=int, help="steps per demonstration (default 15 / 20)")
+    p.add_argument("--trajectories", help="demonstrations per batch, e.g. 1,2,4,8 (default 10)")
+    p.add_argument("--length", help="steps per demonstration, e.g. 10,20 (default 15 / 20)")
+    p.add_argument("--learner-beta", help="beta the learners are fitted with: betas, factors of "
+                   "the true beta (x0.5,x1,x2) or paper (0.03); default: the true beta")
     p.add_argument("--methods", default="mmap-birl,map-birl,hidden-data-em,maxent",
                    help="comma-separated subset of mmap-birl,map-birl,hidden-data-em,maxent")
     p.add_argument("--seed", type=int, default=0)
@@ -36,11 +42,16 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from onionsort.stages import ExperimentConfig, run_experiment
-    from onionsort.stages.experiment import format_table
+    from onionsort.stages.experiment import format_table, parse_list
+
+    def listed(name, kind="int"):
+        value = getattr(args, name.replace("-", "_"))
+        return None if value is None else parse_list(value, name, kind)
 
     config = ExperimentConfig(
         domain=args.domain, occlusion=args.occlusion, noise=args.noise, batches=args.batches,
-        trajectories=args.trajectories, length=args.length,
+        trajectories=listed("trajectories"), length=listed("length"),
+        learner_beta=listed("learner-beta", "learner"),
         methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
         seed=args.seed, workers=args.workers, quick=args.quick, out=args.out)
     summary = run_experiment(config)
