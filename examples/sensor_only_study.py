@@ -5,8 +5,8 @@ The same simulated sessions are learned from three ways, with MMAP-BIRL and the 
 1. **RGB-D**: the recorded sessions (colour, depth, the recorder's step clock), calibrated
    RGB-D;
 2. **video, fixed clock**: each session's colour frames written to an MP4 (1.5 frames/s, so a
-   2-second step has 3 frames), imported with ``--step-seconds 2``, perceived and calibrated
-   colour-only;
+   2-second step has 3 frames), imported with ``--step-seconds 2``, perceived colour-only, and
+   calibrated colour-only without the inspection view (a video has none);
 3. **video, perceived changes**: the same MP4s imported with the default segmentation by
    perceived state changes.
 
@@ -87,9 +87,9 @@ def main() -> None:
     sessions = record(RecordConfig(out=out / "rgbd", sessions=args.sessions, seed=args.seed))
     make_dataset(DatasetConfig(out=out / "heldout", frames=1500, seed=args.seed + 1,
                                robot_onions=0))
-    for name, depth in (("cal_rgbd", True), ("cal_rgb", False)):
+    for name, sensors in (("cal_rgbd", True), ("cal_video", False)):
         calibrate(CalibrateConfig(data=out / "heldout", out=out / name, split="all",
-                                  depth=depth), models)
+                                  depth=sensors, inspection=sensors), models)
 
     videos, truth_steps = [], []
     for path in sessions:
@@ -116,7 +116,7 @@ def main() -> None:
     results["rgbd"] = _score(rgbd, None)
     for mode, paths in imported.items():
         perceive(PerceiveConfig(sessions=tuple(paths)), models)
-        model = learn(LearnConfig(sessions=tuple(paths), calibration=out / "cal_rgb" /
+        model = learn(LearnConfig(sessions=tuple(paths), calibration=out / "cal_video" /
                                   "calibration.json", out=out / f"learn_video_{mode}",
                                   rerun=False))
         results[f"video_{mode}"] = _score(model, rgbd)
@@ -126,7 +126,7 @@ def main() -> None:
     results["segmentation"] = {"precision": matched / max(n_pred, 1),
                                "recall": matched / max(n_true, 1), "n_true": n_true,
                                "n_predicted": n_pred, "tolerance_frames": 1}
-    for name in ("cal_rgbd", "cal_rgb"):
+    for name in ("cal_rgbd", "cal_video"):
         doc = json.loads((out / name / "calibration.json").read_text())
         results[name] = {"state_error_rate": doc["state_error_rate"],
                          "pair_error_rate": doc["pair_error_rate"],

@@ -142,8 +142,9 @@ class Session:
         corrupt, opened with ``recover=True``).
     frames_per_step : int
         Frames of each step.
-    has_depth, has_ground_truth : bool
-        Whether the sensor gave depth, and whether the file carries ground truth.
+    has_depth, has_inspection, has_ground_truth : bool
+        Whether the sensor gave depth, whether there was an inspection view, and whether the
+        file carries ground truth.
     steps : list of StepTruth
         The ground-truth steps, in order; empty without ground truth.
     problem : str or None
@@ -163,6 +164,7 @@ class Session:
     status: str
     frames_per_step: int
     has_depth: bool
+    has_inspection: bool
     has_ground_truth: bool
     steps: list[StepTruth]
     _frames: list[FrameRecord] = field(repr=False)
@@ -363,6 +365,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
         logger.warning("%s", message)
     return Session(path=path, metadata=metadata, status=status,
                    frames_per_step=layout["frames_per_step"], has_depth=layout["depth"],
+                   has_inspection=layout["inspection"],
                    has_ground_truth=truth, steps=complete_steps, _frames=frames,
                    problem=problem, perception=perception, perception_models=models,
                    task=task)
@@ -381,17 +384,19 @@ def _task(metadata: dict, path: Path) -> TaskDescription:
 
 
 def _layout(metadata: dict, version: str, path: Path) -> dict:
-    """Frames per step and whether there is depth, from the session record."""
+    """Frames per step and whether there are depth and an inspection view, from the session
+    record."""
     if version == "1":  # simulated, always with depth; frames per step in its configuration
         fps = metadata.get("config", {}).get("frames_per_step")
-        return {"frames_per_step": int(fps) if fps else 0, "depth": True}
+        return {"frames_per_step": int(fps) if fps else 0, "depth": True, "inspection": True}
     try:
         fps = int(metadata["frames_per_step"])
         depth = bool(metadata["sensors"]["depth"])
+        inspection = bool(metadata["sensors"].get("inspection", False))
     except (KeyError, TypeError, ValueError) as exc:
         raise NotASessionError(f"{path}: the session record lacks {exc} (frames_per_step, "
                                "sensors.depth)") from None
-    return {"frames_per_step": fps, "depth": depth}
+    return {"frames_per_step": fps, "depth": depth, "inspection": inspection}
 
 
 def _decode_metadata(meta: dict) -> dict:

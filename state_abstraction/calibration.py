@@ -137,6 +137,9 @@ class Calibration:
     depth : bool or None
         Whether the classifier was given depth (RGB-D) or colour alone; a calibration holds
         only for the mode it was measured in. None in files that predate the field.
+    inspection : bool or None
+        Whether the inspection view was given (the prediction factor comes from it); a session
+        without one (an imported video) needs a calibration measured without it.
     task : TaskDescription
         The task measured: its factors, in the order of the state encoding, and its sizes
         (the onion-sorting task by default).
@@ -148,6 +151,7 @@ class Calibration:
     smoothing: float = 1.0
     models: dict | None = None
     depth: bool | None = None
+    inspection: bool | None = None
     task: TaskDescription = SORTING_TASK
 
     def __post_init__(self) -> None:
@@ -291,8 +295,9 @@ def load_calibration(path: Path | str, *, task: TaskDescription = SORTING_TASK) 
                              f"{task.name!r}); got {factors[k].labels}")
     joint = ConfusionMatrix(np.array(doc["joint_state_counts"]),
                             [str(s) for s in range(task.n_states)])
-    depth = doc.get("depth")
+    depth, inspection = doc.get("depth"), doc.get("inspection")
     return Calibration(factors=factors, joint_state=joint,
                        pair_correct=int(doc.get("pair_correct", 0)),
                        smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
-                       depth=None if depth is None else bool(depth), task=task)
+                       depth=None if depth is None else bool(depth),
+                       inspection=None if inspection is None else bool(inspection), task=task)

@@ -28,13 +28,14 @@ STEPS = 8
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
-    """Two recorded sessions and calibrations (RGB-D and colour only) of the shipped models."""
+    """Two recorded sessions and calibrations of the shipped models: RGB-D with the inspection
+    view, and colour only without it (what an imported video has)."""
     root = tmp_path_factory.mktemp("sensor_first")
     assert main(["record", "--sessions", "2", "--steps-per-session", str(STEPS),
                  "--occlusion", "0.25", "--seed", "11", "--out", str(root / "rec")]) == 0
     assert main(["dataset", "--frames", "36", "--robot-onions", "0", "--steps-per-session", "4",
                  "--seed", "12", "--out", str(root / "data")]) == 0
-    for name, extra in (("cal", []), ("cal_rgb", ["--no-depth"])):
+    for name, extra in (("cal", []), ("cal_video", ["--no-depth", "--no-inspection"])):
         assert main(["calibrate", "--data", str(root / "data"), "--split", "all",
                      "--out", str(root / name), *extra]) == 0
     return root
@@ -96,13 +97,20 @@ def test_a_plain_video_is_imported_perceived_calibrated_colour_only_and_learned_
     assert main(["perceive", str(imported)]) == 0
     said = capsys.readouterr().out
     assert f"{STEPS} steps" in said and "(colour only)" in said
-    assert open_session(imported).perception_models["depth"] is False
+    record = open_session(imported).perception_models
+    assert record["depth"] is False and record["inspection"] is False
 
     assert main(["learn", str(imported), "--observation-model",
                  str(work / "cal" / "calibration.json"), "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
-    assert "perceived colour-only but" in err and "measured RGB-D" in err
-    model = _learn([imported], work / "cal_rgb" / "calibration.json", tmp_path / "learn")
+    assert "perceived without depth but" in err and "measured with depth" in err
+    doc = json.loads((work / "cal_video" / "calibration.json").read_text())
+    doc["inspection"] = True
+    (tmp_path / "with_inspection.json").write_text(json.dumps(doc))
+    assert main(["learn", str(imported), "--observation-model",
+                 str(tmp_path / "with_inspection.json"), "--out", str(tmp_path / "bad2")]) == 2
+    assert "measured with inspection" in capsys.readouterr().err
+    model = _learn([imported], work / "cal_video" / "calibration.json", tmp_path / "learn")
     assert model["n_steps"] == STEPS and len(model["policy_indices"]) == 48
 
 

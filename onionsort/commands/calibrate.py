@@ -2,14 +2,15 @@
 
 Runs the detector and the state classifier on a held-out split of a labelled dataset and writes
 ``calibration.json`` (per-factor confusion counts, the models' hashes, the depth mode),
-``observation_model.npz`` (``O[s, a, o]``) and ``confusion.png``. Calibrate with ``--no-depth``
-for sessions without depth (imported videos): a calibration holds for the mode it measured.
+``observation_model.npz`` (``O[s, a, o]``) and ``confusion.png``. A calibration holds for the
+sensor mode it measured: calibrate with ``--no-depth --no-inspection`` for imported videos.
 
 Examples
 --------
     onionsort dataset --frames 1500 --seed 1 --out runs/heldout
     onionsort calibrate --data runs/heldout --split all --out runs/calibration
-    onionsort calibrate --data runs/heldout --split all --no-depth --out runs/calibration-rgb
+    onionsort calibrate --data runs/heldout --split all --no-depth --no-inspection \\
+        --out runs/calibration-video
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ def register(subparsers) -> None:
                         help="additive smoothing of the confusion counts (1.0)")
     parser.add_argument("--no-depth", action="store_true",
                         help="measure the classifier on colour alone (for sessions without depth)")
+    parser.add_argument("--no-inspection", action="store_true",
+                        help="measure without the inspection view (imported videos have none)")
     add_models_argument(parser)
     parser.set_defaults(func=run)
 
@@ -39,8 +42,9 @@ def run(args) -> int:
 
     calibration, metrics = calibrate(CalibrateConfig(
         data=args.data, out=args.out, split=args.split, smoothing=args.smoothing,
-        models=args.models, depth=not args.no_depth))
-    mode = "colour only" if args.no_depth else "RGB-D"
+        models=args.models, depth=not args.no_depth, inspection=not args.no_inspection))
+    mode = ("colour only" if args.no_depth else "RGB-D") + (
+        ", no inspection view" if args.no_inspection else "")
     print(f"calibrated ({mode}) on {metrics['n_steps']} steps of {args.data} ({args.split}), "
           f"{calibration.n_observed} called unoccluded")
     for name, matrix in calibration.factors.items():

@@ -24,6 +24,8 @@ def register(subparsers) -> None:
     parser.add_argument("--split", default="test",
                         help="split to evaluate on: train, val, test or all (test)")
     parser.add_argument("--no-depth", action="store_true", help="classifier on colour alone")
+    parser.add_argument("--no-inspection", action="store_true",
+                        help="without the inspection view")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_models_argument(parser)
     parser.set_defaults(func=run)
@@ -33,7 +35,8 @@ def run(args) -> int:
     from onionsort.stages import PerceptionEvalConfig, eval_perception
 
     r = eval_perception(PerceptionEvalConfig(data=args.data, split=args.split,
-                                             models=args.models, depth=not args.no_depth))
+                                             models=args.models, depth=not args.no_depth,
+                                             inspection=not args.no_inspection))
     if args.json:
         print(json.dumps(r))
         return 0

@@ -6,9 +6,9 @@ unoccluded (exactly the steps that become observations), and writes the calibrat
 read (``calibration.json``, with the models' hashes and the depth mode), the observation model it
 gives (``observation_model.npz``, ``O[s, a, o]``) and a plot of each confusion matrix.
 
-A calibration holds for one mode: RGB-D (``depth=True``) or colour alone (``depth=False``, what a
-plain video gives). It is measured in the mode asked for, with depth removed from every step when
-``depth`` is False.
+A calibration holds for one sensor mode: with or without depth (``depth``), with or without the
+inspection view (``inspection``; the prediction factor comes from it). A plain video has
+neither. It is measured in the mode asked for, with what the mode lacks removed from every step.
 
 Example::
 
@@ -52,6 +52,8 @@ class CalibrateConfig:
         Perception models folder (None: the shipped models).
     depth : bool
         Measure with depth (RGB-D) or colour alone.
+    inspection : bool
+        Measure with the inspection view or without it.
     """
 
     data: Path
@@ -60,6 +62,7 @@ class CalibrateConfig:
     smoothing: float = 1.0
     models: Path | None = None
     depth: bool = True
+    inspection: bool = True
 
     def __post_init__(self) -> None:
         if self.smoothing < 0:
@@ -74,20 +77,21 @@ class PerceptionEvalConfig:
     split: str = "test"
     models: Path | None = None
     depth: bool = True
+    inspection: bool = True
 
 
 def measure_perception(models: PerceptionModels, root: Path | str, split: str = "test", *,
-                       depth: bool = True):
+                       depth: bool = True, inspection: bool = True):
     """Perceive every step of a dataset split and compare with the truth.
 
     Returns
     -------
     calibration : state_abstraction.calibration.Calibration
         Confusion of each factor on the steps the classifier called unoccluded, with the
-        models and the depth mode recorded.
+        models and the sensor mode (depth, inspection) recorded.
     metrics : dict
         ``accuracy`` per factor on truly unoccluded steps, ``occlusion_recall``,
-        ``occlusion_precision``, ``n_steps``, ``n_occluded``, ``depth``.
+        ``occlusion_precision``, ``n_steps``, ``n_occluded``, ``depth``, ``inspection``.
     """
     from recordings.dataset import read_steps
     from state_abstraction.calibration import FACTORS, calibrate
@@ -96,8 +100,8 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
     pred = {k: [] for k in FACTORS}
     truly_occluded, called_occluded = [], []
     for steps in read_steps(root, split, models.frames_per_step):
-        perceived = models.perceive([(s.colors, s.depths if depth else None, s.inspection)
-                                     for s in steps])
+        perceived = models.perceive([(s.colors, s.depths if depth else None,
+                                      s.inspection if inspection else None) for s in steps])
         for step, seen in zip(steps, perceived, strict=True):
             truly_occluded.append(bool(step.record["occluded"]))
             called_occluded.append(seen.occluded)
@@ -119,8 +123,10 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
         "n_steps": len(occ),
         "n_occluded": int(occ.sum()),
         "depth": depth,
+        "inspection": inspection,
     }
-    return replace(calibration, models=models.describe(), depth=depth), metrics
+    return (replace(calibration, models=models.describe(), depth=depth, inspection=inspection),
+            metrics)
 
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
@@ -161,11 +167,11 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
     check_output_folder(config.out)
     models = PerceptionModels.load(config.models) if models is None else models
     calibration, metrics = measure_perception(models, config.data, config.split,
-                                              depth=config.depth)
+                                              depth=config.depth, inspection=config.inspection)
     calibration = calibration.with_smoothing(config.smoothing)
     calibration.save(config.out / CALIBRATION_FILE, extra={
         "data": str(config.data), "split": config.split, "models": calibration.models,
-        "depth": config.depth, "metrics": metrics})
+        "depth": config.depth, "inspection": config.inspection, "metrics": metrics})
     np.savez_compressed(config.out / "observation_model.npz",
                         probs=calibration.observation_model().probs)
     confusion_figure(calibration, config.out / "confusion.png")
@@ -177,9 +183,11 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
     """mAP of the detector and the state classifier's accuracy on a dataset split."""
     log_config("eval-perception", config)
     models = PerceptionModels.load(config.models) if models is None else models
-    _, metrics = measure_perception(models, config.data, config.split, depth=config.depth)
+    _, metrics = measure_perception(models, config.data, config.split, depth=config.depth,
+                                    inspection=config.inspection)
     maps = detector_map(models, config.data, config.split)
     return {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
             "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
             "occlusion_precision": metrics["occlusion_precision"], "map_by_view": maps,
-            "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth}
+            "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth,
+            "inspection": config.inspection}

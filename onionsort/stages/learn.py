@@ -91,12 +91,14 @@ def _check_provenance(session, calibration, calibration_path: Path) -> None:
             f"{session.path} was perceived by other models than {calibration_path} was "
             f"measured with ({', '.join(differ)} differ); perceive it again with the "
             "calibration's models, recalibrate, or pass --allow-model-mismatch")
-    if calibration.depth is not None and record.get("depth", True) != calibration.depth:
-        mode = {True: "RGB-D", False: "colour-only"}
-        raise ValueError(
-            f"{session.path} was perceived {mode[bool(record.get('depth', True))]} but "
-            f"{calibration_path} was measured {mode[calibration.depth]}; calibrate with "
-            "--no-depth to match, or pass --allow-model-mismatch")
+    for sensor, flag in (("depth", "--no-depth"), ("inspection", "--no-inspection")):
+        measured, perceived = getattr(calibration, sensor), bool(record.get(sensor, True))
+        if measured is not None and perceived != measured:
+            said = {True: f"with {sensor}", False: f"without {sensor}"}
+            raise ValueError(
+                f"{session.path} was perceived {said[perceived]} but {calibration_path} was "
+                f"measured {said[measured]}; calibrate in the sessions' mode (with or without "
+                f"{flag}), or pass --allow-model-mismatch")
 
 
 def learn(config: LearnConfig) -> dict:

@@ -135,7 +135,8 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
             for seen, step in zip(perceived, steps, strict=True)]
     add_perception(path, docs, detections=detections, inspection=inspection,
                    frame_times={f.index: f.time_ns for f in frames},
-                   models={**models.describe(), "depth": session.has_depth}, replace=replace)
+                   models={**models.describe(), "depth": session.has_depth,
+                           "inspection": session.has_inspection}, replace=replace)
     return PerceivedSession(Path(path), perceived, session.has_depth)
 
 
