@@ -5,10 +5,12 @@ The same simulated sessions are learned from three ways, with MMAP-BIRL and the 
 1. **RGB-D**: the recorded sessions (colour, depth, the recorder's step clock), calibrated
    RGB-D;
 2. **video, fixed clock**: each session's colour frames written to an MP4 (1.5 frames/s, so a
-   2-second step has 3 frames), imported with ``--step-seconds 2``, perceived colour-only, and
-   calibrated colour-only without the inspection view (a video has none);
+   2-second step has 3 frames), with a second MP4 of the inspection spot, imported with
+   ``--step-seconds 2 --inspection``, perceived and calibrated colour-only;
 3. **video, perceived changes**: the same MP4s imported with the default segmentation by
-   perceived state changes.
+   perceived state changes;
+4. **video alone, fixed clock**: the main MP4 without the inspection video (the sorter's
+   prediction unobserved), calibrated without the inspection view.
 
 It reports, for each, the learned reward's ILE and normalized ILE, whether the greedy policy is
 the expert's on every reachable state, and how many states' actions differ from the RGB-D
@@ -87,27 +89,33 @@ def main() -> None:
     sessions = record(RecordConfig(out=out / "rgbd", sessions=args.sessions, seed=args.seed))
     make_dataset(DatasetConfig(out=out / "heldout", frames=1500, seed=args.seed + 1,
                                robot_onions=0))
-    for name, sensors in (("cal_rgbd", True), ("cal_video", False)):
-        calibrate(CalibrateConfig(data=out / "heldout", out=out / name, split="all",
-                                  depth=sensors, inspection=sensors), models)
+    calibrations = {"rgbd": (True, True), "video": (False, True), "video_alone": (False, False)}
+    for name, (depth, inspection) in calibrations.items():
+        calibrate(CalibrateConfig(data=out / "heldout", out=out / f"cal_{name}", split="all",
+                                  depth=depth, inspection=inspection), models)
 
-    videos, truth_steps = [], []
+    imported: dict[str, list[Path]] = {"video_clock": [], "video_perceived": [],
+                                       "video_alone_clock": []}
+    segmentation = []
     for path in sessions:
         session = open_session(path)
-        videos.append(write_video(out / "video" / f"{path.stem}.mp4",
-                                  (f.color for f in session.frames()), fps=FPS))
-        truth_steps.append([f.step for f in session.frames()])
-    imported = {"clock": [], "perceived": []}
-    segmentation = []
-    for video, truth in zip(videos, truth_steps, strict=True):
-        for mode, seconds in (("clock", 2.0), ("perceived", None)):
-            target = out / f"video_{mode}" / f"{video.stem}.mcap"
+        frames = list(session.frames())
+        video = write_video(out / "video" / f"{path.stem}.mp4", (f.color for f in frames),
+                            fps=FPS)
+        views = {f.step: f.inspection for f in frames if f.inspection is not None}
+        face = write_video(out / "video" / f"{path.stem}_inspection.mp4",
+                           (views[f.step] for f in frames), fps=FPS)
+        for mode, seconds, second in (("video_clock", 2.0, face), ("video_perceived", None, face),
+                                      ("video_alone_clock", 2.0, None)):
+            target = out / mode / f"{path.stem}.mcap"
             target.parent.mkdir(parents=True, exist_ok=True)
-            import_video(ImportConfig(out=target, video=video, step_seconds=seconds))
+            import_video(ImportConfig(out=target, video=video, step_seconds=seconds,
+                                      inspection=second))
             imported[mode].append(target)
         with VideoFileSource(video) as source:
             predicted = perceived_segmentation(models.classifier, (f.color for f in source), 2)
-        segmentation.append(segmentation_scores(predicted, truth, tolerance=1))
+        segmentation.append(segmentation_scores(predicted, [f.step for f in frames],
+                                                tolerance=1))
 
     perceive(PerceiveConfig(sessions=tuple(sessions)), models)
     results: dict = {}
@@ -116,19 +124,19 @@ def main() -> None:
     results["rgbd"] = _score(rgbd, None)
     for mode, paths in imported.items():
         perceive(PerceiveConfig(sessions=tuple(paths)), models)
-        model = learn(LearnConfig(sessions=tuple(paths), calibration=out / "cal_video" /
-                                  "calibration.json", out=out / f"learn_video_{mode}",
-                                  rerun=False))
-        results[f"video_{mode}"] = _score(model, rgbd)
+        cal = "cal_video_alone" if mode == "video_alone_clock" else "cal_video"
+        model = learn(LearnConfig(sessions=tuple(paths), calibration=out / cal /
+                                  "calibration.json", out=out / f"learn_{mode}", rerun=False))
+        results[mode] = {**_score(model, rgbd), "theta": model["theta"]}
     n_true = sum(s["n_true"] for s in segmentation)
     n_pred = sum(s["n_predicted"] for s in segmentation)
     matched = sum(s["n_matched"] for s in segmentation)
     results["segmentation"] = {"precision": matched / max(n_pred, 1),
                                "recall": matched / max(n_true, 1), "n_true": n_true,
                                "n_predicted": n_pred, "tolerance_frames": 1}
-    for name in ("cal_rgbd", "cal_video"):
-        doc = json.loads((out / name / "calibration.json").read_text())
-        results[name] = {"state_error_rate": doc["state_error_rate"],
+    for name in calibrations:
+        doc = json.loads((out / f"cal_{name}" / "calibration.json").read_text())
+        results[f"cal_{name}"] = {"state_error_rate": doc["state_error_rate"],
                          "pair_error_rate": doc["pair_error_rate"],
                          "accuracy": doc["accuracy"]}
     write_json(out / "study.json", results)

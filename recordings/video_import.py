@@ -78,7 +78,9 @@ def _partial_path(out_path: Path) -> Path:
 
 def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_per_step: int,
                  step_of_frame: Sequence[int], camera_K: np.ndarray,
-                 metadata: dict[str, Any] | None = None) -> ImportSummary:
+                 metadata: dict[str, Any] | None = None,
+                 inspection: Iterable[SourceFrame] | None = None,
+                 inspection_K: np.ndarray | None = None) -> ImportSummary:
     """Write the frames of ``source`` as one sensor-only session.
 
     The source is read once, frame by frame, holding no more than one frame in memory; only
@@ -105,6 +107,12 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
     metadata : dict or None
         Session description (software version, segmentation settings, ...); ``source``,
         ``source_fps`` and ``source_frames`` are added unless given.
+    inspection : iterable of SourceFrame or None
+        A second camera filming the inspection spot (where the sorter looks at the onion),
+        frame for frame with ``source``: its frame at each step's first frame becomes the
+        step's inspection view. It must give as many frames as ``source``.
+    inspection_K : ndarray of shape (3, 3) or None
+        Its intrinsics (required with ``inspection``).
 
     Returns
     -------
@@ -139,6 +147,11 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
         for phase, i in enumerate(frames):
             plan.setdefault(i, []).append((step, phase))
 
+    if (inspection is None) != (inspection_K is None):
+        raise ValueError("inspection and inspection_K go together; got "
+                         f"inspection={'a source' if inspection is not None else None}, "
+                         f"inspection_K={'a matrix' if inspection_K is not None else None}")
+    views = None if inspection is None else iter(inspection)
     meta = {"source": name, "source_fps": getattr(source, "fps", None), "source_frames": n}
     meta.update(metadata or {})
     partial = _partial_path(out_path)
@@ -146,7 +159,7 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
         logger.warning("%s: replacing a partial file left by an earlier import", partial)
     read = written = 0
     try:
-        with SessionWriter(partial, meta, K, None, frames_per_step=fps, depth=False,
+        with SessionWriter(partial, meta, K, inspection_K, frames_per_step=fps, depth=False,
                            ground_truth=False, overwrite=True) as writer:
             for frame in source:
                 if read >= n:
@@ -155,9 +168,17 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
                 if frame.index != read:
                     raise ValueError(f"{name}: frame {read} came with index {frame.index}; "
                                      "frames must be numbered 0, 1, ... in order")
+                view = None
+                if views is not None:
+                    view = next(views, None)
+                    if view is None:
+                        raise ValueError(f"the inspection video ended after {read} frames; "
+                                         f"it must have as many as {name}")
                 for step, phase in plan.get(read, ()):
-                    writer.write_sensor_frame(index=written, step=step, phase=phase,
-                                              time_ns=int(frame.time_ns), color=frame.color)
+                    writer.write_sensor_frame(
+                        index=written, step=step, phase=phase, time_ns=int(frame.time_ns),
+                        color=frame.color,
+                        inspection=view.color if view is not None and phase == 0 else None)
                     written += 1
                 read += 1
             if read != n:

@@ -35,7 +35,8 @@ def work(tmp_path_factory):
                  "--occlusion", "0.25", "--seed", "11", "--out", str(root / "rec")]) == 0
     assert main(["dataset", "--frames", "36", "--robot-onions", "0", "--steps-per-session", "4",
                  "--seed", "12", "--out", str(root / "data")]) == 0
-    for name, extra in (("cal", []), ("cal_video", ["--no-depth", "--no-inspection"])):
+    for name, extra in (("cal", []), ("cal_video", ["--no-depth", "--no-inspection"]),
+                        ("cal_colour", ["--no-depth"])):
         assert main(["calibrate", "--data", str(root / "data"), "--split", "all",
                      "--out", str(root / name), *extra]) == 0
     return root
@@ -112,6 +113,38 @@ def test_a_plain_video_is_imported_perceived_calibrated_colour_only_and_learned_
     assert "measured with inspection" in capsys.readouterr().err
     model = _learn([imported], work / "cal_video" / "calibration.json", tmp_path / "learn")
     assert model["n_steps"] == STEPS and len(model["policy_indices"]) == 48
+
+
+def test_a_second_video_of_the_inspection_spot_gives_each_step_its_inspection_view(
+        work, tmp_path, capsys):
+    session = open_session(sorted((work / "rec").glob("*.mcap"))[1])
+    frames = list(session.frames())
+    views = {f.step: f.inspection for f in frames if f.inspection is not None}
+    video = write_video(tmp_path / "line.mp4", (f.color for f in frames), fps=1.5)
+    face = write_video(tmp_path / "face.mp4", (views[f.step] for f in frames), fps=1.5)
+    imported = tmp_path / "line.mcap"
+    assert main(["import", str(video), "--inspection", str(face), "--step-seconds", "2",
+                 "--out", str(imported)]) == 0
+    got = open_session(imported)
+    assert got.has_inspection and not got.has_depth
+    steps = got.step_frames()
+    assert [s[0].inspection is not None for s in steps] == [True] * STEPS
+    assert all(f.inspection is None for s in steps for f in s[1:])
+    assert steps[0][0].inspection.shape == views[0].shape
+    assert main(["perceive", str(imported)]) == 0
+    assert open_session(imported).perception_models["inspection"] is True
+    capsys.readouterr()
+    assert main(["learn", str(imported), "--observation-model",
+                 str(work / "cal_video" / "calibration.json"),
+                 "--out", str(tmp_path / "bad")]) == 2
+    assert "perceived with inspection but" in capsys.readouterr().err
+    model = _learn([imported], work / "cal_colour" / "calibration.json", tmp_path / "learn")
+    assert model["n_steps"] == STEPS
+    short = write_video(tmp_path / "short.mp4", [views[0]] * 5, fps=1.5)
+    assert main(["import", str(video), "--inspection", str(short), "--step-seconds", "2",
+                 "--out", str(tmp_path / "x.mcap")]) == 2
+    assert "must match frame for frame" in capsys.readouterr().err
+    assert not (tmp_path / "x.mcap").exists()
 
 
 def test_learn_refuses_sessions_perceived_by_other_models(work, tmp_path, capsys):

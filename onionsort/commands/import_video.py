@@ -7,7 +7,7 @@ calibrate with ``--no-depth`` and learn from it like any other. Steps come from 
 Examples
 --------
     onionsort import line.mp4 --step-seconds 2 --out runs/line/session_000.mcap
-    onionsort import line.mp4 --intrinsics camera.json --out runs/line/session_000.mcap
+    onionsort import line.mp4 --inspection face.mp4 --step-seconds 2 --out runs/line/s0.mcap
     onionsort import --camera 0 --max-seconds 120 --step-seconds 2 --out runs/cam/s0.mcap
 """
 
@@ -31,6 +31,8 @@ def register(subparsers) -> None:
     parser.add_argument("--frames-per-step", type=int, default=3, help="frames kept per step (3)")
     parser.add_argument("--intrinsics", type=Path, metavar="FILE",
                         help="camera intrinsics JSON (default: a 60-degree horizontal view)")
+    parser.add_argument("--inspection", type=Path, metavar="VIDEO",
+                        help="a video of the inspection spot, frame for frame with VIDEO")
     parser.add_argument("--max-seconds", type=float, default=60.0,
                         help="how long to record from --camera (60)")
     add_models_argument(parser)
@@ -43,7 +45,8 @@ def run(args) -> int:
     s = import_video(ImportConfig(
         out=args.out, video=args.video, camera=args.camera, step_seconds=args.step_seconds,
         debounce=args.debounce, frames_per_step=args.frames_per_step,
-        intrinsics=args.intrinsics, models=args.models, max_seconds=args.max_seconds))
+        intrinsics=args.intrinsics, models=args.models, max_seconds=args.max_seconds,
+        inspection=args.inspection))
     print(f"imported {s.source}: {s.frames_read} frames read, {s.steps_written} steps of "
           f"{s.frames_per_step} frames written to {s.path}")
     return 0

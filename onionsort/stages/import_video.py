@@ -17,7 +17,10 @@ that ``perceive``, ``calibrate --no-depth`` and ``learn`` then use like any othe
   :func:`segmentation_scores`.
 
 Each step keeps ``frames_per_step`` frames spread over it (the first one always), as the state
-classifier reads them. Intrinsics come from ``intrinsics`` (JSON) or default to a 60-degree
+classifier reads them. A second video of the inspection spot (``inspection``, frame for frame
+with the first) gives each step its inspection view, from which perception reads the onion's
+class; without it the sorter's prediction is unobserved, and which class goes where cannot be
+learned. Intrinsics come from ``intrinsics`` (JSON) or default to a 60-degree
 horizontal field of view (:func:`recordings.sources.default_intrinsics`).
 
 Example::
@@ -71,6 +74,10 @@ class ImportConfig:
         Perception models for the perceived-change segmentation (None: the shipped ones).
     max_seconds : float
         How long to record from a camera.
+    inspection : Path or None
+        A video of the inspection spot, frame for frame with ``video``.
+    inspection_intrinsics : Path or None
+        Its intrinsics JSON (default: a 60-degree horizontal view).
     """
 
     out: Path
@@ -82,6 +89,8 @@ class ImportConfig:
     intrinsics: Path | None = None
     models: Path | None = None
     max_seconds: float = 60.0
+    inspection: Path | None = None
+    inspection_intrinsics: Path | None = None
 
     def __post_init__(self) -> None:
         if (self.video is None) == (self.camera is None):
@@ -95,6 +104,8 @@ class ImportConfig:
             raise ValueError(f"frames_per_step must be >= 1; got {self.frames_per_step}")
         if not self.max_seconds > 0:
             raise ValueError(f"max_seconds must be > 0; got {self.max_seconds}")
+        if self.inspection is not None and self.video is None:
+            raise ValueError("--inspection VIDEO goes with a video file, not --camera")
         if Path(self.out).exists():
             raise FileExistsError(f"{self.out} exists; choose another --out")
 
@@ -168,9 +179,22 @@ def import_video(config: ImportConfig):
         K = (load_intrinsics(config.intrinsics) if config.intrinsics is not None
              else default_intrinsics(source.width, source.height))
     steps = _step_of_frame(config, frames)
+    views, view_K = None, None
+    if config.inspection is not None:
+        from recordings.sources import VideoFileSource
+
+        with VideoFileSource(config.inspection) as view_source:
+            views = list(view_source)
+            view_K = (load_intrinsics(config.inspection_intrinsics)
+                      if config.inspection_intrinsics is not None
+                      else default_intrinsics(view_source.width, view_source.height))
+        if len(views) != len(frames):
+            raise ValueError(f"{config.inspection} has {len(views)} frames and {name} has "
+                             f"{len(frames)}; the inspection video must match frame for frame")
     summary = video_import.import_video(
         frames, config.out, frames_per_step=config.frames_per_step, step_of_frame=steps,
-        camera_K=K, metadata={"source": name, "segmentation": (
+        camera_K=K, inspection=views, inspection_K=view_K,
+        metadata={"source": name, "segmentation": (
             {"method": "fixed clock", "step_seconds": config.step_seconds}
             if config.step_seconds is not None
             else {"method": "perceived changes", "debounce": config.debounce})})
