@@ -18,6 +18,7 @@ from recordings.reader import (
     read_demonstrations,
 )
 from recordings.rewrite import strip_ground_truth
+from recordings.sources import write_video
 from recordings.writer import SessionWriter
 
 __all__ = [
@@ -28,4 +29,5 @@ __all__ = [
     "open_session",
     "read_demonstrations",
     "strip_ground_truth",
+    "write_video",
 ]

@@ -103,6 +103,28 @@ class SourceFrame:
                              f"{getattr(c, 'dtype', '')}".rstrip())
 
 
+@contextlib.contextmanager
+def _quiet_native_stderr():
+    """Silence what OpenCV's and FFmpeg's native code print while a capture opens (they write
+    to file descriptor 2 directly); our own error then says what is wrong in one line."""
+    import os
+    import sys
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable descriptor 2 (e.g. some embedded hosts)
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def _to_rgb(image: np.ndarray) -> np.ndarray:
     """An OpenCV frame (BGR, BGRA or grey) as (H, W, 3) uint8 RGB."""
     if image.ndim == 2:
@@ -213,7 +235,8 @@ class VideoFileSource(_CaptureSource):
             raise SourceNotFoundError(f"{self.path}: no such video file; check the path")
         if not self.path.is_file():
             raise SourceError(f"{self.path} is not a file; give the path of a video file")
-        cap = cv2.VideoCapture(str(self.path))
+        with _quiet_native_stderr():
+            cap = cv2.VideoCapture(str(self.path))
         if not cap.isOpened():
             cap.release()
             raise SourceError(
@@ -305,7 +328,8 @@ class CameraSource(_CaptureSource):
         self.name = f"camera {self.index}"
         self.max_frames = None if max_frames is None else int(max_frames)
         self.max_seconds = None if max_seconds is None else float(max_seconds)
-        cap = cv2.VideoCapture(self.index)
+        with _quiet_native_stderr():
+            cap = cv2.VideoCapture(self.index)
         if not cap.isOpened():
             cap.release()
             raise CameraNotFoundError(

@@ -33,6 +33,8 @@ def register(subparsers) -> None:
                         help="measure the classifier on colour alone (for sessions without depth)")
     parser.add_argument("--no-inspection", action="store_true",
                         help="measure without the inspection view (imported videos have none)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace a calibration.json already in --out")
     add_models_argument(parser)
     parser.set_defaults(func=run)
 
@@ -42,7 +44,8 @@ def run(args) -> int:
 
     calibration, metrics = calibrate(CalibrateConfig(
         data=args.data, out=args.out, split=args.split, smoothing=args.smoothing,
-        models=args.models, depth=not args.no_depth, inspection=not args.no_inspection))
+        models=args.models, depth=not args.no_depth, inspection=not args.no_inspection,
+        overwrite=args.overwrite))
     mode = ("colour only" if args.no_depth else "RGB-D") + (
         ", no inspection view" if args.no_inspection else "")
     print(f"calibrated ({mode}) on {metrics['n_steps']} steps of {args.data} ({args.split}), "

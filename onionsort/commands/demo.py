@@ -21,8 +21,9 @@ from onionsort.commands._args import add_models_argument, subcommand
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "demo", __doc__,
                         "record, perceive, calibrate, learn and evaluate: the whole job")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"), help="run folder")
+    parser.add_argument("--seed", type=int, default=0, help="root seed (0)")
+    parser.add_argument("--out", type=Path, default=Path("runs/demo"),
+                        help="run folder (runs/demo)")
     parser.add_argument("--quick", action="store_true", help="a small, fast run (smoke test)")
     add_models_argument(parser)
     parser.set_defaults(func=run)

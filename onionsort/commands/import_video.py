@@ -27,7 +27,7 @@ def register(subparsers) -> None:
     parser.add_argument("--step-seconds", type=float, metavar="X",
                         help="a step every X seconds (default: segment by perceived changes)")
     parser.add_argument("--debounce", type=int, default=2,
-                        help="frames a perceived change must hold to start a step (2)")
+                        help="windows a perceived change must hold to start a step (2)")
     parser.add_argument("--frames-per-step", type=int, default=3, help="frames kept per step (3)")
     parser.add_argument("--intrinsics", type=Path, metavar="FILE",
                         help="camera intrinsics JSON (default: a 60-degree horizontal view)")
@@ -47,6 +47,6 @@ def run(args) -> int:
         debounce=args.debounce, frames_per_step=args.frames_per_step,
         intrinsics=args.intrinsics, models=args.models, max_seconds=args.max_seconds,
         inspection=args.inspection))
-    print(f"imported {s.source}: {s.frames_read} frames read, {s.steps_written} steps of "
+    print(f"imported {s.source}: {s.frames_read} frames read, {s.steps_written} step(s) of "
           f"{s.frames_per_step} frames written to {s.path}")
     return 0

@@ -24,14 +24,16 @@ def register(subparsers) -> None:
     parser = subcommand(subparsers, "learn", __doc__,
                         "learn the sorter's reward from perceived sessions (offline run)")
     parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
-    parser.add_argument("--method", choices=METHODS, default="mmap-birl")
+    parser.add_argument("--method", choices=METHODS, default="mmap-birl",
+                        help="the learner (mmap-birl)")
     parser.add_argument("--observation-model", type=Path, required=True, metavar="FILE",
                         help="calibration.json written by `onionsort calibrate`")
     parser.add_argument("--out", type=Path, required=True, help="run folder")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="the learner's seed (0)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
     parser.add_argument("--allow-model-mismatch", action="store_true",
                         help="learn even if the sessions were perceived by other models (or "
-                             "another depth mode) than the calibration measured")
+                             "in another sensor mode) than the calibration measured")
     parser.set_defaults(func=run)
 
 
@@ -40,9 +42,10 @@ def run(args) -> int:
 
     model = learn(LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
                               out=args.out, method=args.method, seed=args.seed,
-                              allow_model_mismatch=args.allow_model_mismatch))
-    print(f"{args.method}: learned from {len(args.sessions)} sessions ({model['n_steps']} steps, "
-          f"{model['n_occluded']} occluded)")
+                              allow_model_mismatch=args.allow_model_mismatch,
+                              overwrite=args.overwrite))
+    print(f"{args.method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
+          f"steps, {model['n_occluded']} occluded)")
     print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
     print(f"wrote {args.out / 'model.json'}")
     return 0

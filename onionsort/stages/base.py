@@ -10,12 +10,14 @@ the Python API for scripting a study::
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["check_output_folder", "log_config", "write_json"]
+__all__ = ["check_output_folder", "log_config", "output_folder", "refuse_existing", "write_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -62,3 +64,26 @@ def check_output_folder(folder: Path, what: str = "--out") -> Path:
         raise ValueError(f"{what} {folder} cannot be created ({exc.strerror or exc}); "
                          "choose another") from None
     return folder
+
+
+@contextlib.contextmanager
+def output_folder(folder: Path, what: str = "--out") -> Iterator[Path]:
+    """:func:`check_output_folder`, and if the stage then fails, remove the folder again when
+    this call created it and it is still empty: a failed run leaves nothing behind."""
+    folder = Path(folder)
+    existed = folder.exists()
+    check_output_folder(folder, what)
+    try:
+        yield folder
+    except BaseException:
+        if not existed:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty
+        raise
+
+
+def refuse_existing(path: Path, overwrite: bool) -> None:
+    """Refuse to replace an earlier result unless the caller said so."""
+    if Path(path).exists() and not overwrite:
+        raise FileExistsError(f"{path} exists (an earlier run); choose another output folder "
+                              "or allow overwriting (--overwrite)")

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.base import log_config, output_folder, refuse_existing
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 
 __all__ = ["CalibrateConfig", "PerceptionEvalConfig", "calibrate", "detector_map",
@@ -54,6 +54,8 @@ class CalibrateConfig:
         Measure with depth (RGB-D) or colour alone.
     inspection : bool
         Measure with the inspection view or without it.
+    overwrite : bool
+        Replace a ``calibration.json`` already in ``out``.
     """
 
     data: Path
@@ -63,6 +65,7 @@ class CalibrateConfig:
     models: Path | None = None
     depth: bool = True
     inspection: bool = True
+    overwrite: bool = False
 
     def __post_init__(self) -> None:
         if self.smoothing < 0:
@@ -164,17 +167,19 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
     from onionsort.plots import confusion_figure
 
     log_config("calibrate", config)
-    check_output_folder(config.out)
-    models = PerceptionModels.load(config.models) if models is None else models
-    calibration, metrics = measure_perception(models, config.data, config.split,
-                                              depth=config.depth, inspection=config.inspection)
-    calibration = calibration.with_smoothing(config.smoothing)
-    calibration.save(config.out / CALIBRATION_FILE, extra={
-        "data": str(config.data), "split": config.split, "models": calibration.models,
-        "depth": config.depth, "inspection": config.inspection, "metrics": metrics})
-    np.savez_compressed(config.out / "observation_model.npz",
-                        probs=calibration.observation_model().probs)
-    confusion_figure(calibration, config.out / "confusion.png")
+    refuse_existing(config.out / CALIBRATION_FILE, config.overwrite)
+    with output_folder(config.out) as out:
+        models = PerceptionModels.load(config.models) if models is None else models
+        calibration, metrics = measure_perception(models, config.data, config.split,
+                                                  depth=config.depth,
+                                                  inspection=config.inspection)
+        calibration = calibration.with_smoothing(config.smoothing)
+        calibration.save(out / CALIBRATION_FILE, extra={
+            "data": str(config.data), "split": config.split, "models": calibration.models,
+            "depth": config.depth, "inspection": config.inspection, "metrics": metrics})
+        np.savez_compressed(out / "observation_model.npz",
+                            probs=calibration.observation_model().probs)
+        confusion_figure(calibration, out / "confusion.png")
     return calibration, metrics
 
 

@@ -159,7 +159,13 @@ def _step_of_frame(config: ImportConfig, frames) -> list[int]:
     from recordings.segmentation import fixed_clock
 
     if config.step_seconds is not None:
-        return fixed_clock([f.time_ns for f in frames], config.step_seconds)
+        times = [f.time_ns for f in frames]
+        frame_ns = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else 0
+        lasts = (times[-1] - times[0] + frame_ns) / 1e9 if times else 0.0
+        if lasts < config.step_seconds:
+            raise ValueError(f"{config.video or f'camera {config.camera}'} lasts {lasts:.1f} s, "
+                             f"shorter than one step of --step-seconds {config.step_seconds:g}")
+        return fixed_clock(times, config.step_seconds)
     from onionsort.stages.models import PerceptionModels
 
     classifier = PerceptionModels.load(config.models).classifier

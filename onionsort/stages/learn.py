@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from onionsort.stages.base import check_output_folder, log_config, write_json
+from onionsort.stages.base import log_config, output_folder, refuse_existing, write_json
 from onionsort.stages.models import model_mismatch
 
 if TYPE_CHECKING:
@@ -56,10 +56,12 @@ class LearnConfig:
         A learner of :data:`irl.experiments.METHODS`.
     seed : int
     allow_model_mismatch : bool
-        Learn even when the sessions were perceived by other models, or in another depth
-        mode, than the calibration was measured with.
+        Learn even when the sessions were perceived by other models, or in another sensor
+        mode, than the calibration was measured with (logged, and noted in ``model.json``).
     rerun : bool
         Write ``learn.rrd``.
+    overwrite : bool
+        Replace an earlier run's ``model.json`` in ``out``.
     """
 
     sessions: tuple[Path, ...]
@@ -69,6 +71,7 @@ class LearnConfig:
     seed: int = 0
     allow_model_mismatch: bool = False
     rerun: bool = True
+    overwrite: bool = False
 
     def __post_init__(self) -> None:
         from irl.experiments import METHODS
@@ -91,14 +94,24 @@ def _check_provenance(session, calibration, calibration_path: Path) -> None:
             f"{session.path} was perceived by other models than {calibration_path} was "
             f"measured with ({', '.join(differ)} differ); perceive it again with the "
             "calibration's models, recalibrate, or pass --allow-model-mismatch")
-    for sensor, flag in (("depth", "--no-depth"), ("inspection", "--no-inspection")):
-        measured, perceived = getattr(calibration, sensor), bool(record.get(sensor, True))
-        if measured is not None and perceived != measured:
-            said = {True: f"with {sensor}", False: f"without {sensor}"}
-            raise ValueError(
-                f"{session.path} was perceived {said[perceived]} but {calibration_path} was "
-                f"measured {said[measured]}; calibrate in the sessions' mode (with or without "
-                f"{flag}), or pass --allow-model-mismatch")
+    sensors = ("depth", "inspection")
+    perceived = {k: bool(record.get(k, True)) for k in sensors}
+    differ = [k for k in sensors
+              if getattr(calibration, k) is not None and getattr(calibration, k) != perceived[k]]
+    if differ:
+        said = {True: "with", False: "without"}
+        flags = " ".join(f"--no-{k}" for k in sensors if not perceived[k])
+        shipped = ""
+        if not perceived["depth"]:
+            shipped = (" (or use the shipped calibration-video.json)" if perceived["inspection"]
+                       else " (or use the shipped calibration-video-no-inspection.json)")
+        raise ValueError(
+            f"{session.path} was perceived "
+            + " and ".join(f"{said[perceived[k]]} {k}" for k in differ)
+            + f" but {calibration_path} was measured "
+            + " and ".join(f"{said[getattr(calibration, k)]} {k}" for k in differ)
+            + f"; calibrate in the sessions' mode (`onionsort calibrate {flags or '...'}`)"
+            + f"{shipped}, or pass --allow-model-mismatch")
 
 
 def learn(config: LearnConfig) -> dict:
@@ -112,7 +125,7 @@ def learn(config: LearnConfig) -> dict:
     from state_abstraction.calibration import load_calibration
 
     log_config("learn", config)
-    check_output_folder(config.out)
+    refuse_existing(config.out / MODEL_FILE, config.overwrite)
     base = onion_sorting()
     calibration = load_calibration(config.calibration, task=base.task)
     sessions = [open_session(p) for p in config.sessions]
@@ -120,38 +133,46 @@ def learn(config: LearnConfig) -> dict:
         if session.task != base.task:
             raise ValueError(f"{session.path} records the task {session.task.name!r}, not "
                              f"{base.task.name!r} that learn fits")
-    if not config.allow_model_mismatch:
-        for session in sessions:
+    mismatch = []
+    for session in sessions:
+        try:
             if session.perception:
                 _check_provenance(session, calibration, config.calibration)
+        except ValueError as exc:
+            if not config.allow_model_mismatch:
+                raise
+            mismatch.append(str(exc))
+            logger.warning("allowed by --allow-model-mismatch: %s", exc)
     demos = [s.perceived_demonstration() for s in sessions]
     domain = dataclasses.replace(base, observation_model=calibration.observation_model())
     estimator = make_estimator(config.method, domain, seed=config.seed)
-    estimator.fit(demos)
-    theta = np.asarray(estimator.theta_, float)
-    policy = np.asarray(estimator.policy_, int)
-    model = {
-        "format": MODEL_FORMAT, "method": config.method,
-        "theta": dict(zip(domain.feature_names, theta.round(6).tolist(), strict=True)),
-        "policy": [{"state": domain.state_names[s], "action": domain.action_names[a]}
-                   for s, a in enumerate(policy)],
-        "policy_indices": policy.tolist(),
-        "sessions": [str(p) for p in config.sessions],
-        "n_steps": sum(len(d) for d in demos),
-        "n_occluded": sum(d.n_occluded for d in demos),
-        "observation_model": str(config.calibration),
-        "state_error_rate": calibration.state_error_rate,
-        "n_iter": int(getattr(estimator, "n_iter_", 0)),
-    }
-    history = list(getattr(estimator, "history_", []))
-    write_json(config.out / "learning_curve.json", history)
-    write_json(config.out / MODEL_FILE, model)
-    learning_curve_figure(objective_curve(history), config.method,
-                          config.out / "learning_curve.png")
-    if config.rerun:
-        from recordings.rerun import log_learning
+    with output_folder(config.out) as out:
+        estimator.fit(demos)
+        theta = np.asarray(estimator.theta_, float)
+        policy = np.asarray(estimator.policy_, int)
+        model = {
+            "format": MODEL_FORMAT, "method": config.method,
+            "theta": dict(zip(domain.feature_names, theta.round(6).tolist(), strict=True)),
+            "policy": [{"state": domain.state_names[s], "action": domain.action_names[a]}
+                       for s, a in enumerate(policy)],
+            "policy_indices": policy.tolist(),
+            "sessions": [str(p) for p in config.sessions],
+            "n_steps": sum(len(d) for d in demos),
+            "n_occluded": sum(d.n_occluded for d in demos),
+            "observation_model": str(config.calibration),
+            "state_error_rate": calibration.state_error_rate,
+            "n_iter": int(getattr(estimator, "n_iter_", 0)),
+            "model_mismatch_allowed": mismatch,
+        }
+        history = list(getattr(estimator, "history_", []))
+        write_json(out / "learning_curve.json", history)
+        write_json(out / MODEL_FILE, model)
+        learning_curve_figure(objective_curve(history), config.method,
+                              out / "learning_curve.png")
+        if config.rerun:
+            from recordings.rerun import log_learning
 
-        log_learning(config.out / "learn.rrd", model, history)
+            log_learning(out / "learn.rrd", model, history)
     return model
 
 
