@@ -104,7 +104,9 @@ def test_a_plain_video_is_imported_perceived_calibrated_colour_only_and_learned_
     assert main(["learn", str(imported), "--observation-model",
                  str(work / "cal" / "calibration.json"), "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
-    assert "perceived without depth but" in err and "measured with depth" in err
+    assert "perceived without depth and without inspection but" in err
+    assert "measured with depth and with inspection" in err
+    assert "--no-depth --no-inspection" in err and "calibration-video-no-inspection.json" in err
     doc = json.loads((work / "cal_video" / "calibration.json").read_text())
     doc["inspection"] = True
     (tmp_path / "with_inspection.json").write_text(json.dumps(doc))
@@ -161,7 +163,13 @@ def test_learn_refuses_sessions_perceived_by_other_models(work, tmp_path, capsys
     err = capsys.readouterr().err
     assert "perceived by other models" in err and "detector_sha256" in err
     assert "--allow-model-mismatch" in err and not (tmp_path / "refused" / "model.json").exists()
-    _learn([path], other, tmp_path / "forced", "--allow-model-mismatch")
+    forced = _learn([path], other, tmp_path / "forced", "--allow-model-mismatch")
+    assert "detector_sha256" in forced["model_mismatch_allowed"][0]
+    capsys.readouterr()
+    assert main(["learn", str(path), "--observation-model", str(other), "--out",
+                 str(tmp_path / "forced"), "--allow-model-mismatch"]) == 2
+    assert "model.json exists" in capsys.readouterr().err
+    _learn([path], other, tmp_path / "forced", "--allow-model-mismatch", "--overwrite")
 
 
 @pytest.mark.parametrize("case", ["missing", "not a video", "too short", "no camera"])
@@ -184,3 +192,25 @@ def test_import_answers_bad_input_with_one_line_and_leaves_no_file(case, tmp_pat
     err = capsys.readouterr().err.strip()
     assert err.startswith("onionsort import: error:") and "\n" not in err
     assert sorted(p.name for p in tmp_path.iterdir() if "mcap" in p.name) == []
+
+
+def test_failed_or_repeated_runs_leave_earlier_results_and_no_empty_folders(work, tmp_path,
+                                                                              capsys):
+    raw = sorted((work / "rec").glob("*.mcap"))[0]  # never perceived
+    assert main(["learn", str(raw), "--observation-model", str(work / "cal" / "calibration.json"),
+                 "--out", str(tmp_path / "L")]) == 2
+    assert "has no perception topics" in capsys.readouterr().err
+    assert not (tmp_path / "L").exists()
+    assert main(["calibrate", "--data", str(tmp_path / "nodata"), "--out",
+                 str(tmp_path / "C")]) == 2
+    assert not (tmp_path / "C").exists()
+    before = (work / "cal" / "calibration.json").read_bytes()
+    assert main(["calibrate", "--data", str(work / "data"), "--out", str(work / "cal")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert (work / "cal" / "calibration.json").read_bytes() == before
+    session = open_session(raw)
+    video = write_video(tmp_path / "v.mp4", (f.color for f in session.frames()), fps=1.5)
+    assert main(["import", str(video), "--step-seconds", "100", "--out",
+                 str(tmp_path / "s.mcap")]) == 2
+    assert "shorter than one step of --step-seconds 100" in capsys.readouterr().err
+    assert not (tmp_path / "s.mcap").exists()
