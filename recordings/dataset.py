@@ -42,6 +42,7 @@ import numpy as np
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.frames import TruthFrame
+from recordings.schema import check_task
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
@@ -60,13 +61,7 @@ _RECORD_KEYS = ("color", "depth", "source", "boxes", "classes", "state", "action
 
 
 def _check_task(task: TaskDescription) -> TaskDescription:
-    if not isinstance(task, TaskDescription):
-        raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
-    clash = [f for f in task.factor_names if f in _RECORD_KEYS]
-    if clash:
-        raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of a frame "
-                         f"record {_RECORD_KEYS}; rename them")
-    return task
+    return check_task(task, _RECORD_KEYS, "a frame record")
 
 
 def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera",

@@ -59,6 +59,7 @@ __all__ = [
     "SENSOR_JSON_SCHEMAS",
     "SESSION_METADATA",
     "Topic",
+    "check_task",
     "json_schema_bytes",
 ]
 
@@ -157,6 +158,20 @@ JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
         "required": ["frame", "onions"],
     }),
 }
+
+
+def check_task(task, reserved: tuple[str, ...], where: str):
+    """Refuse a task that is not a TaskDescription, or whose factor names would collide with
+    the keys of the messages or records (``where``) that carry its factors by name."""
+    from irl.domains.task import TaskDescription
+
+    if not isinstance(task, TaskDescription):
+        raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
+    clash = [f for f in task.factor_names if f in reserved]
+    if clash:
+        raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of {where} "
+                         f"{reserved}; rename them")
+    return task
 
 
 def json_schema_bytes(schema: dict) -> bytes:

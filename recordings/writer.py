@@ -41,6 +41,7 @@ from recordings.schema import (
     SENSOR_JSON_SCHEMAS,
     SESSION_METADATA,
     Topic,
+    check_task,
     json_schema_bytes,
 )
 
@@ -169,12 +170,7 @@ class SessionWriter:
             raise FileExistsError(f"{self.path} exists; choose another --out or remove it")
         if int(frames_per_step) < 1:
             raise ValueError(f"frames_per_step must be >= 1; got {frames_per_step}")
-        if not isinstance(task, TaskDescription):
-            raise TypeError(f"task must be a TaskDescription; got {type(task).__name__}")
-        clash = [f for f in task.factor_names if f in _STATE_KEYS]
-        if clash:
-            raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of a "
-                             f"ground-truth state message {_STATE_KEYS}; rename them")
+        check_task(task, _STATE_KEYS, "a ground-truth state message")
         if "task" in metadata:
             raise ValueError("metadata must not hold 'task'; pass the task as task=")
         self.task = task
