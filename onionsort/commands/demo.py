@@ -25,6 +25,9 @@ def register(subparsers) -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/demo"),
                         help="run folder (runs/demo)")
     parser.add_argument("--quick", action="store_true", help="a small, fast run (smoke test)")
+    parser.add_argument("--sessions", type=int, help="sessions recorded per repeat (12; quick 4)")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="repeat with seeds SEED..SEED+K-1 and report 95%% intervals (1)")
     add_models_argument(parser)
     parser.set_defaults(func=run)
 
@@ -34,7 +37,7 @@ def run(args) -> int:
     from onionsort.stages.demo import table
 
     results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
-                              models=args.models))
+                              models=args.models, sessions=args.sessions, repeats=args.repeats))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

@@ -4,12 +4,19 @@
    of them) to MCAP, with a Rerun recording;
 2. perceive them with the shipped detector and state classifier;
 3. calibrate the observation model on freshly rendered held-out frames;
-4. learn the sorter's reward with MMAP-BIRL and with HiddenDataEM;
+4. learn the sorter's reward with MMAP-BIRL, with MAP-BIRL (the same model reading the
+   observations at face value: the ablation that shows what modelling observer noise is worth)
+   and with HiddenDataEM;
 5. let the Sawyer sort 50 onions (30 blemished) with each learned policy, inspection by the
    detector;
 6. write ``results.json`` with the paper's Table 1 beside ours (:func:`table`).
 
-``quick`` runs the same pipeline small (4 sessions, 10 onions): the end-to-end smoke test.
+``repeats`` runs steps 1, 2, 4 and 5 again with other seeds (repeat ``k`` uses seed
+``seed + k``; one calibration serves all). ``results.json`` then holds the counts summed over
+the repeats, each repeat's own, and 95% intervals of precision and recall from a two-level
+bootstrap (repeats, then onions within a repeat), so both the spread between learned policies
+and the finite line-up count. ``quick`` runs the pipeline small (4 sessions, 10 onions): the
+end-to-end smoke test.
 
 Example::
 
@@ -43,22 +50,38 @@ PAPER_TABLE_1 = {
     "hidden-data-em": {"tp": 16, "fp": 10, "tn": 15, "fn": 9, "precision": 0.615,
                        "recall": 0.64},
 }
-METHODS = ("mmap-birl", "hidden-data-em")
+METHODS = ("mmap-birl", "map-birl", "hidden-data-em")
+#: The demo's line-up and recording sizes, full and quick.
+SIZES = {False: {"sessions": 12, "steps": 20, "heldout": 1500, "onions": 50, "blemished": 30},
+         True: {"sessions": 4, "steps": 12, "heldout": 360, "onions": 10, "blemished": 6}}
 
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """The demo's run folder, seed, size and models."""
+    """The demo's run folder, seed, size, repeats and models.
+
+    ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
+    repeat gets its own folder ``repeat_K``.
+    """
 
     out: Path = Path("runs/demo")
     seed: int = 0
     quick: bool = False
     models: Path | None = None
+    sessions: int | None = None
+    repeats: int = 1
+
+    def __post_init__(self) -> None:
+        if self.repeats < 1:
+            raise ValueError(f"repeats must be >= 1; got {self.repeats}")
+        if self.sessions is not None and self.sessions < 1:
+            raise ValueError(f"sessions must be >= 1; got {self.sessions}")
 
 
 def demo(config: DemoConfig) -> dict:
     """Run the whole job; write ``config.out/results.json`` and return its content."""
     import torch
+    from tqdm import tqdm
 
     log_config("demo", config)
     torch.set_num_threads(2)
@@ -67,15 +90,12 @@ def demo(config: DemoConfig) -> dict:
     if (out / "results.json").exists():
         raise FileExistsError(f"{out} already holds a demo (results.json); choose a new --out")
     check_output_folder(out)
-    sessions, steps, heldout = (4, 12, 360) if config.quick else (12, 20, 1500)
-    onions, blemished = (10, 6) if config.quick else (50, 30)
+    size = dict(SIZES[config.quick])
+    if config.sessions is not None:
+        size["sessions"] = config.sessions
     models = PerceptionModels.load(config.models)
-    paths = record(RecordConfig(out=out / "sessions", sessions=sessions,
-                                steps_per_session=steps, occlusion=0.2, seed=config.seed,
-                                rerun=out / "sessions.rrd"))
-    perceive(PerceiveConfig(sessions=tuple(paths), models=config.models), models)
     data = out / "heldout"
-    make_dataset(DatasetConfig(out=data, frames=heldout, seed=config.seed + 1000,
+    make_dataset(DatasetConfig(out=data, frames=size["heldout"], seed=config.seed + 1000,
                                robot_onions=0))
     calibration, metrics = calibrate(CalibrateConfig(data=data, split="all",
                                                      out=out / "calibration",
@@ -83,27 +103,101 @@ def demo(config: DemoConfig) -> dict:
     logger.info("calibrated on %d held-out steps: state error rate %.3f, (state, action) "
                 "error rate %.3f", metrics["n_steps"], calibration.state_error_rate,
                 calibration.pair_error_rate)
-    results = {"methods": {}, "paper": PAPER_TABLE_1, "quick": config.quick,
-               "seed": config.seed, "onions": onions, "blemished": blemished,
+    per_repeat: dict[str, list[dict]] = {m: [] for m in METHODS}
+    with tqdm(total=config.repeats * (2 + len(METHODS)), desc="demo", unit="stage") as bar:
+        for k in range(config.repeats):
+            folder = out if config.repeats == 1 else out / f"repeat_{k}"
+            seed = config.seed + k
+            paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
+                                        steps_per_session=size["steps"], occlusion=0.2,
+                                        seed=seed, rerun=folder / "sessions.rrd"))
+            bar.update()
+            perceive(PerceiveConfig(sessions=tuple(paths), models=config.models), models)
+            bar.update()
+            for method in METHODS:
+                per_repeat[method].append(_learn_and_sort(
+                    method, paths, out / "calibration" / "calibration.json", folder / method,
+                    seed, size, config.models))
+                bar.update()
+    results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
+               "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
+               "repeats": config.repeats, "sessions": size["sessions"],
+               "onions": size["onions"], "blemished": size["blemished"],
                "state_error_rate": calibration.state_error_rate,
-               "pair_error_rate": calibration.pair_error_rate}
-    for method in METHODS:
-        run_dir = out / method
-        t0 = time.perf_counter()
-        model = learn(LearnConfig(sessions=tuple(paths),
-                                  calibration=out / "calibration" / "calibration.json",
-                                  out=run_dir, method=method, seed=config.seed))
-        learn_s = time.perf_counter() - t0
-        result, _ = evaluate(EvaluateConfig(run=run_dir, onions=onions, blemished=blemished,
-                                            seed=config.seed, models=config.models))
-        results["methods"][method] = {
-            "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
-            "precision": result.precision, "recall": result.recall,
-            "learn_seconds": round(learn_s, 3), "theta": model["theta"],
-            "ile": _ile(model), "undecided": result.undecided}
-    results["seconds"] = round(time.perf_counter() - start, 1)
+               "pair_error_rate": calibration.pair_error_rate,
+               "seconds": round(time.perf_counter() - start, 1)}
     write_json(out / "results.json", results)
     return results
+
+
+def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, seed: int,
+                    size: dict, models: Path | None) -> dict:
+    """Learn with one method, let the Sawyer sort with its policy; one repeat's result."""
+    t0 = time.perf_counter()
+    model = learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
+                              method=method, seed=seed))
+    learn_s = time.perf_counter() - t0
+    result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
+                                        blemished=size["blemished"], seed=seed, models=models))
+    return {"seed": seed, "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
+            "precision": result.precision, "recall": result.recall,
+            "learn_seconds": round(learn_s, 3), "theta": model["theta"], "ile": _ile(model),
+            "undecided": result.undecided}
+
+
+def _pooled(runs: list[dict], seed: int) -> dict:
+    """Counts summed over the repeats, precision and recall of the sums with their 95%
+    intervals, the mean ILE, and every repeat's own result."""
+    import numpy as np
+
+    counts = np.array([[r["tp"], r["fp"], r["tn"], r["fn"]] for r in runs])
+    tp, fp, tn, fn = (int(c) for c in counts.sum(axis=0))
+    (p_lo, p_hi), (r_lo, r_hi) = precision_recall_intervals(counts, seed=seed)
+    return {"tp": tp, "fp": fp, "tn": tn, "fn": fn,
+            "precision": tp / (tp + fp) if tp + fp else 0.0,
+            "recall": tp / (tp + fn) if tp + fn else 0.0,
+            "precision_ci": [p_lo, p_hi], "recall_ci": [r_lo, r_hi],
+            "ile": float(np.mean([r["ile"] for r in runs])), "per_repeat": runs}
+
+
+def precision_recall_intervals(counts, *, seed: int = 0, n_resamples: int = 2000,
+                               confidence: float = 0.95):
+    """95% intervals of pooled precision and recall by a two-level bootstrap.
+
+    Parameters
+    ----------
+    counts : array of shape (K, 4)
+        TP, FP, TN, FN of each of K repeats (each repeat a line-up of onions).
+
+    Each resample draws K repeats with replacement, then each drawn repeat's onions from its
+    own outcome frequencies (a multinomial of its line-up size), and pools the counts.
+
+    Returns
+    -------
+    ((precision_low, precision_high), (recall_low, recall_high))
+        Percentile intervals; a resample with no positive call (or no blemished onion) has no
+        precision (recall) and is left out of that interval.
+    """
+    import numpy as np
+
+    counts = np.asarray(counts, dtype=np.int64)
+    if counts.ndim != 2 or counts.shape[1] != 4 or len(counts) == 0:
+        raise ValueError(f"counts must have shape (K, 4) with K >= 1; got {counts.shape}")
+    rng = np.random.default_rng(seed)
+    n = counts.sum(axis=1)
+    pooled = np.zeros((n_resamples, 4), np.int64)
+    for i in range(n_resamples):
+        for k in rng.integers(0, len(counts), len(counts)):
+            pooled[i] += rng.multinomial(n[k], counts[k] / max(n[k], 1))
+    tp, fp, fn = pooled[:, 0], pooled[:, 1], pooled[:, 3]
+    alpha = 100 * (1 - confidence) / 2
+    out = []
+    for num, den in ((tp, tp + fp), (tp, tp + fn)):
+        ok = den > 0
+        values = num[ok] / den[ok]
+        out.append((float(np.percentile(values, alpha)), float(np.percentile(values, 100 - alpha)))
+                   if ok.any() else (float("nan"), float("nan")))
+    return tuple(out)
 
 
 def _ile(model: dict) -> float:
@@ -119,13 +213,20 @@ def _ile(model: dict) -> float:
 
 
 def table(results: dict) -> str:
-    """The paper's Table 1 beside ours, as Markdown."""
+    """The paper's Table 1 beside ours, as Markdown (ours with 95% intervals)."""
     rows = ["| method | source | TP | FP | TN | FN | precision | recall | ILE |",
             "|---|---|---|---|---|---|---|---|---|"]
+    ours = f"ours (simulation, {results.get('repeats', 1)} repeat(s))"
     for method in METHODS:
-        for source, r in (("paper (physical robot)", PAPER_TABLE_1[method]),
-                          ("ours (simulation)", results["methods"][method])):
+        sources = [(ours, results["methods"][method])]
+        if method in PAPER_TABLE_1:
+            sources.insert(0, ("paper (physical robot)", PAPER_TABLE_1[method]))
+        for source, r in sources:
             ile = f"{r['ile']:.3f}" if "ile" in r else "-"
+            p, rc = f"{r['precision']:.3f}", f"{r['recall']:.3f}"
+            if "precision_ci" in r:
+                p += " [{:.2f}, {:.2f}]".format(*r["precision_ci"])
+                rc += " [{:.2f}, {:.2f}]".format(*r["recall_ci"])
             rows.append(f"| {method} | {source} | {r['tp']} | {r['fp']} | {r['tn']} | "
-                        f"{r['fn']} | {r['precision']:.3f} | {r['recall']:.3f} | {ile} |")
+                        f"{r['fn']} | {p} | {rc} | {ile} |")
     return "\n".join(rows)
