@@ -27,6 +27,10 @@ def register(subparsers) -> None:
     parser.add_argument("--robot-onions", type=int, default=120,
                         help="onions the Sawyer holds up to the inspection camera, 3 views each, "
                              "in line-ups of 10 split like the sessions (120; 0 for none)")
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
+                        help="perception difficulty of the world (clean)")
     parser.set_defaults(func=run)
 
 
@@ -36,7 +40,7 @@ def run(args) -> int:
     summary = make_dataset(DatasetConfig(
         out=args.out, frames=args.frames, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
-        val=args.val, test=args.test, robot_onions=args.robot_onions))
+        val=args.val, test=args.test, robot_onions=args.robot_onions, difficulty=args.difficulty))
     sessions = ", ".join(f"{s}: {n} sessions" for s, n in summary.sessions.items())
     print(f"wrote {summary.frames} frames ({sessions}) to {args.out}")
     if summary.robot_views:

@@ -31,6 +31,10 @@ def register(subparsers) -> None:
                         help="perfect inspection instead of the detector (for comparison)")
     parser.add_argument("--no-rerun", action="store_true", help="skip the Rerun recording")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
+                        help="perception difficulty of the world (clean)")
     parser.set_defaults(func=run)
 
 
@@ -40,7 +44,7 @@ def run(args) -> int:
     result, out = evaluate(EvaluateConfig(
         run=args.run, onions=args.onions, blemished=args.blemished, seed=args.seed,
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
-        rerun=not args.no_rerun))
+        rerun=not args.no_rerun, difficulty=args.difficulty))
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall")}))

@@ -33,6 +33,10 @@ def register(subparsers) -> None:
     viewer.add_argument("--spawn", action="store_true", help="also log to a Rerun viewer")
     viewer.add_argument("--connect", metavar="URL",
                         help="also log to a Rerun viewer at URL (rerun+http://HOST:9876/proxy)")
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
+                        help="perception difficulty of the world (clean)")
     parser.set_defaults(func=run)
 
 
@@ -43,6 +47,7 @@ def run(args) -> int:
     paths = record(RecordConfig(
         out=args.out, sessions=args.sessions, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
-        width=args.width, height=args.height, overwrite=args.overwrite, rerun=rerun))
+        width=args.width, height=args.height, overwrite=args.overwrite, rerun=rerun,
+        difficulty=args.difficulty))
     print(f"recorded {len(paths)} sessions to {args.out}")
     return 0

@@ -26,6 +26,15 @@ __all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
 logger = logging.getLogger(__name__)
 
 
+def _check_difficulty(level: str) -> None:
+    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    if level not in DIFFICULTY_LEVELS:
+        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
+                         f"{level!r}")
+
+
 @dataclass(frozen=True)
 class DatasetConfig:
     """What to render.
@@ -45,6 +54,9 @@ class DatasetConfig:
     robot_onions : int
         Onions the Sawyer holds up to the inspection camera (3 views each), in line-ups of 10
         split like the sessions; 0 for none.
+    difficulty : str
+        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
+        today's world).
     """
 
     out: Path
@@ -56,8 +68,10 @@ class DatasetConfig:
     val: float = 0.15
     test: float = 0.15
     robot_onions: int = 120
+    difficulty: str = "clean"
 
     def __post_init__(self) -> None:
+        _check_difficulty(self.difficulty)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.robot_onions < 0:
@@ -100,7 +114,8 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     log_config("dataset", config)
     session_config = SessionConfig(n_steps=config.steps_per_session,
                                    occlusion=config.occlusion,
-                                   frames_per_step=config.frames_per_step)
+                                   frames_per_step=config.frames_per_step,
+                                   difficulty=config.difficulty)
     per_session = session_config.n_steps * session_config.frames_per_step
     n_sessions = math.ceil(config.frames / per_session)
     plan = split_plan(n_sessions, config.val, config.test)
@@ -145,7 +160,8 @@ def _robot_views(writer, config: DatasetConfig) -> int:
     try:
         for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
                                                      desc="robot views", unit="line-up")):
-            for index, rgb, labels in robot_inspection_views(size, seed):
+            for index, rgb, labels in robot_inspection_views(size, seed,
+                                                               config.difficulty):
                 writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
                 n += 1
             writer.flush(split)

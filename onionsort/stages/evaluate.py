@@ -27,6 +27,15 @@ __all__ = ["EvaluateConfig", "evaluate", "inspection_classifier"]
 logger = logging.getLogger(__name__)
 
 
+def _check_difficulty(level: str) -> None:
+    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    if level not in DIFFICULTY_LEVELS:
+        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
+                         f"{level!r}")
+
+
 @dataclass(frozen=True)
 class EvaluateConfig:
     """Which run to evaluate, on how many onions.
@@ -44,6 +53,9 @@ class EvaluateConfig:
         Perfect inspection instead of the detector (for comparison).
     rerun : bool
         Write ``evaluation.rrd``.
+    difficulty : str
+        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
+        today's station).
     """
 
     run: Path
@@ -53,8 +65,10 @@ class EvaluateConfig:
     models: Path | None = None
     ground_truth_inspection: bool = False
     rerun: bool = True
+    difficulty: str = "clean"
 
     def __post_init__(self) -> None:
+        _check_difficulty(self.difficulty)
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:
@@ -110,11 +124,13 @@ def evaluate(config: EvaluateConfig):
     try:
         result = evaluate_policy(actions, n_onions=config.onions, n_blemished=config.blemished,
                                  seed=config.seed, classify=classify, render=config.rerun,
+                                 difficulty=config.difficulty,
                                  on_step=None if logger_ is None else logger_.on_step)
     finally:
         if logger_ is not None:
             logger_.close()
-    summary = {"method": doc.get("method"), "seed": config.seed, "inspection":
+    summary = {"method": doc.get("method"), "seed": config.seed,
+               "difficulty": config.difficulty, "inspection":
                "ground truth" if config.ground_truth_inspection else "detector",
                **result.to_dict()}
     write_json(Path(config.run) / "evaluation.json", summary)

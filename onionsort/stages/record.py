@@ -25,6 +25,15 @@ __all__ = ["RecordConfig", "record"]
 logger = logging.getLogger(__name__)
 
 
+def _check_difficulty(level: str) -> None:
+    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    if level not in DIFFICULTY_LEVELS:
+        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
+                         f"{level!r}")
+
+
 @dataclass(frozen=True)
 class RecordConfig:
     """How many sessions to simulate, how, and where to write them.
@@ -45,6 +54,9 @@ class RecordConfig:
         Replace existing session files in ``out``.
     rerun : Path, str or None
         Also log every session to Rerun: an ``.rrd`` path, ``"spawn"``, or a viewer URL.
+    difficulty : str
+        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
+        today's world).
     """
 
     out: Path
@@ -57,8 +69,10 @@ class RecordConfig:
     height: int = 240
     overwrite: bool = False
     rerun: Path | str | None = None
+    difficulty: str = "clean"
 
     def __post_init__(self) -> None:
+        _check_difficulty(self.difficulty)
         if self.sessions < 1:
             raise ValueError(f"sessions must be >= 1; got {self.sessions}")
 
@@ -83,6 +97,7 @@ def record(config: RecordConfig) -> list[Path]:
         n_steps=config.steps_per_session, occlusion=config.occlusion,
         frames_per_step=config.frames_per_step,
         camera=dataclasses.replace(CameraSpec(), width=config.width, height=config.height),
+        difficulty=config.difficulty,
     )
     out = check_output_folder(config.out)
     paths = [out / f"session_{i:03d}.mcap" for i in range(config.sessions)]
