@@ -120,6 +120,7 @@ class HumanSorter:
         self.forearm = _body(client, p.GEOM_CAPSULE, skin, SHOULDER, radius=0.035,
                              length=FOREARM)
         self.hand = _body(client, p.GEOM_SPHERE, skin, SHOULDER, radius=HAND_RADIUS)
+        self.skin = np.array(skin[:3]) * 255.0  # RGB in [0, 255], for drawn fingers
         self.body_ids = (self.torso, self.legs, self.head, self.left_arm, self.upper_arm,
                          self.forearm, self.hand)
         self.hand_position = SHOULDER - np.array([0.0, 0.0, UPPER_ARM + FOREARM])

@@ -36,6 +36,7 @@ from irl.domains.onion_sorting import (
     SortAction,
     encode_state,
 )
+from robot.difficulty import Difficulty
 from robot.station import Classifier, SawyerStation
 
 __all__ = [
@@ -240,6 +241,7 @@ def evaluate_policy(
     render: bool = False,
     move_steps: int = 120,
     on_step: Callable[[EvaluationStep], None] | None = None,
+    difficulty: Difficulty | str = "clean",
 ) -> SortingResult:
     """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
 
@@ -263,6 +265,9 @@ def evaluate_policy(
         Physics steps per arm motion (see :class:`robot.station.SawyerStation`).
     on_step : callable, optional
         Called with an :class:`EvaluationStep` after every action.
+    difficulty : Difficulty or str
+        Perception difficulty of the station (:mod:`robot.difficulty`): the onions' blemishes
+        and the inspection view the classifier reads; ``"clean"`` by default.
 
     Returns
     -------
@@ -285,7 +290,8 @@ def evaluate_policy(
     fates: list[Fate | None] = [None] * n_onions
     counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
-                       move_steps=move_steps, render_every_step=render) as station:
+                       move_steps=move_steps, render_every_step=render,
+                       difficulty=difficulty) as station:
         truth = station.blemished
         n_steps = 0
         while n_steps < budget and any(f is None for f in fates):

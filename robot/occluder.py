@@ -3,6 +3,10 @@
 :func:`occlusion_schedule` decides which abstract steps are occluded (independently, with the
 requested rate); :class:`PasserBy` walks across the view during those steps and waits out of
 sight otherwise. How much of the view is blocked varies with the walker's build and distance.
+
+A *partial* crossing (:meth:`PasserBy.start_crossing` with ``partial=True``, the
+``partial_occlusion`` knob of :mod:`robot.difficulty`) walks past the left or right edge of the
+view, covering 8-30 % of its width and leaving the workspace in view.
 """
 
 from __future__ import annotations
@@ -67,8 +71,26 @@ class PasserBy:
                 physicsClientId=self.client,
             )
 
-    def start_crossing(self) -> None:
-        """Draw a crossing: a depth between camera and workspace and a walking direction."""
+    def start_crossing(self, partial: bool = False, rng: np.random.Generator | None = None,
+                       tan_half_fov: float = 0.54) -> None:
+        """Draw a crossing: a depth between camera and workspace and a walking direction.
+
+        With ``partial`` the walker passes the edge of the view instead (drawn from ``rng``,
+        by default the walker's own): its inner side 8-30 % of the view's width in from the
+        left or right edge (``tan_half_fov``: tangent of the camera's half horizontal field
+        of view; the camera looks along +y, so x is across the view).
+        """
+        if partial:
+            rng = self.rng if rng is None else rng
+            frac = rng.uniform(0.5, 0.75)
+            center = self.camera_eye + frac * (self.workspace - self.camera_eye)
+            half_view = frac * np.linalg.norm(self.workspace - self.camera_eye) * tan_half_fov
+            side = 1.0 if rng.random() < 0.5 else -1.0
+            inner = center[0] + side * half_view * (1.0 - 2.0 * rng.uniform(0.08, 0.3))
+            center[0], center[2] = inner + side * self.width, 0.0
+            step = rng.uniform(-0.05, 0.05) * np.array([1.0, 0.0, 0.0])
+            self._crossing = (center - step, center + step)
+            return
         depth = self.rng.uniform(0.3, 0.6)  # fraction of the way from camera to workspace
         center = self.camera_eye + depth * (self.workspace - self.camera_eye)
         center[2] = 0.0

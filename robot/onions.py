@@ -65,15 +65,24 @@ def _blob(shape: tuple[int, int], center: np.ndarray, radius: float, rng) -> np.
     return np.clip(1.5 - r, 0.0, 1.0)
 
 
-def onion_texture(appearance: OnionAppearance, size: int = 128) -> np.ndarray:
+def onion_texture(appearance: OnionAppearance, size: int = 128, *, subtlety: float = 0.0,
+                  one_sided: float = 0.0) -> np.ndarray:
     """The onion's texture, shape (size, size, 3), uint8 RGB.
 
     Veins run along ``u`` (around the onion); a blemished onion gets 5-9 dark rot patches of
     varied size and darkness, spread so that some show from any side (the camera sees one
     hemisphere, and a sorter one view of it).
+
+    ``subtlety`` in [0, 1] (:attr:`robot.difficulty.Difficulty.blemish_subtlety`) keeps fewer,
+    smaller and fainter patches: at 1, a fifth of them (at least one), 40 % of the size and
+    35 % of the darkness. ``one_sided`` is the probability (drawn from the texture's seed) that
+    every patch lies on one third of the circumference. At 0 and 0 the texture is unchanged.
     """
     if size < 16:
         raise ValueError(f"size must be >= 16; got {size}")
+    if not 0.0 <= subtlety <= 1.0 or not 0.0 <= one_sided <= 1.0:
+        raise ValueError(f"subtlety and one_sided must be in [0, 1]; got {subtlety}, "
+                         f"{one_sided}")
     rng = np.random.default_rng(appearance.texture_seed)
     v, u = np.mgrid[0:size, 0:size] / size
     veins = 0.08 * np.sin(2 * np.pi * (u * rng.integers(8, 16) + 0.3 * np.sin(2 * np.pi * v)))
@@ -82,12 +91,21 @@ def onion_texture(appearance: OnionAppearance, size: int = 128) -> np.ndarray:
     if appearance.blemished:
         rot = np.array([45.0, 32.0, 20.0])
         n = int(rng.integers(5, 10))
+        keep, sector, start = n, 1.0, 0.0
+        if subtlety or one_sided:
+            keep = max(1, round(n * (1.0 - 0.8 * subtlety)))
+            side = np.random.default_rng([appearance.texture_seed, 1])
+            if side.random() < one_sided:
+                sector, start = 1.0 / 3.0, side.uniform(0.0, 1.0)
         for k in range(n):
-            u0 = (k + rng.uniform(0.0, 1.0)) / n * size  # one patch per sector around the onion
+            # one patch per sector around the onion
+            u0 = ((start + sector * (k + rng.uniform(0.0, 1.0)) / n) % 1.0) * size
             center = np.array([u0, rng.uniform(0.15 * size, 0.85 * size)])
-            mask = _blob((size, size), center, rng.uniform(0.1, 0.2) * size, rng)
-            darkness = rng.uniform(0.75, 0.95)
-            tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
+            radius = rng.uniform(0.1, 0.2) * size * (1.0 - 0.6 * subtlety)
+            mask = _blob((size, size), center, radius, rng)
+            darkness = rng.uniform(0.75, 0.95) * (1.0 - 0.65 * subtlety)
+            if k < keep:
+                tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
     return np.clip(tex, 0, 255).astype(np.uint8)
 
 

@@ -141,10 +141,13 @@ class OnionPool:
     rng : numpy.random.Generator
     texture_size : int
         Side of each onion's texture in pixels.
+    blemish_subtlety, one_sided_blemish : float
+        How subtle blemishes are (see :func:`robot.onions.onion_texture`); 0 for today's.
     """
 
     def __init__(self, client: int, n_onions: int, blemish_rate: float,
-                 rng: np.random.Generator, texture_size: int = 64) -> None:
+                 rng: np.random.Generator, texture_size: int = 64, *,
+                 blemish_subtlety: float = 0.0, one_sided_blemish: float = 0.0) -> None:
         if n_onions < 2:
             raise ValueError(f"n_onions must be >= 2; got {n_onions}")
         if not 0.0 <= blemish_rate <= 1.0:
@@ -157,7 +160,9 @@ class OnionPool:
         with tempfile.TemporaryDirectory(prefix="onion-textures-") as tmp:
             for i in range(n_onions):
                 look = sample_appearance(rng, blemished=rng.random() < blemish_rate)
-                png = save_texture(onion_texture(look, texture_size), Path(tmp) / f"{i}.png")
+                tex = onion_texture(look, texture_size, subtlety=blemish_subtlety,
+                                    one_sided=one_sided_blemish)
+                png = save_texture(tex, Path(tmp) / f"{i}.png")
                 texture = p.loadTexture(str(png), physicsClientId=client)
                 vis = p.createVisualShape(p.GEOM_SPHERE, radius=look.radius,
                                           rgbaColor=[1, 1, 1, 1], physicsClientId=client)

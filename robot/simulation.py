@@ -36,6 +36,13 @@ from robot.camera import (
     render,
     sample_lighting,
 )
+from robot.difficulty import (
+    DIFFICULTY_LEVELS,
+    Difficulty,
+    ImageEffects,
+    difficulty_rng,
+    resolve_difficulty,
+)
 from robot.labels import Frame, OnionLabel, StepLabel
 from robot.occluder import PasserBy, occlusion_schedule
 from robot.scene import Onion, OnionPool, StopGate, build_workcell, connect
@@ -76,6 +83,9 @@ class SessionConfig:
         Side of each onion texture in pixels.
     camera, inspection : CameraSpec
         The main RGB-D camera facing the sorter, and the inspection view.
+    difficulty : Difficulty or str
+        Perception difficulty (:mod:`robot.difficulty`): a :class:`Difficulty` or the name of
+        one of :data:`robot.difficulty.DIFFICULTY_LEVELS`; ``"clean"`` renders today's world.
     """
 
     n_steps: int = 20
@@ -88,8 +98,10 @@ class SessionConfig:
     texture_size: int = 64
     camera: CameraSpec = field(default_factory=CameraSpec)
     inspection: CameraSpec = INSPECTION_CAMERA
+    difficulty: Difficulty = DIFFICULTY_LEVELS["clean"]
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "difficulty", resolve_difficulty(self.difficulty))
         if self.n_steps < 1:
             raise ValueError(f"n_steps must be >= 1; got {self.n_steps}")
         if not 0.0 <= self.occlusion <= 1.0:
@@ -137,7 +149,10 @@ class SortingSession:
     steps : list of StepLabel
         The steps taken so far.
     occluded : ndarray of shape (n_steps,)
-        The passer-by's schedule.
+        The passer-by's schedule (full crossings: the steps labelled occluded).
+    partial : ndarray of shape (n_steps,)
+        Steps at which a passer-by walks past the edge of the view only (the difficulty's
+        ``partial_occlusion``); they stay labelled unoccluded.
     lighting : Lighting
     """
 
@@ -160,6 +175,13 @@ class SortingSession:
         self.occluded = occlusion_schedule(config.n_steps, config.occlusion,
                                            np.random.default_rng(occl_seq))
         self._walker_rng = np.random.default_rng(walker_seq)
+        # the difficulty draws from a stream of its own: the clean world's draws are unchanged
+        self._difficulty_rng = difficulty_rng(seq)
+        d = config.difficulty
+        self.partial = np.zeros(config.n_steps, bool)
+        if d.partial_occlusion:
+            self.partial = ~self.occluded & (self._difficulty_rng.random(config.n_steps)
+                                             < d.partial_occlusion)
         self.steps: list[StepLabel] = []
         self.client: int | None = None
 
@@ -169,8 +191,12 @@ class SortingSession:
         rng = self._scene_rng
         self.lighting: Lighting = sample_lighting(rng)
         self.workcell = build_workcell(self.client, rng)
+        d = self.config.difficulty
         self.pool = OnionPool(self.client, self.config.n_onions, self.config.blemish_rate, rng,
-                              texture_size=self.config.texture_size)
+                              texture_size=self.config.texture_size,
+                              blemish_subtlety=d.blemish_subtlety,
+                              one_sided_blemish=d.one_sided_blemish)
+        self.effects = ImageEffects(d, self._difficulty_rng)
         self.sorter = HumanSorter(self.client, rng)
         self.gate = StopGate(self.client)
         cam = self.config.camera
@@ -235,11 +261,15 @@ class SortingSession:
         inspection, inspection_onions = None, ()
         if with_inspection:
             close = render(self.client, self.config.inspection, self.lighting)
-            inspection = close.rgb
             inspection_onions = tuple(o for o in self._onion_labels(close.seg) if o.box)
+            focus = [o.box for o in inspection_onions if o.in_focus]
+            inspection = self.effects.color(
+                self.effects.hand(close.rgb, focus[0] if focus else None, self.sorter.skin),
+                time_s)
         return Frame(
-            index=index, step=label, phase=phase, time_s=time_s, color=image.rgb,
-            depth=image.depth, onions=onions,
+            index=index, step=label, phase=phase, time_s=time_s,
+            color=self.effects.color(image.rgb, time_s, moving=phase > 0),
+            depth=self.effects.depth(image.depth), onions=onions,
             occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
             inspection=inspection, inspection_onions=inspection_onions,
         )
@@ -277,8 +307,14 @@ class SortingSession:
                               next_state=encode_state(s_next), occluded=bool(self.occluded[t]))
             self.steps.append(label)
             waypoints = self._plan(s, a, s_next)
+            crossing = bool(self.occluded[t] or self.partial[t])
             if self.occluded[t]:
                 self.walker.start_crossing()
+            elif self.partial[t]:
+                cam = cfg.camera
+                self.walker.start_crossing(
+                    partial=True, rng=self._difficulty_rng,
+                    tan_half_fov=np.tan(np.deg2rad(cam.fov_deg) / 2) * cam.width / cam.height)
             for k in range(cfg.frames_per_step + 1):
                 phase = k / cfg.frames_per_step
                 if k > 0:  # the belt moves between frames; the focus onion waits at the gate
@@ -295,7 +331,7 @@ class SortingSession:
                     self.pool.move(self.focus, self._held_position(self.focus))
                 if k == cfg.frames_per_step:
                     break  # the step's end is the next step's first frame
-                self.walker.walk((k + 0.5) / cfg.frames_per_step if self.occluded[t] else None)
+                self.walker.walk((k + 0.5) / cfg.frames_per_step if crossing else None)
                 yield self._render(index, label, k, (t + phase) * cfg.step_duration_s,
                                    with_inspection=k == 0)
                 index += 1

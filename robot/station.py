@@ -57,6 +57,13 @@ from robot.camera import (
     render,
     sample_lighting,
 )
+from robot.difficulty import (
+    DIFFICULTY_LEVELS,
+    Difficulty,
+    ImageEffects,
+    difficulty_rng,
+    resolve_difficulty,
+)
 from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
 from robot.scene import GATE_X, StopGate, build_workcell, connect
 from robot.simulation import INSPECTION_CAMERA
@@ -124,6 +131,8 @@ _SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions aft
 _INSPECT_YAWS = (0.0, -2 * np.pi / 3, -4 * np.pi / 3)  # wrist turns while the classifier abstains
 _BIN_SLOTS = 9  # onions per layer in the bin (3 x 3)
 _BIN_LAYERS = 4
+_GRIPPER_RGB = (72.0, 72.0, 78.0)  # the suction gripper's grey, drawn over a held onion
+_STEP_S = 2.0  # station clock per action, for the difficulty's lighting drift
 
 
 def _down(yaw: float) -> tuple[float, ...]:
@@ -226,6 +235,10 @@ class SawyerStation:
         Render the main camera after every action (:attr:`StationStep.image`).
     camera, inspection : CameraSpec
         The main camera and the inspection view.
+    difficulty : Difficulty or str
+        Perception difficulty (:mod:`robot.difficulty`), or a level's name: the onions'
+        blemishes, and the image effects and the gripper covering part of the onion on the
+        inspection view (and the main camera's renders); ``"clean"`` is today's station.
 
     Attributes
     ----------
@@ -251,6 +264,7 @@ class SawyerStation:
         render_every_step: bool = False,
         camera: CameraSpec | None = None,
         inspection: CameraSpec = INSPECTION_CAMERA,
+        difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
     ) -> None:
         if isinstance(classify, str):
             if classify != GROUND_TRUTH:
@@ -267,6 +281,8 @@ class SawyerStation:
                 or move_steps < 2:
             raise ValueError(f"move_steps must be an int >= 2; got {move_steps!r}")
         seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        self.difficulty = resolve_difficulty(difficulty)
+        self._difficulty_seq = seq
         lineup_seq, self._lanes_seq, self._scene_seq = seq.spawn(3)
         self.lineup = make_lineup(n_onions, n_blemished, np.random.default_rng(lineup_seq))
         self.blemished = np.array([look.blemished for look in self.lineup])
@@ -285,6 +301,8 @@ class SawyerStation:
 
         self.client = connect()
         self._scene_rng = np.random.default_rng(self._scene_seq)  # the same world on every entry
+        self.effects = ImageEffects(self.difficulty, difficulty_rng(self._difficulty_seq))
+        self._clock = 0.0
         try:
             self.lighting: Lighting = sample_lighting(self._scene_rng)
             self.workcell = build_workcell(self.client, self._scene_rng)
@@ -325,7 +343,9 @@ class SawyerStation:
         lanes = np.random.default_rng(self._lanes_seq).uniform(*_LANES, len(self.lineup))
         with tempfile.TemporaryDirectory(prefix="station-onions-") as tmp:
             for i, look in enumerate(self.lineup):
-                png = save_texture(onion_texture(look, 64), Path(tmp) / f"{i}.png")
+                tex = onion_texture(look, 64, subtlety=self.difficulty.blemish_subtlety,
+                                    one_sided=self.difficulty.one_sided_blemish)
+                png = save_texture(tex, Path(tmp) / f"{i}.png")
                 texture = p.loadTexture(str(png), physicsClientId=self.client)
                 vis = p.createVisualShape(p.GEOM_SPHERE, radius=look.radius,
                                           rgbaColor=[1, 1, 1, 1], physicsClientId=self.client)
@@ -421,12 +441,26 @@ class SawyerStation:
         return errors
 
     def render(self) -> CameraImage:
-        """The main camera's view now."""
-        return render(self._require_client(), self.camera, self.lighting)
+        """The main camera's view now (with the difficulty's image effects)."""
+        image = render(self._require_client(), self.camera, self.lighting)
+        if self.difficulty.is_clean:
+            return image
+        return CameraImage(rgb=self.effects.color(image.rgb, self._clock),
+                           depth=self.effects.depth(image.depth), seg=image.seg)
 
     def render_inspection(self) -> CameraImage:
-        """The inspection view now."""
-        return render(self._require_client(), self.inspection, self.lighting)
+        """The inspection view now, as the classifier reads it: with the difficulty's image
+        effects and, by chance, the gripper over part of the held onion."""
+        image = render(self._require_client(), self.inspection, self.lighting)
+        if self.difficulty.is_clean:
+            return image
+        box = None
+        if self.focus is not None:
+            boxes = boxes_from_segmentation(image.seg, [self._onions[self.focus].body])
+            box = next(iter(boxes.values()))[:4] if boxes else None
+        rgb = self.effects.hand(image.rgb, box, _GRIPPER_RGB)
+        return CameraImage(rgb=self.effects.color(rgb, self._clock), depth=image.depth,
+                           seg=image.seg)
 
     def inspection_labels(self, image: CameraImage | None = None
                           ) -> list[tuple[tuple[int, int, int, int], bool, int]]:
@@ -436,7 +470,8 @@ class SawyerStation:
         of ``image`` (rendered now if None): the ground truth of the robot's inspection views,
         for training the detector on what the robot will see.
         """
-        image = self.render_inspection() if image is None else image
+        if image is None:
+            image = render(self._require_client(), self.inspection, self.lighting)
         boxes = boxes_from_segmentation(image.seg, [o.body for o in self._onions])
         by_body = {o.body: o for o in self._onions}
         return [(tuple(b[:4]), by_body[body].appearance.blemished, b[4])
@@ -600,6 +635,7 @@ class SawyerStation:
                 f"action must be a SortAction in [0, {len(SortAction)}); got {action!r}"
             ) from None
         s = self.state
+        self._clock += _STEP_S
         applies = next_state(s, a, blemished=False) != s or next_state(s, a, blemished=True) != s
         errs: list[float] = []
         perceived, inspection = None, None
@@ -631,12 +667,14 @@ class SawyerStation:
 
 
 def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
+                           difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
                            ) -> Iterator[tuple[int, np.ndarray, list]]:
     """The Sawyer's inspection views of a line-up, with their ground-truth boxes.
 
     The expert's greedy policy runs the line-up with a classifier that abstains, so the wrist
     shows each onion from every side it turns to (:data:`_INSPECT_YAWS`). Yields ``(onion
-    index, rgb (h, w, 3) uint8, labels)`` with labels as :meth:`SawyerStation.inspection_labels`.
+    index, rgb (h, w, 3) uint8, labels)`` with labels as :meth:`SawyerStation.inspection_labels`;
+    ``difficulty`` as for :class:`SawyerStation`.
     """
     from irl.domains.onion_sorting import encode_state, onion_sorting
 
@@ -649,7 +687,7 @@ def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
         return Prediction.UNKNOWN
 
     with SawyerStation(abstain, n_onions=n_onions, n_blemished=n_onions // 2,
-                       seed=seed) as station:
+                       seed=seed, difficulty=difficulty) as station:
         holder.append(station)
         logger.disabled = True  # the classifier abstains on purpose: no warning per onion
         try:
