@@ -19,6 +19,8 @@ from onionsort.commands._args import add_models_argument, subcommand
 
 
 def register(subparsers) -> None:
+    from robot.difficulty import DIFFICULTY_LEVELS
+
     parser = subcommand(subparsers, "demo", __doc__,
                         "record, perceive, calibrate, learn and evaluate: the whole job")
     parser.add_argument("--seed", type=int, default=0, help="root seed (0)")
@@ -26,6 +28,8 @@ def register(subparsers) -> None:
                         help="run folder (runs/demo)")
     parser.add_argument("--quick", action="store_true", help="a small, fast run (smoke test)")
     parser.add_argument("--sessions", type=int, help="sessions recorded per repeat (12; quick 4)")
+    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
+                        help="how hard the world makes perception (clean)")
     parser.add_argument("--repeats", type=int, default=1,
                         help="repeat with seeds SEED..SEED+K-1 and report 95%% intervals (1)")
     add_models_argument(parser)
@@ -37,7 +41,8 @@ def run(args) -> int:
     from onionsort.stages.demo import table
 
     results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
-                              models=args.models, sessions=args.sessions, repeats=args.repeats))
+                              models=args.models, sessions=args.sessions, repeats=args.repeats,
+                              difficulty=args.difficulty))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

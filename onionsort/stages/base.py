@@ -17,7 +17,8 @@ import logging
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["check_output_folder", "log_config", "output_folder", "refuse_existing", "write_json"]
+__all__ = ["check_difficulty", "check_output_folder", "log_config", "output_folder",
+           "refuse_existing", "write_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -87,3 +88,13 @@ def refuse_existing(path: Path, overwrite: bool) -> None:
     if Path(path).exists() and not overwrite:
         raise FileExistsError(f"{path} exists (an earlier run); choose another output folder "
                               "or allow overwriting (--overwrite)")
+
+
+def check_difficulty(level: str) -> str:
+    """Refuse a name that is not a level of :data:`robot.difficulty.DIFFICULTY_LEVELS`."""
+    from robot.difficulty import resolve_difficulty
+
+    if not isinstance(level, str):
+        raise TypeError(f"difficulty must be a level name; got {type(level).__name__}")
+    resolve_difficulty(level)
+    return level

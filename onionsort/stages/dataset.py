@@ -19,20 +19,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import log_config
+from onionsort.stages.base import check_difficulty, log_config
 
 __all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
 
 logger = logging.getLogger(__name__)
-
-
-def _check_difficulty(level: str) -> None:
-    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    if level not in DIFFICULTY_LEVELS:
-        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
-                         f"{level!r}")
 
 
 @dataclass(frozen=True)
@@ -71,7 +62,7 @@ class DatasetConfig:
     difficulty: str = "clean"
 
     def __post_init__(self) -> None:
-        _check_difficulty(self.difficulty)
+        check_difficulty(self.difficulty)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.robot_onions < 0:

@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_output_folder, log_config, write_json
+from onionsort.stages.base import check_difficulty, check_output_folder, log_config, write_json
 from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
@@ -58,10 +58,12 @@ SIZES = {False: {"sessions": 12, "steps": 20, "heldout": 1500, "onions": 50, "bl
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """The demo's run folder, seed, size, repeats and models.
+    """The demo's run folder, seed, size, repeats, perception difficulty and models.
 
     ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
-    repeat gets its own folder ``repeat_K``.
+    repeat gets its own folder ``repeat_K``. ``difficulty`` names a level of
+    :data:`robot.difficulty.DIFFICULTY_LEVELS`: the recorded sessions, the held-out frames the
+    calibration is measured on, and the robot's inspection at evaluation all face it.
     """
 
     out: Path = Path("runs/demo")
@@ -70,12 +72,14 @@ class DemoConfig:
     models: Path | None = None
     sessions: int | None = None
     repeats: int = 1
+    difficulty: str = "clean"
 
     def __post_init__(self) -> None:
         if self.repeats < 1:
             raise ValueError(f"repeats must be >= 1; got {self.repeats}")
         if self.sessions is not None and self.sessions < 1:
             raise ValueError(f"sessions must be >= 1; got {self.sessions}")
+        check_difficulty(self.difficulty)
 
 
 def demo(config: DemoConfig) -> dict:
@@ -96,7 +100,7 @@ def demo(config: DemoConfig) -> dict:
     models = PerceptionModels.load(config.models)
     data = out / "heldout"
     make_dataset(DatasetConfig(out=data, frames=size["heldout"], seed=config.seed + 1000,
-                               robot_onions=0))
+                               robot_onions=0, difficulty=config.difficulty))
     calibration, metrics = calibrate(CalibrateConfig(data=data, split="all",
                                                      out=out / "calibration",
                                                      models=config.models), models)
@@ -110,18 +114,20 @@ def demo(config: DemoConfig) -> dict:
             seed = config.seed + k
             paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
                                         steps_per_session=size["steps"], occlusion=0.2,
-                                        seed=seed, rerun=folder / "sessions.rrd"))
+                                        seed=seed, rerun=folder / "sessions.rrd",
+                                        difficulty=config.difficulty))
             bar.update()
             perceive(PerceiveConfig(sessions=tuple(paths), models=config.models), models)
             bar.update()
             for method in METHODS:
                 per_repeat[method].append(_learn_and_sort(
                     method, paths, out / "calibration" / "calibration.json", folder / method,
-                    seed, size, config.models))
+                    seed, size, config))
                 bar.update()
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
-               "repeats": config.repeats, "sessions": size["sessions"],
+               "difficulty": config.difficulty, "repeats": config.repeats,
+               "sessions": size["sessions"],
                "onions": size["onions"], "blemished": size["blemished"],
                "state_error_rate": calibration.state_error_rate,
                "pair_error_rate": calibration.pair_error_rate,
@@ -131,14 +137,15 @@ def demo(config: DemoConfig) -> dict:
 
 
 def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, seed: int,
-                    size: dict, models: Path | None) -> dict:
+                    size: dict, config: DemoConfig) -> dict:
     """Learn with one method, let the Sawyer sort with its policy; one repeat's result."""
     t0 = time.perf_counter()
     model = learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
                               method=method, seed=seed))
     learn_s = time.perf_counter() - t0
     result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
-                                        blemished=size["blemished"], seed=seed, models=models))
+                                        blemished=size["blemished"], seed=seed,
+                                        models=config.models, difficulty=config.difficulty))
     return {"seed": seed, "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
             "precision": result.precision, "recall": result.recall,
             "learn_seconds": round(learn_s, 3), "theta": model["theta"], "ile": _ile(model),

@@ -19,21 +19,12 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import log_config, write_json
+from onionsort.stages.base import check_difficulty, log_config, write_json
 from onionsort.stages.learn import load_policy
 
 __all__ = ["EvaluateConfig", "evaluate", "inspection_classifier"]
 
 logger = logging.getLogger(__name__)
-
-
-def _check_difficulty(level: str) -> None:
-    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    if level not in DIFFICULTY_LEVELS:
-        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
-                         f"{level!r}")
 
 
 @dataclass(frozen=True)
@@ -68,7 +59,7 @@ class EvaluateConfig:
     difficulty: str = "clean"
 
     def __post_init__(self) -> None:
-        _check_difficulty(self.difficulty)
+        check_difficulty(self.difficulty)
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:

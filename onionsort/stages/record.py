@@ -18,20 +18,11 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.base import check_difficulty, check_output_folder, log_config
 
 __all__ = ["RecordConfig", "record"]
 
 logger = logging.getLogger(__name__)
-
-
-def _check_difficulty(level: str) -> None:
-    """Raise ValueError unless ``level`` names a level of ``robot.difficulty``."""
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    if level not in DIFFICULTY_LEVELS:
-        raise ValueError(f"difficulty must be one of {', '.join(DIFFICULTY_LEVELS)}; got "
-                         f"{level!r}")
 
 
 @dataclass(frozen=True)
@@ -72,7 +63,7 @@ class RecordConfig:
     difficulty: str = "clean"
 
     def __post_init__(self) -> None:
-        _check_difficulty(self.difficulty)
+        check_difficulty(self.difficulty)
         if self.sessions < 1:
             raise ValueError(f"sessions must be >= 1; got {self.sessions}")
 
