@@ -352,14 +352,21 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     frames = [_assemble(i, parts[i], version) for i in sorted(parts)
               if _complete(parts[i], version, layout["depth"])]
     truth = version == "1" or bool(metadata.get("ground_truth", False))
-    complete_steps = [steps[t] for t in sorted(steps)]
+    fps = layout["frames_per_step"]
+    phases: dict[int, set[int]] = {}
+    for f in frames:
+        phases.setdefault(f.step, set()).add(f.phase)
+    whole = {t for t, seen in phases.items() if fps and len(seen) == fps}
+    # ground truth only for the steps whose frames are all there (an interrupted or damaged
+    # recording may end in the middle of one)
+    complete_steps = [steps[t] for t in sorted(steps) if t in whole]
     if problem is None and end is None:
         problem = "no end record"
     status = "damaged" if problem else end.get("status", "complete")
     if problem:
         message = (
             f"{path} is truncated or corrupt ({problem}); recovered {len(frames)} complete "
-            f"frames and {len(complete_steps)} steps from {path.stat().st_size} bytes")
+            f"frames and {len(whole)} complete steps from {path.stat().st_size} bytes")
         if not recover:
             raise RecordingDamagedError(message + "; open it with recover=True to use them")
         logger.warning("%s", message)

@@ -104,9 +104,14 @@ def strip_ground_truth(source: str | Path, target: str | Path) -> Path:
         If ``target`` exists.
     """
     from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
+    from recordings.reader import open_session
 
     if Path(target).exists():
         raise FileExistsError(f"{target} exists; choose another output")
+    version = str(open_session(source).metadata.get("format_version"))
+    if version == "1":
+        raise ValueError(f"{source} is a format-1 session, whose only step clock is its ground "
+                         "truth; record it again (format 2 has a step clock of its own)")
     return rewrite_session(source, target,
                            drop_topics=(*Topic.GROUND_TRUTH, *PerceptionTopic.ALL),
                            drop_metadata=(PERCEPTION_METADATA,),

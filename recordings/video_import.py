@@ -3,7 +3,8 @@
 
 :func:`import_video` streams the frames of a source (:mod:`recordings.sources`, or any iterable
 of :class:`~recordings.sources.SourceFrame`) into one session MCAP with colour, calibration and
-a step clock only: no depth, no ground truth, no inspection view. Which step each source frame
+a step clock, and the inspection view when a second source films it: no depth, no ground
+truth. Which step each source frame
 belongs to is decided beforehand and passed in (``step_of_frame``; see
 :mod:`recordings.segmentation` for a fixed clock or perceived changes), so this module needs no
 perception model. Of each step it keeps exactly ``frames_per_step`` frames
@@ -173,7 +174,7 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
                     view = next(views, None)
                     if view is None:
                         raise ValueError(f"the inspection video ended after {read} frames; "
-                                         f"it must have as many as {name}")
+                                         f"it must match {name} frame for frame")
                 for step, phase in plan.get(read, ()):
                     writer.write_sensor_frame(
                         index=written, step=step, phase=phase, time_ns=int(frame.time_ns),
@@ -183,6 +184,9 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
                 read += 1
             if read != n:
                 raise ValueError(f"{name} ended after {read} frames; step_of_frame covers {n}")
+            if views is not None and next(views, None) is not None:
+                raise ValueError(f"the inspection video has more frames than the {n} of "
+                                 f"{name}; it must match frame for frame")
         if out_path.exists():
             raise FileExistsError(f"{out_path} appeared during the import; choose another "
                                   "--out or remove it")

@@ -307,7 +307,10 @@ class SessionWriter:
                     t, i)
         self._write_json(Topic.STEP_CLOCK, {"frame": i, "step": int(step), "phase": int(phase)},
                          t, i)
-        if inspection is not None and self.inspection_K is not None:
+        if inspection is not None and self.inspection_K is None:
+            raise ValueError(f"{self.path}: frame {i} has an inspection view but the session "
+                             "was opened without inspection_K (no inspection camera)")
+        if inspection is not None:
             ih, iw = inspection.shape[:2]
             msg = CompressedImage(frame_id="inspection", format="png",
                                   data=encode_color(inspection, "png"))

@@ -145,7 +145,11 @@ def test_a_second_video_of_the_inspection_spot_gives_each_step_its_inspection_vi
     short = write_video(tmp_path / "short.mp4", [views[0]] * 5, fps=1.5)
     assert main(["import", str(video), "--inspection", str(short), "--step-seconds", "2",
                  "--out", str(tmp_path / "x.mcap")]) == 2
-    assert "must match frame for frame" in capsys.readouterr().err
+    assert "frame for frame" in capsys.readouterr().err
+    long = write_video(tmp_path / "long.mp4", [views[0]] * (len(frames) + 2), fps=1.5)
+    assert main(["import", str(video), "--inspection", str(long), "--step-seconds", "2",
+                 "--out", str(tmp_path / "x.mcap")]) == 2
+    assert "more frames than" in capsys.readouterr().err
     assert not (tmp_path / "x.mcap").exists()
 
 

@@ -32,6 +32,7 @@ Example::
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -123,21 +124,43 @@ def perceived_labels(classifier, colors: Iterable[np.ndarray]) -> list[tuple[int
 
     Window ``i`` is frames ``i .. i + fps - 1`` (the last frames repeat at the end), read by the
     state classifier as one step; its location heads say what the window's first frame shows.
-    A window called occluded keeps the previous window's reading.
+    A window called occluded (``OCCLUDED_THRESHOLD``) keeps the previous window's reading.
+    Frames are read as a stream: at most ``fps`` frames and one batch of windows are held.
     """
-    from state_abstraction.classifier import step_input
+    from collections import deque
+
+    from state_abstraction.classifier import OCCLUDED_THRESHOLD, step_input
 
     fps = classifier.config.frames
-    frames = [np.asarray(c) for c in colors]
     labels: list[tuple[int, int]] = []
-    for start in range(0, len(frames), _BATCH):
-        x = np.stack([step_input([frames[min(i + k, len(frames) - 1)] for k in range(fps)],
-                                 None, classifier.config)
-                      for i in range(start, min(start + _BATCH, len(frames)))])
-        probs = classifier.predict(x)
-        for onion, hand, occluded in zip(probs["onion"].argmax(1), probs["end_effector"].argmax(1),
-                                         probs["occluded"][:, 1] >= 0.5, strict=True):
+    batch: list[np.ndarray] = []
+
+    def classify() -> None:
+        probs = classifier.predict(np.stack(batch))
+        for onion, hand, p_occluded in zip(probs["onion"].argmax(1),
+                                           probs["end_effector"].argmax(1),
+                                           probs["occluded"][:, 1], strict=True):
+            occluded = p_occluded >= OCCLUDED_THRESHOLD
             labels.append(labels[-1] if occluded and labels else (int(onion), int(hand)))
+        batch.clear()
+
+    def window(frames) -> None:
+        batch.append(step_input(list(frames), None, classifier.config))
+        if len(batch) == _BATCH:
+            classify()
+
+    recent: deque[np.ndarray] = deque(maxlen=fps)
+    for color in colors:
+        recent.append(np.asarray(color))
+        if len(recent) == fps:
+            window(recent)
+    n_windows = len(labels) + len(batch)
+    tail = list(recent)[1:] if n_windows else list(recent)  # windows not started yet
+    for i in range(len(tail)):
+        frames = tail[i:]
+        window(frames + [frames[-1]] * (fps - len(frames)))
+    if batch:
+        classify()
     return labels
 
 
@@ -156,57 +179,79 @@ def perceived_segmentation(classifier, colors: Iterable[np.ndarray], debounce: i
 
 
 def _step_of_frame(config: ImportConfig, frames) -> list[int]:
+    """The step of each frame (a stream or a list of :class:`SourceFrame`)."""
     from recordings.segmentation import fixed_clock
 
-    if config.step_seconds is not None:
-        times = [f.time_ns for f in frames]
-        frame_ns = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else 0
-        lasts = (times[-1] - times[0] + frame_ns) / 1e9 if times else 0.0
-        if lasts < config.step_seconds:
-            raise ValueError(f"{config.video or f'camera {config.camera}'} lasts {lasts:.1f} s, "
-                             f"shorter than one step of --step-seconds {config.step_seconds:g}")
-        return fixed_clock(times, config.step_seconds)
-    from onionsort.stages.models import PerceptionModels
+    if config.step_seconds is None:
+        from onionsort.stages.models import PerceptionModels
 
-    classifier = PerceptionModels.load(config.models).classifier
-    return perceived_segmentation(classifier, (f.color for f in frames), config.debounce)
+        classifier = PerceptionModels.load(config.models).classifier
+        return perceived_segmentation(classifier, (f.color for f in frames), config.debounce)
+    times = [f.time_ns for f in frames]
+    frame_ns = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else 0
+    lasts = (times[-1] - times[0] + frame_ns) / 1e9 if times else 0.0
+    if lasts < config.step_seconds:
+        raise ValueError(f"{config.video or f'camera {config.camera}'} lasts {lasts:.1f} s, "
+                         f"shorter than one step of --step-seconds {config.step_seconds:g}")
+    steps = fixed_clock(times, config.step_seconds)
+    # a trailing fragment shorter than half a step is no step: it joins the one before
+    fragment = steps.count(steps[-1])
+    if steps[-1] > 0 and fragment < 0.5 * steps.count(steps[0]):
+        steps[-fragment:] = [steps[-1] - 1] * fragment
+    return steps
 
 
 def import_video(config: ImportConfig):
     """Import the source as one sensor-only session; return the
-    :class:`recordings.video_import.ImportSummary`."""
+    :class:`recordings.video_import.ImportSummary`.
+
+    A video file is read twice, frame by frame (once to cut it into steps, once to write
+    them), so its length is not bounded by memory; a camera's frames are held until it stops
+    (``max_seconds``, or Ctrl-C, which ends the recording and imports what was seen).
+    """
     from recordings import video_import
-    from recordings.sources import default_intrinsics, load_intrinsics
+    from recordings.sources import VideoFileSource, default_intrinsics, load_intrinsics
 
     log_config("import", config)
     with _open(config) as source:
-        frames = list(source)  # a video is read twice otherwise; a camera cannot be
         name = source.name
         K = (load_intrinsics(config.intrinsics) if config.intrinsics is not None
              else default_intrinsics(source.width, source.height))
-    steps = _step_of_frame(config, frames)
-    views, view_K = None, None
-    if config.inspection is not None:
-        from recordings.sources import VideoFileSource
-
-        with VideoFileSource(config.inspection) as view_source:
-            views = list(view_source)
+        if config.video is None:
+            frames = _read_camera(source)
+            steps = _step_of_frame(config, frames)
+        else:
+            steps = _step_of_frame(config, source)
+    metadata = {"source": name, "segmentation": (
+        {"method": "fixed clock", "step_seconds": config.step_seconds}
+        if config.step_seconds is not None
+        else {"method": "perceived changes", "debounce": config.debounce})}
+    with contextlib.ExitStack() as stack:
+        if config.video is not None:
+            frames = stack.enter_context(VideoFileSource(config.video))
+        views, view_K = None, None
+        if config.inspection is not None:
+            views = stack.enter_context(VideoFileSource(config.inspection))
             view_K = (load_intrinsics(config.inspection_intrinsics)
                       if config.inspection_intrinsics is not None
-                      else default_intrinsics(view_source.width, view_source.height))
-        if len(views) != len(frames):
-            raise ValueError(f"{config.inspection} has {len(views)} frames and {name} has "
-                             f"{len(frames)}; the inspection video must match frame for frame")
-    summary = video_import.import_video(
-        frames, config.out, frames_per_step=config.frames_per_step, step_of_frame=steps,
-        camera_K=K, inspection=views, inspection_K=view_K,
-        metadata={"source": name, "segmentation": (
-            {"method": "fixed clock", "step_seconds": config.step_seconds}
-            if config.step_seconds is not None
-            else {"method": "perceived changes", "debounce": config.debounce})})
+                      else default_intrinsics(views.width, views.height))
+        summary = video_import.import_video(
+            frames, config.out, frames_per_step=config.frames_per_step, step_of_frame=steps,
+            camera_K=K, inspection=views, inspection_K=view_K, metadata=metadata)
     logger.info("%s: %d frames read, %d steps written", config.out, summary.frames_read,
                 summary.steps_written)
     return summary
+
+
+def _read_camera(source) -> list:
+    frames = []
+    try:
+        for frame in source:
+            frames.append(frame)
+    except KeyboardInterrupt:
+        logger.warning("%s: stopped by Ctrl-C after %d frames; importing them", source.name,
+                       len(frames))
+    return frames
 
 
 def segmentation_scores(predicted_step_of_frame, true_step_of_frame, tolerance: int = 1) -> dict:

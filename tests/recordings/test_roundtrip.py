@@ -76,3 +76,20 @@ def test_file_passes_a_crc_validating_read_with_the_mcap_reader(recorded):
 def test_writer_refuses_to_overwrite(recorded):
     with pytest.raises(FileExistsError, match="exists"):
         SessionWriter(recorded.path, {}, np.eye(3), np.eye(3), frames_per_step=2)
+
+
+def test_a_format_1_session_still_opens_with_its_steps_from_ground_truth(recorded, tmp_path):
+    """Version 1 had no step clock; the reader takes step and phase from /ground_truth/state."""
+    from recordings import strip_ground_truth
+    from recordings.rewrite import rewrite_session
+
+    old = rewrite_session(recorded.path, tmp_path / "v1.mcap", drop_topics=(Topic.STEP_CLOCK,),
+                          session_update={"format_version": "1"})
+    v1, v2 = open_session(old), open_session(recorded.path)
+    assert v1.metadata["format_version"] == 1 and v1.has_ground_truth and v1.has_depth
+    assert [(f.index, f.step, f.phase) for f in v1.frames()] == [
+        (f.index, f.step, f.phase) for f in v2.frames()]
+    assert v1.demonstration() == v2.demonstration()
+    with pytest.raises(ValueError, match="format-1 session"):
+        strip_ground_truth(old, tmp_path / "bare.mcap")
+    assert not (tmp_path / "bare.mcap").exists()
