@@ -125,13 +125,14 @@ def to_samples(images: Iterable[LabelledImage], width: int, height: int) -> list
     """
     if width < 1 or height < 1:
         raise ValueError(f"width and height must be >= 1; got {width}, {height}")
-    made: dict[int, Sample] = {}
+    made: dict[int, tuple[object, Sample]] = {}  # id -> (the triple, kept alive, its sample)
     samples = []
     for triple in images:
-        if id(triple) not in made:
+        seen = made.get(id(triple))
+        if seen is None or seen[0] is not triple:
             image, boxes, classes = triple
             if np.ndim(image) != 3 or np.shape(image)[2] != 3:
                 raise ValueError(f"images must be (H, W, 3) RGB; got shape {np.shape(image)}")
-            made[id(triple)] = to_canvas(image, boxes, classes, width, height)
-        samples.append(made[id(triple)])
+            seen = made[id(triple)] = (triple, to_canvas(image, boxes, classes, width, height))
+        samples.append(seen[1])
     return samples

@@ -285,16 +285,20 @@ def load_calibration(path: Path | str, *, task: TaskDescription = SORTING_TASK) 
             f"{path} was calibrated for an MDP with (S, A) = ({doc.get('n_states')}, "
             f"{doc.get('n_actions')}), not the {task.name} MDP's {sizes}"
         )
-    factors = {k: ConfusionMatrix(np.array(v["counts"]), list(v["labels"]))
-               for k, v in doc["factors"].items()}
+    try:
+        factors = {k: ConfusionMatrix(np.array(v["counts"]), list(v["labels"]))
+                   for k, v in doc["factors"].items()}
+        joint_counts = np.array(doc["joint_state_counts"])
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path} is not a calibration file (its counts are missing or "
+                         f"malformed: {type(exc).__name__} {exc})") from None
     if set(factors) != set(expected):
         raise ValueError(f"{path}: factors must be {list(expected)}; got {sorted(factors)}")
     for k, labels in expected.items():
         if factors[k].labels != labels:
             raise ValueError(f"{path}: the values of factor {k!r} must be {labels} (task "
                              f"{task.name!r}); got {factors[k].labels}")
-    joint = ConfusionMatrix(np.array(doc["joint_state_counts"]),
-                            [str(s) for s in range(task.n_states)])
+    joint = ConfusionMatrix(joint_counts, [str(s) for s in range(task.n_states)])
     depth, inspection = doc.get("depth"), doc.get("inspection")
     return Calibration(factors=factors, joint_state=joint,
                        pair_correct=int(doc.get("pair_correct", 0)),

@@ -181,10 +181,13 @@ class StateClassifier(nn.Module):
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"no state-classifier checkpoint at {path}")
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-        config = {"depth_dropout": _LEGACY_DEPTH_DROPOUT, **ckpt["config"]}
-        model = cls(ClassifierConfig(**config))
-        model.load_state_dict(ckpt["state_dict"])
+        try:
+            ckpt = torch.load(path, map_location="cpu", weights_only=True)
+            config = {"depth_dropout": _LEGACY_DEPTH_DROPOUT, **ckpt["config"]}
+            model = cls(ClassifierConfig(**config))
+            model.load_state_dict(ckpt["state_dict"])
+        except Exception as exc:  # not a checkpoint, truncated, or another model's weights
+            raise ValueError(f"{path} is not a state-classifier checkpoint ({exc})") from None
         return model.eval()
 
 

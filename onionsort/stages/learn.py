@@ -88,7 +88,7 @@ class LearnConfig:
 def _check_provenance(session, calibration, calibration_path: Path) -> None:
     """Refuse a session perceived by other models, or in another mode, than the calibration."""
     record = session.perception_models or {}
-    differ = model_mismatch(record, calibration.models)
+    differ = model_mismatch(record, calibration.models) if calibration.models else []
     if differ:
         raise ValueError(
             f"{session.path} was perceived by other models than {calibration_path} was "

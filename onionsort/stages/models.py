@@ -28,11 +28,13 @@ def _digest(path: Path) -> str:
 
 @dataclass
 class PerceptionModels:
-    """The trained detector and state classifier, loaded from one folder."""
+    """The trained detector and state classifier, loaded from one folder, with a hash of each
+    file as it was loaded."""
 
     classifier: object
     detector: object
     folder: Path
+    hashes: dict[str, str] | None = None
 
     @classmethod
     def load(cls, folder: Path | str | None = None) -> PerceptionModels:
@@ -56,7 +58,9 @@ class PerceptionModels:
                 raise FileNotFoundError(f"{folder} has no {name}; train it with `{command} "
                                         f"--data DATASET --out {folder}`")
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE),
-                   detector=Detector.load(folder / DETECTOR_FILE), folder=folder)
+                   detector=Detector.load(folder / DETECTOR_FILE), folder=folder,
+                   hashes={"state_classifier_sha256": _digest(folder / CLASSIFIER_FILE),
+                           "detector_sha256": _digest(folder / DETECTOR_FILE)})
 
     @property
     def frames_per_step(self) -> int:
@@ -64,11 +68,12 @@ class PerceptionModels:
         return int(self.classifier.config.frames)
 
     def describe(self) -> dict:
-        """Which models these are: their folder and a hash of each (for the records they
-        write)."""
-        return {"folder": str(self.folder),
-                "state_classifier_sha256": _digest(self.folder / CLASSIFIER_FILE),
-                "detector_sha256": _digest(self.folder / DETECTOR_FILE)}
+        """Which models these are: their folder (``shipped`` for the package's own) and a hash
+        of each file as loaded (for the records they write)."""
+        hashes = self.hashes or {"state_classifier_sha256": _digest(self.folder / CLASSIFIER_FILE),
+                                 "detector_sha256": _digest(self.folder / DETECTOR_FILE)}
+        shipped = self.folder.resolve() == DEFAULT_MODELS.resolve()
+        return {"folder": "shipped" if shipped else str(self.folder), **hashes}
 
     def perceive(self, steps, first_step: int = 0):
         """:func:`state_abstraction.perceive.perceive_steps` with these models."""
