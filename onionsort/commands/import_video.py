@@ -1,7 +1,9 @@
 """``onionsort import``: a video file or a camera becomes a sensor-only session.
 
-The session holds colour, calibration and a step clock (no depth, no ground truth); perceive it,
-calibrate with ``--no-depth`` and learn from it like any other. Steps come from a fixed clock
+The session holds colour, calibration, a step clock, and the inspection view with
+``--inspection`` (no depth, no ground truth); perceive it and learn from it like any other, with
+a calibration of its sensor mode (``calibration-video.json``, or
+``calibration-video-no-inspection.json`` without ``--inspection``). Steps come from a fixed clock
 (``--step-seconds``) or, by default, from changes of the perceived state (debounced).
 
 Examples
