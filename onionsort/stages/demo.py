@@ -122,7 +122,7 @@ def demo(config: DemoConfig) -> dict:
             for method in METHODS:
                 per_repeat[method].append(_learn_and_sort(
                     method, paths, out / "calibration" / "calibration.json", folder / method,
-                    seed, size, config))
+                    seed, size, config, models))
                 bar.update()
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
@@ -137,7 +137,7 @@ def demo(config: DemoConfig) -> dict:
 
 
 def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, seed: int,
-                    size: dict, config: DemoConfig) -> dict:
+                    size: dict, config: DemoConfig, models: PerceptionModels) -> dict:
     """Learn with one method, let the Sawyer sort with its policy; one repeat's result."""
     t0 = time.perf_counter()
     model = learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
@@ -145,7 +145,8 @@ def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, see
     learn_s = time.perf_counter() - t0
     result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
                                         blemished=size["blemished"], seed=seed,
-                                        models=config.models, difficulty=config.difficulty))
+                                        models=config.models, difficulty=config.difficulty),
+                         models)
     return {"seed": seed, "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
             "precision": result.precision, "recall": result.recall,
             "learn_seconds": round(learn_s, 3), "theta": model["theta"], "ile": _ile(model),

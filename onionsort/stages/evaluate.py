@@ -85,8 +85,11 @@ def inspection_classifier(detector):
     return classify
 
 
-def evaluate(config: EvaluateConfig):
+def evaluate(config: EvaluateConfig, models=None):
     """Evaluate a run's policy; write ``evaluation.json`` (and ``.rrd``).
+
+    ``models`` (:class:`~onionsort.stages.models.PerceptionModels`) are used instead of loading
+    ``config.models`` again, as ``demo`` does for its many evaluations.
 
     Returns ``(result, summary)``: the :class:`robot.evaluation.EvaluationResult` and the dict
     written to ``evaluation.json``.
@@ -103,7 +106,8 @@ def evaluate(config: EvaluateConfig):
     if config.ground_truth_inspection:
         classify = "ground-truth"
     else:
-        detector = PerceptionModels.load(config.models).detector
+        loaded = PerceptionModels.load(config.models) if models is None else models
+        detector = loaded.detector
         classify = inspection_classifier(detector)
     logger_ = None
     if config.rerun:
