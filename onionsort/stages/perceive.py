@@ -114,23 +114,24 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
     if not steps:
         raise ValueError(f"{path}: perception found no complete step in {session.n_frames} "
                          "frames; nothing to learn from")
-    perceived = models.perceive([([f.color for f in frames],
-                                  [f.depth for f in frames] if session.has_depth else None,
-                                  frames[0].inspection) for frames in steps])
+    frames = list(session.frames())
+    colors = {f.index: f.color for f in frames}  # each image decoded once
+    views = {f.index: f.inspection for f in frames if f.inspection_png is not None}
+    perceived = models.perceive([([colors[f.index] for f in step],
+                                  [f.depth for f in step] if session.has_depth else None,
+                                  views.get(step[0].index)) for step in steps])
     if all(s.occluded for s in perceived):
         raise ValueError(f"{path}: perception called all {len(perceived)} steps occluded; "
                          "there is no usable step (is the camera blocked?)")
-    frames = list(session.frames())
     detections = {}
-    for i in range(0, len(frames), batch_size):
-        chunk = frames[i:i + batch_size]
-        for frame, det in zip(chunk, models.detector.detect([f.color for f in chunk]),
+    order = sorted(colors)
+    for i in range(0, len(order), batch_size):
+        chunk = order[i:i + batch_size]
+        for index, det in zip(chunk, models.detector.detect([colors[k] for k in chunk]),
                               strict=True):
-            detections[frame.index] = _rows(det)
-    views = [f for f in frames if f.inspection_png is not None]
-    inspection = {f.index: _rows(d)
-                  for f, d in zip(views, models.detector.detect([f.inspection for f in views]),
-                                  strict=True)} if views else {}
+            detections[index] = _rows(det)
+    inspection = ({k: _rows(d) for k, d in zip(views, models.detector.detect(list(
+        views.values())), strict=True)} if views else {})
     docs = [{**seen.to_dict(), "frame": step[0].index}
             for seen, step in zip(perceived, steps, strict=True)]
     add_perception(path, docs, detections=detections, inspection=inspection,
