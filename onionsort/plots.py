@@ -112,10 +112,7 @@ def _save_captioned(fig, points, path: Path, plt) -> Path:
     batches = f"{n[0]}" if len(n) == 1 else f"{n[0]}-{n[-1]}"
     fig.suptitle(f"mean over {batches} batches; 95% percentile-bootstrap interval over batches",
                  fontsize=8, color="0.35", y=1 - 0.06 / fig.get_figheight(), va="top")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, plt)
 
 
 def plot_sweep(results: Sequence, out: Path, *, title: str = "",
@@ -225,9 +222,16 @@ def _learner_figure(points, title, path, plt):
 
 
 def _save(fig, path: Path, plt) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    """Write the figure as PNG to a temporary name beside ``path``, then rename it."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        fig.tight_layout()
+        fig.savefig(tmp, dpi=110, format="png")
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
     return path
 
 

@@ -177,8 +177,9 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
         calibration.save(out / CALIBRATION_FILE, extra={
             "data": str(config.data), "split": config.split, "models": calibration.models,
             "depth": config.depth, "inspection": config.inspection, "metrics": metrics})
-        np.savez_compressed(out / "observation_model.npz",
-                            probs=calibration.observation_model().probs)
+        tmp = out / "observation_model.partial.npz"
+        np.savez_compressed(tmp, probs=calibration.observation_model().probs)
+        tmp.replace(out / "observation_model.npz")
         confusion_figure(calibration, out / "confusion.png")
     return calibration, metrics
 
