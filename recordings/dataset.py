@@ -46,7 +46,7 @@ from recordings.schema import check_task
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
-           "dataset_task", "read_split", "read_steps", "split_names"]
+           "dataset_task", "read_metadata", "read_split", "read_steps", "split_names"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -187,15 +187,26 @@ class LabelledFrame:
     record: dict
 
 
+def read_metadata(root: Path | str) -> dict:
+    """A dataset folder's ``dataset.json``, checked; clear errors for anything else."""
+    meta_path = Path(root) / "dataset.json"
+    if not meta_path.is_file():
+        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json); render one "
+                                "with `onionsort dataset`")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{meta_path} is not JSON ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise ValueError(f"{meta_path}: format must be {FORMAT!r}; got "
+                         f"{meta.get('format') if isinstance(meta, dict) else meta!r}")
+    return meta
+
+
 def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[LabelledFrame]:
     """Iterate the frames of one split of a dataset folder, in ``view`` (see :data:`VIEWS`)."""
     root = Path(root)
-    meta_path = root / "dataset.json"
-    if not meta_path.exists():
-        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json)")
-    meta = json.loads(meta_path.read_text())
-    if meta.get("format") != FORMAT:
-        raise ValueError(f"{meta_path}: format must be {FORMAT!r}; got {meta.get('format')!r}")
+    meta = read_metadata(root)
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
     views = meta.get("views", ["camera"])
@@ -217,16 +228,14 @@ def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[L
 def dataset_task(root: Path | str) -> TaskDescription:
     """The task of a dataset folder's records: ``dataset.json``'s ``"task"``, or the
     onion-sorting task for a dataset written before the field."""
-    meta_path = Path(root) / "dataset.json"
-    if not meta_path.exists():
-        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json)")
-    doc = json.loads(meta_path.read_text()).get("task")
+    doc = read_metadata(root).get("task")
     if doc is None:
         return SORTING_TASK
     try:
         return TaskDescription.from_dict(doc)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{meta_path}: 'task' is not a task description ({exc})") from None
+        raise ValueError(f"{Path(root) / 'dataset.json'}: 'task' is not a task description "
+                         f"({exc})") from None
 
 
 def split_names(split: str) -> tuple[str, ...]:

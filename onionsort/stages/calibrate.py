@@ -135,13 +135,12 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
                  batch_size: int = 32) -> dict[str, dict[str, float]]:
     """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``."""
-    import json
 
     from perception.metrics import mean_average_precision
     from perception.train import EVAL_SCORE_THRESHOLD
-    from recordings.dataset import read_split, split_names
+    from recordings.dataset import read_metadata, read_split, split_names
 
-    views = json.loads((Path(root) / "dataset.json").read_text()).get("views", ["camera"])
+    views = read_metadata(root).get("views", ["camera"])
     gts: dict[str, list] = {}
     dts: dict[str, list] = {}
     for view in views:

@@ -15,7 +15,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -106,11 +105,9 @@ class _EpochBar:
 
 
 def _metadata(root: Path) -> dict:
-    path = root / "dataset.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{root} is not a dataset folder (no dataset.json); render one "
-                                "with `onionsort dataset`")
-    return json.loads(path.read_text())
+    from recordings.dataset import read_metadata
+
+    return read_metadata(root)
 
 
 def train_state_classifier(config: ClassifierTrainConfig) -> dict:
