@@ -42,7 +42,7 @@ import numpy as np
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.frames import TruthFrame
-from recordings.schema import check_task
+from recordings.schema import check_task, task_of
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
@@ -228,14 +228,7 @@ def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[L
 def dataset_task(root: Path | str) -> TaskDescription:
     """The task of a dataset folder's records: ``dataset.json``'s ``"task"``, or the
     onion-sorting task for a dataset written before the field."""
-    doc = read_metadata(root).get("task")
-    if doc is None:
-        return SORTING_TASK
-    try:
-        return TaskDescription.from_dict(doc)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{Path(root) / 'dataset.json'}: 'task' is not a task description "
-                         f"({exc})") from None
+    return task_of(read_metadata(root), str(Path(root) / "dataset.json"))
 
 
 def split_names(split: str) -> tuple[str, ...]:

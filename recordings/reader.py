@@ -34,6 +34,7 @@ from recordings.schema import (
     READABLE_VERSIONS,
     SESSION_METADATA,
     Topic,
+    task_of,
 )
 from recordings.steps import group_steps
 
@@ -380,14 +381,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
 
 def _task(metadata: dict, path: Path) -> TaskDescription:
     """The session record's task, or the onion-sorting task for files without one."""
-    doc = metadata.get("task")
-    if doc is None:
-        return SORTING_TASK
-    try:
-        return TaskDescription.from_dict(doc)
-    except (TypeError, ValueError) as exc:
-        raise NotASessionError(f"{path}: the session record's task is not a task "
-                               f"description ({exc})") from None
+    return task_of(metadata, f"{path}: the session record", NotASessionError)
 
 
 def _layout(metadata: dict, version: str, path: Path) -> dict:

@@ -61,6 +61,7 @@ __all__ = [
     "Topic",
     "check_task",
     "json_schema_bytes",
+    "task_of",
 ]
 
 FORMAT_NAME = "onionsort-session"
@@ -172,6 +173,22 @@ def check_task(task, reserved: tuple[str, ...], where: str):
         raise ValueError(f"task {task.name!r}: factors {clash} clash with the keys of {where} "
                          f"{reserved}; rename them")
     return task
+
+
+def task_of(metadata: dict, where: str, error: type[Exception] = ValueError):
+    """The task described in a session's or dataset's metadata (``"task"``), or the
+    onion-sorting task for files written before the field; ``error`` names ``where`` when the
+    field is not a task description."""
+    from irl.domains.onion_sorting import SORTING_TASK
+    from irl.domains.task import TaskDescription
+
+    doc = metadata.get("task")
+    if doc is None:
+        return SORTING_TASK
+    try:
+        return TaskDescription.from_dict(doc)
+    except (TypeError, ValueError) as exc:
+        raise error(f"{where}'s task is not a task description ({exc})") from None
 
 
 def json_schema_bytes(schema: dict) -> bytes:
