@@ -19,7 +19,19 @@ from scipy.optimize import minimize
 
 from irl.exceptions import ConvergenceWarning
 
-__all__ = ["OptimizationResult", "maximize_gradient_ascent", "maximize_lbfgs"]
+__all__ = ["OBJECTIVE_KEYS", "OptimizationResult", "maximize_gradient_ascent", "maximize_lbfgs",
+           "objective_curve"]
+
+#: Keys under which a learner's ``history_`` records its objective: ``value`` (the log
+#: posterior of the Bayesian learners) or ``log_likelihood`` (HiddenDataEM, MaxEnt).
+OBJECTIVE_KEYS = ("value", "log_likelihood")
+
+
+def objective_curve(history) -> tuple[str | None, list[float]]:
+    """The objective's key (the first of :data:`OBJECTIVE_KEYS` in ``history[0]``) and its value
+    per iteration, from a learner's ``history_``; ``(None, [])`` if it records neither."""
+    key = next((k for k in OBJECTIVE_KEYS if history and k in history[0]), None)
+    return key, ([float(h[key]) for h in history] if key else [])
 
 Objective = Callable[[np.ndarray], tuple[float, np.ndarray]]
 

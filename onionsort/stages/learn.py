@@ -120,6 +120,7 @@ def learn(config: LearnConfig) -> dict:
 
     from irl.domains.onion_sorting import onion_sorting
     from irl.experiments import make_estimator
+    from irl.learners.optimize import objective_curve
     from onionsort.plots import learning_curve_figure
     from recordings import open_session
     from state_abstraction.calibration import load_calibration
@@ -167,19 +168,13 @@ def learn(config: LearnConfig) -> dict:
         history = list(getattr(estimator, "history_", []))
         write_json(out / "learning_curve.json", history)
         write_json(out / MODEL_FILE, model)
-        learning_curve_figure(objective_curve(history), config.method,
+        learning_curve_figure(objective_curve(history)[1], config.method,
                               out / "learning_curve.png")
         if config.rerun:
             from recordings.rerun import log_learning
 
             log_learning(out / "learn.rrd", model, history)
     return model
-
-
-def objective_curve(history: list[dict]) -> list[float]:
-    """The objective per iteration from a learner's ``history_``."""
-    key = next((k for k in ("value", "log_likelihood") if history and k in history[0]), None)
-    return [float(h[key]) for h in history] if key else []
 
 
 def load_policy(run_dir: Path, task: TaskDescription | None = None):

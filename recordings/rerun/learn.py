@@ -19,6 +19,7 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
+from irl.learners.optimize import OBJECTIVE_KEYS, objective_curve
 from recordings.rerun.common import (
     close_recording,
     log_series_names,
@@ -26,13 +27,12 @@ from recordings.rerun.common import (
     send_series,
 )
 
-__all__ = ["LEARN_ROOT", "OBJECTIVE_KEYS", "learn_blueprint", "log_learning", "objective"]
+__all__ = ["LEARN_ROOT", "learn_blueprint", "log_learning"]
 
 logger = logging.getLogger(__name__)
 
 LEARN_ROOT = "learn"
 #: Keys of a history entry holding the objective, in order of preference.
-OBJECTIVE_KEYS = ("value", "log_likelihood")
 
 
 def learn_blueprint() -> rrb.Blueprint:
@@ -48,13 +48,6 @@ def learn_blueprint() -> rrb.Blueprint:
         ),
         collapse_panels=True,
     )
-
-
-def objective(history: Sequence[dict]) -> tuple[str | None, list[float]]:
-    """The objective's key (the first of :data:`OBJECTIVE_KEYS` in ``history[0]``) and its
-    value per iteration; ``(None, [])`` if the history records neither."""
-    key = next((k for k in OBJECTIVE_KEYS if history and k in history[0]), None)
-    return key, ([float(h[key]) for h in history] if key else [])
 
 
 def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
@@ -84,7 +77,7 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
                          f"{sorted(model)}")
     rec = open_recording(application_id, target, learn_blueprint())
     try:
-        key, values = objective(history)
+        key, values = objective_curve(history)
         if key is None:
             logger.warning("the learning history records no objective (%s); logging the "
                            "model alone", " or ".join(OBJECTIVE_KEYS))
