@@ -54,6 +54,9 @@ def test_bootstrap_accepts_a_statistic_without_axis():
     x = np.arange(10.0)
     lo, hi = bootstrap_ci(x, lambda v: float(v.max() - v.min()), n_resamples=300, rng=0)
     assert 0.0 <= lo <= hi <= 9.0
+    # about 41% of resamples of ten draws hold both 0 and 9: the upper end is the full range,
+    # and the lower end is not
+    assert hi == 9.0 and lo < 9.0
 
 
 def test_bootstrap_coverage_of_the_mean_is_about_nominal():
