@@ -7,6 +7,7 @@ Examples
 --------
     onionsort dataset --frames 3000 --seed 0 --out runs/data
     onionsort dataset --frames 300 --occlusion 0.4 --seed 1 --out runs/data-small
+    onionsort dataset --frames 8000 --difficulty clean,realistic,paper,hard --out runs/data-mix
 """
 
 from __future__ import annotations
@@ -29,9 +30,24 @@ def register(subparsers) -> None:
                              "in line-ups of 10 split like the sessions (120; 0 for none)")
     from robot.difficulty import DIFFICULTY_LEVELS
 
-    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
-                        help="perception difficulty of the world (clean)")
+    parser.add_argument("--difficulty", type=_levels, default="clean",
+                        help="perception difficulty of the world: one of "
+                             f"{', '.join(DIFFICULTY_LEVELS)} (clean), or several joined by "
+                             "commas for a mix whose sessions take the levels in turn")
     parser.set_defaults(func=run)
+
+
+def _levels(text: str) -> str:
+    """One difficulty level or several joined by commas, for argparse ``type=``."""
+    import argparse
+
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    unknown = [x for x in text.split(",") if x.strip() not in DIFFICULTY_LEVELS]
+    if unknown:
+        raise argparse.ArgumentTypeError(
+            f"unknown level {unknown[0].strip()!r}; the levels are {', '.join(DIFFICULTY_LEVELS)}")
+    return ",".join(x.strip() for x in text.split(","))
 
 
 def run(args) -> int:

@@ -1,6 +1,7 @@
 """``onionsort eval-perception``: measure the detector and the state classifier on a dataset.
 
-Prints mAP of the detector (per view), the accuracy of each factor on unoccluded steps, and the
+Prints mAP of the detector (per view), the accuracy of its good/blemished call on inspected
+onions (the sorter's and the Sawyer's), the accuracy of each factor on unoccluded steps, and the
 recall and precision of occluded steps; ``--no-depth`` measures the classifier on colour alone.
 
 Examples
@@ -44,6 +45,10 @@ def run(args) -> int:
     for view, m in r["map_by_view"].items():
         if view != "all":
             print(f"  {view:10s} mAP@0.5 {m['map50']:.3f}, mAP@0.5:0.95 {m['map50_95']:.3f}")
+    for source, m in r["inspection_call"].items():
+        print(f"  inspection call ({source}): accuracy {m['accuracy']:.3f} on {m['n']} onions, "
+              f"{m['missed_blemished']} blemished missed, {m['false_blemished']} good called "
+              "blemished")
     mode = "RGB-D" if r["depth"] else "colour only"
     print(f"state classifier ({mode}), unoccluded steps: " + ", ".join(
         f"{k} {v:.3f}" for k, v in r["accuracy"].items()))

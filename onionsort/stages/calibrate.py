@@ -29,7 +29,7 @@ from onionsort.stages.base import log_config, output_folder, refuse_existing
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 
 __all__ = ["CalibrateConfig", "PerceptionEvalConfig", "calibrate", "detector_map",
-           "eval_perception", "measure_perception"]
+           "eval_perception", "inspection_calls", "measure_perception"]
 
 logger = logging.getLogger(__name__)
 
@@ -134,7 +134,13 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
                  batch_size: int = 32) -> dict[str, dict[str, float]]:
-    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``."""
+    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``.
+
+    With an inspection view, ``"inspection_call"`` adds the accuracy of the call perception
+    makes of each inspected onion (:func:`state_abstraction.perceive.inspected_class`; no call
+    counts as wrong), per source (``human``: the sorter's inspection, ``robot``: the Sawyer's,
+    ``all``), each as ``{"n", "accuracy", "missed_blemished", "false_blemished"}``.
+    """
 
     from perception.metrics import mean_average_precision
     from perception.train import EVAL_SCORE_THRESHOLD
@@ -143,18 +149,42 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     views = read_metadata(root).get("views", ["camera"])
     gts: dict[str, list] = {}
     dts: dict[str, list] = {}
+    frames: dict[str, list] = {}
     for view in views:
-        frames = [f for name in split_names(split) for f in read_split(root, name, view=view)]
+        frames[view] = [f for name in split_names(split) for f in read_split(root, name, view=view)]
         gts[view] = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
-                      np.asarray(f.record["classes"], int)) for f in frames]
+                      np.asarray(f.record["classes"], int)) for f in frames[view]]
         dts[view] = []
-        for i in range(0, len(frames), batch_size):
-            for det in models.detector.detect([f.color for f in frames[i:i + batch_size]],
-                                              score_threshold=EVAL_SCORE_THRESHOLD):
-                dts[view].append((det.boxes, det.scores, det.classes))
-    out = {v: mean_average_precision(gts[v], dts[v]) for v in views}
-    out["all"] = mean_average_precision([g for v in views for g in gts[v]],
-                                        [d for v in views for d in dts[v]])
+        for i in range(0, len(frames[view]), batch_size):
+            dts[view].extend(models.detector.detect(
+                [f.color for f in frames[view][i:i + batch_size]],
+                score_threshold=EVAL_SCORE_THRESHOLD))
+    out = {v: mean_average_precision(gts[v], [(d.boxes, d.scores, d.classes) for d in dts[v]])
+           for v in views}
+    out["all"] = mean_average_precision(
+        [g for v in views for g in gts[v]],
+        [(d.boxes, d.scores, d.classes) for v in views for d in dts[v]])
+    if "inspection" in views:
+        out["inspection_call"] = inspection_calls(frames["inspection"], dts["inspection"])
+    return out
+
+
+def inspection_calls(frames, detections) -> dict[str, dict[str, float]]:
+    """Accuracy of the good/blemished call on inspection views that hold one onion."""
+    from state_abstraction.perceive import inspected_class
+
+    rows = [(f.record.get("source", "human"), int(f.record["classes"][0]), inspected_class(d))
+            for f, d in zip(frames, detections, strict=True) if len(f.record["classes"]) == 1]
+    out = {}
+    for source in ("human", "robot", "all"):
+        mine = [(t, c) for s, t, c in rows if source in (s, "all")]
+        if mine:
+            out[source] = {
+                "n": len(mine),
+                "accuracy": float(np.mean([t == c for t, c in mine])),
+                "missed_blemished": sum(t == 1 and c != 1 for t, c in mine),
+                "false_blemished": sum(t == 0 and c == 1 for t, c in mine),
+            }
     return out
 
 
@@ -193,6 +223,7 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
     maps = detector_map(models, config.data, config.split)
     return {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
             "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
-            "occlusion_precision": metrics["occlusion_precision"], "map_by_view": maps,
+            "occlusion_precision": metrics["occlusion_precision"],
+            "inspection_call": maps.pop("inspection_call", {}), "map_by_view": maps,
             "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth,
             "inspection": config.inspection}

@@ -47,7 +47,8 @@ class DatasetConfig:
         split like the sessions; 0 for none.
     difficulty : str
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's world).
+        today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
+        whose sessions and robot line-ups take the levels in turn.
     """
 
     out: Path
@@ -62,11 +63,17 @@ class DatasetConfig:
     difficulty: str = "clean"
 
     def __post_init__(self) -> None:
-        check_difficulty(self.difficulty)
+        for level in self.levels:
+            check_difficulty(level)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.robot_onions < 0:
             raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
+
+    @property
+    def levels(self) -> list[str]:
+        """The difficulty levels, in the order sessions and line-ups take them."""
+        return [level.strip() for level in self.difficulty.split(",")]
 
 
 @dataclass(frozen=True)
@@ -103,24 +110,30 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     from robot.simulation import SessionConfig, SortingSession, expert_model
 
     log_config("dataset", config)
-    session_config = SessionConfig(n_steps=config.steps_per_session,
-                                   occlusion=config.occlusion,
-                                   frames_per_step=config.frames_per_step,
-                                   difficulty=config.difficulty)
-    per_session = session_config.n_steps * session_config.frames_per_step
+    levels = config.levels
+    session_configs = [SessionConfig(n_steps=config.steps_per_session,
+                                     occlusion=config.occlusion,
+                                     frames_per_step=config.frames_per_step, difficulty=level)
+                       for level in levels]
+    per_session = config.steps_per_session * config.frames_per_step
     n_sessions = math.ceil(config.frames / per_session)
     plan = split_plan(n_sessions, config.val, config.test)
-    writer = DatasetWriter(config.out, {
+    metadata = {
         "seed": config.seed, "frames": config.frames, "sessions": n_sessions,
-        "config": session_config.to_dict(), "software": f"onionsort {__version__}",
+        "config": session_configs[0].to_dict(), "software": f"onionsort {__version__}",
         "session_splits": plan,
-    })
-    policy, initial = expert_model(session_config.blemish_rate)
+    }
+    if len(levels) > 1:
+        metadata["config"]["difficulty"] = [c.difficulty.to_dict() for c in session_configs]
+        metadata["session_difficulty"] = [levels[k % len(levels)] for k in range(n_sessions)]
+    writer = DatasetWriter(config.out, metadata)
+    policy, initial = expert_model(session_configs[0].blemish_rate)
     seeds = np.random.SeedSequence([config.seed, 0x0D47A5E7]).spawn(n_sessions)
     written = 0
     try:
         with tqdm(total=config.frames, unit="frame", desc="dataset") as bar:
             for k, (split, seed) in enumerate(zip(plan, seeds, strict=True)):
+                session_config = session_configs[k % len(levels)]
                 with SortingSession(session_config, policy, initial, seed) as session:
                     for frame in session.frames():
                         if written == config.frames:
@@ -151,8 +164,8 @@ def _robot_views(writer, config: DatasetConfig) -> int:
     try:
         for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
                                                      desc="robot views", unit="line-up")):
-            for index, rgb, labels in robot_inspection_views(size, seed,
-                                                               config.difficulty):
+            level = config.levels[k % len(config.levels)]
+            for index, rgb, labels in robot_inspection_views(size, seed, level):
                 writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
                 n += 1
             writer.flush(split)

@@ -86,3 +86,31 @@ def test_split_plan():
 def test_read_split_refuses_a_non_dataset(tmp_path):
     with pytest.raises(FileNotFoundError, match="not a dataset folder"):
         list(read_split(tmp_path, "train"))
+
+
+def test_a_mix_of_levels_gives_each_session_its_level_in_turn(dataset, tmp_path, capsys):
+    args = ["dataset", "--frames", "12", "--steps-per-session", "2", "--frames-per-step", "2",
+            "--seed", "3", "--robot-onions", "0"]
+    assert main([*args, "--difficulty", "clean,hard", "--out", str(tmp_path / "mix")]) == 0
+    assert main([*args, "--out", str(tmp_path / "clean")]) == 0
+    meta = json.loads((tmp_path / "mix" / "dataset.json").read_text())
+    assert meta["session_difficulty"] == ["clean", "hard", "clean"]
+    assert [d["name"] for d in meta["config"]["difficulty"]] == ["clean", "hard"]
+
+    def by_session(root):
+        out = {}
+        for split in SPLITS:
+            for f in read_split(root, split):
+                out.setdefault(f.record["session"], []).append(f.color)
+        return out
+
+    mix, clean = by_session(tmp_path / "mix"), by_session(tmp_path / "clean")
+    # a clean session of the mix is the clean dataset's session; the hard one is not
+    assert all(np.array_equal(a, b) for a, b in zip(mix[0], clean[0], strict=True))
+    assert not any(np.array_equal(a, b) for a, b in zip(mix[1], clean[1], strict=True))
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        main([*args, "--difficulty", "clean,foggy", "--out", str(tmp_path / "bad")])
+    assert exit_.value.code == 2
+    assert "unknown level 'foggy'" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()

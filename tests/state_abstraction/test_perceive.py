@@ -151,3 +151,26 @@ def test_learn_from_perceived_sessions_and_its_refusals(random_models, session, 
     assert main(["learn", str(perceived), "--observation-model", str(wrong),
                  "--out", str(tmp_path / "bad2")]) == 2
     assert "not the onion-sorting MDP" in capsys.readouterr().err
+
+
+def test_inspection_calls_count_misses_and_no_call_as_wrong():
+    from types import SimpleNamespace as NS
+
+    from onionsort.stages.calibrate import inspection_calls
+
+    def frame(source, cls):
+        return NS(record={"source": source, "classes": [cls], "boxes": [[0, 0, 1, 1]]})
+
+    def det(cls, score):
+        return NS(scores=np.array([score]), classes=np.array([cls]))
+
+    frames = [frame("human", 1), frame("human", 0), frame("robot", 1), frame("robot", 0),
+              frame("robot", 0), NS(record={"classes": [], "boxes": []})]
+    dets = [det(0, 0.9), det(0, 0.9), det(1, 0.9), det(1, 0.05), det(1, 0.8), det(0, 0.9)]
+    calls = inspection_calls(frames, dets)
+    assert calls["human"] == {"n": 2, "accuracy": 0.5, "missed_blemished": 1,
+                              "false_blemished": 0}
+    # a score below the inspection threshold is no call: wrong, but not "called blemished"
+    assert calls["robot"] == {"n": 3, "accuracy": 1 / 3, "missed_blemished": 0,
+                              "false_blemished": 1}
+    assert calls["all"]["n"] == 5 and calls["all"]["accuracy"] == 2 / 5
