@@ -29,7 +29,7 @@ from onionsort.stages.base import log_config, output_folder, refuse_existing
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 
 __all__ = ["CalibrateConfig", "PerceptionEvalConfig", "calibrate", "detector_map",
-           "eval_perception", "inspection_calls", "measure_perception"]
+           "dataset_identity", "eval_perception", "inspection_calls", "measure_perception"]
 
 logger = logging.getLogger(__name__)
 
@@ -204,13 +204,27 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
                                                   inspection=config.inspection)
         calibration = calibration.with_smoothing(config.smoothing)
         calibration.save(out / CALIBRATION_FILE, extra={
-            "data": str(config.data), "split": config.split, "models": calibration.models,
+            "data": dataset_identity(config.data), "split": config.split,
+            "models": calibration.models,
             "depth": config.depth, "inspection": config.inspection, "metrics": metrics})
         tmp = out / "observation_model.partial.npz"
         np.savez_compressed(tmp, probs=calibration.observation_model().probs)
         tmp.replace(out / "observation_model.npz")
         confusion_figure(calibration, out / "confusion.png")
     return calibration, metrics
+
+
+def dataset_identity(root: Path | str) -> dict:
+    """A dataset as a calibration records it: its folder's name, seed, size and difficulty (a
+    path would name a folder on one machine only)."""
+    from recordings.dataset import read_metadata
+
+    meta = read_metadata(root)
+    difficulty = meta.get("config", {}).get("difficulty", "clean")
+    levels = ([d["name"] for d in difficulty] if isinstance(difficulty, list)
+              else difficulty["name"] if isinstance(difficulty, dict) else difficulty)
+    return {"name": Path(root).resolve().name, "seed": meta.get("seed"),
+            "frames": meta.get("frames"), "difficulty": levels}
 
 
 def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None

@@ -101,6 +101,8 @@ def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys)
                  "--out", str(out)]) == 0
     doc = json.loads((out / "calibration.json").read_text())
     assert set(doc["factors"]) == {"onion", "end_effector", "prediction", "action"}
+    # the dataset by name and seed, not by a path of this machine
+    assert doc["data"] == {"name": "data", "seed": 4, "frames": 36, "difficulty": "clean"}
     probs = np.load(out / "observation_model.npz")["probs"]
     assert probs.shape == (48, 5, 240)
     np.testing.assert_allclose(probs.sum(axis=2), 1.0)
