@@ -37,12 +37,13 @@ from irl.domains.onion_sorting import (
     encode_state,
 )
 from robot.difficulty import Difficulty
-from robot.station import Classifier, SawyerStation
+from robot.station import Classifier, SawyerStation, StationStep
 
 __all__ = [
     "EvaluationStep",
     "OnionOutcome",
     "SortingResult",
+    "SortingTally",
     "evaluate_policy",
     "greedy_actions",
 ]
@@ -287,49 +288,100 @@ def evaluate_policy(
     if on_step is not None and not callable(on_step):
         raise TypeError(f"on_step must be callable or None; got {type(on_step).__name__}")
     budget = n_onions * max_steps_per_onion
-    fates: list[Fate | None] = [None] * n_onions
-    counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
                        move_steps=move_steps, render_every_step=render,
                        difficulty=difficulty) as station:
-        truth = station.blemished
+        tally = SortingTally(station.blemished)
         n_steps = 0
-        while n_steps < budget and any(f is None for f in fates):
+        while n_steps < budget and not tally.complete:
             s = station.state
             a = SortAction(int(policy[encode_state(s)]))
             done = station.step(a)
-            fate = _fate(done.action, done.next_state) if done.changed else None
-            if fate is not None:
-                fates[done.onion] = fate
-                counts[_cell(bool(truth[done.onion]), fate)] += 1
+            fate = tally.record(done)
             if on_step is not None:
                 on_step(EvaluationStep(
                     step=n_steps, state=encode_state(done.state), action=int(a),
                     next_state=encode_state(done.next_state), onion=done.onion,
-                    blemished=None if done.onion is None else bool(truth[done.onion]),
-                    perceived=done.perceived, fate=fate, **counts,
+                    blemished=None if done.onion is None else tally.is_blemished(done.onion),
+                    perceived=done.perceived, fate=fate, **tally.counts,
                     color=None if done.image is None else done.image.rgb,
                     depth=None if done.image is None else done.image.depth,
                     inspection=done.inspection, q=done.q,
                 ))
             n_steps += 1
         perceived = [station.perceived(i) for i in range(n_onions)]
-    undecided = sum(f is None for f in fates)
-    if undecided:
-        logger.info("step budget of %d spent with %d of %d onions undecided (left on the "
-                    "line)", budget, undecided, n_onions)
-    outcomes = tuple(
-        OnionOutcome(index=i, blemished=bool(truth[i]), perceived=perceived[i],
-                     fate=fates[i] or "line", decided=fates[i] is not None)
-        for i in range(n_onions)
-    )
-    final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
-    for o in outcomes:
-        final[_cell(o.blemished, o.fate)] += 1
-    result = SortingResult(**final, n_steps=n_steps, undecided=undecided, onions=outcomes)
-    logger.info("sorted %d onions in %d steps: precision %.3f, recall %.3f", n_onions, n_steps,
-                result.precision, result.recall)
-    return result
+    return tally.result(n_steps, perceived)
+
+
+class SortingTally:
+    """The fates of a line-up's onions and the running TP/FP/TN/FN, action by action.
+
+    The one place where an episode is counted: :func:`evaluate_policy` and the Gymnasium
+    environment (:mod:`robot.gym_env`) feed it every :class:`~robot.station.StationStep` and
+    read the same counts.
+
+    Parameters
+    ----------
+    blemished : ndarray of shape (n_onions,)
+        The line-up's true classes (:attr:`robot.station.SawyerStation.blemished`).
+
+    Attributes
+    ----------
+    fates : list of {"bin", "line"} or None
+        Each onion's fate so far (None while undecided).
+    counts : dict
+        ``tp``, ``fp``, ``tn``, ``fn`` over the onions decided so far.
+    """
+
+    def __init__(self, blemished: np.ndarray) -> None:
+        self._blemished = np.asarray(blemished, bool).copy()
+        if self._blemished.ndim != 1 or not len(self._blemished):
+            raise ValueError(f"blemished must be a non-empty 1-D array of classes; got shape "
+                             f"{self._blemished.shape}")
+        self.fates: list[Fate | None] = [None] * len(self._blemished)
+        self.counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
+
+    def is_blemished(self, index: int) -> bool:
+        """The true class of line-up onion ``index``."""
+        return bool(self._blemished[index])
+
+    @property
+    def complete(self) -> bool:
+        """Whether every onion has a fate (the episode is over)."""
+        return all(f is not None for f in self.fates)
+
+    def record(self, done: StationStep) -> Fate | None:
+        """Count the fate ``done`` gave the onion in focus; return it (None if it gave none)."""
+        fate = _fate(done.action, done.next_state) if done.changed else None
+        if fate is not None:
+            self.fates[done.onion] = fate
+            self.counts[_cell(self.is_blemished(done.onion), fate)] += 1
+        return fate
+
+    def result(self, n_steps: int, perceived: list[Prediction | None]) -> SortingResult:
+        """The episode's :class:`SortingResult` after ``n_steps`` actions; onions still
+        undecided count as left on the line. ``perceived`` (n_onions,) is what the robot
+        perceived of each onion (None if never inspected)."""
+        n_onions = len(self.fates)
+        if len(perceived) != n_onions:
+            raise ValueError(f"perceived must hold one entry per onion ({n_onions}); got "
+                             f"{len(perceived)}")
+        undecided = sum(f is None for f in self.fates)
+        if undecided:
+            logger.info("the episode ended after %d steps with %d of %d onions undecided (left "
+                        "on the line)", n_steps, undecided, n_onions)
+        outcomes = tuple(
+            OnionOutcome(index=i, blemished=self.is_blemished(i), perceived=perceived[i],
+                         fate=self.fates[i] or "line", decided=self.fates[i] is not None)
+            for i in range(n_onions)
+        )
+        final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
+        for o in outcomes:
+            final[_cell(o.blemished, o.fate)] += 1
+        result = SortingResult(**final, n_steps=n_steps, undecided=undecided, onions=outcomes)
+        logger.info("sorted %d onions in %d steps: precision %.3f, recall %.3f", n_onions,
+                    n_steps, result.precision, result.recall)
+        return result
 
 
 def _fate(action: SortAction, next_state) -> Fate | None:

@@ -22,7 +22,7 @@ RULES: dict[str, set[str]] = {
     "state_abstraction": {"torch", "cv2", "numpy", "irl"},
     "recordings": {"mcap", "mcap_protobuf", "foxglove_schemas_protobuf", "rerun", "cv2",
                    "numpy", "irl"},
-    "robot": {"pybullet", "cv2", "numpy", "irl"},
+    "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},
     "onionsort": {"irl", "perception", "state_abstraction", "recordings", "robot", "numpy",
                   "scipy", "torch", "matplotlib", "tqdm", "pybullet"},
 }
