@@ -36,6 +36,7 @@ parts of a session (its states, actions, onions and full crossings) are the same
 
 from __future__ import annotations
 
+import copy
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -166,12 +167,14 @@ def resolve_difficulty(difficulty: Difficulty | str | dict) -> Difficulty:
                     f"{type(difficulty).__name__}")
 
 
-def difficulty_rng(seed: int | np.random.SeedSequence) -> np.random.Generator:
+def difficulty_rng(seed: int | np.random.SeedSequence, stream: int = 0) -> np.random.Generator:
     """The difficulty's generator for a session seeded with ``seed``: a stream of its own that
-    does not advance (or spawn from) the session's seed sequence."""
+    does not advance (or spawn from) the session's seed sequence. ``stream`` > 0 gives further
+    independent streams (one per camera, so that whether one camera renders never changes
+    another's noise)."""
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    return np.random.default_rng(np.random.SeedSequence(seq.entropy,
-                                                        spawn_key=(*seq.spawn_key, _TAG)))
+    key = (*seq.spawn_key, _TAG) + ((stream,) if stream else ())
+    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=key))
 
 
 class ImageEffects:
@@ -192,6 +195,13 @@ class ImageEffects:
             self.gain = np.exp(rng.normal(0.0, d.lighting_gain) + cast)
             self.drift_period_s = float(rng.uniform(60.0, 180.0))
             self.drift_phase = float(rng.uniform(0.0, 2 * np.pi))
+
+    def with_rng(self, rng: np.random.Generator) -> ImageEffects:
+        """The same session's effects (gain, colour cast, drift) drawing their per-call noise
+        from ``rng``: for a second camera of the same scene."""
+        other = copy.copy(self)
+        other.rng = rng
+        return other
 
     def gain_at(self, time_s: float) -> np.ndarray:
         """Per-channel gain (3,) at ``time_s`` seconds into the session."""

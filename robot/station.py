@@ -302,6 +302,9 @@ class SawyerStation:
         self.client = connect()
         self._scene_rng = np.random.default_rng(self._scene_seq)  # the same world on every entry
         self.effects = ImageEffects(self.difficulty, difficulty_rng(self._difficulty_seq))
+        # the inspection camera's noise is a stream of its own: whether the main camera renders
+        # (a Rerun log, a Gymnasium observation) never changes what the detector sees
+        self.inspection_effects = self.effects.with_rng(difficulty_rng(self._difficulty_seq, 1))
         self._clock = 0.0
         try:
             self.lighting: Lighting = sample_lighting(self._scene_rng)
@@ -458,8 +461,8 @@ class SawyerStation:
         if self.focus is not None:
             boxes = boxes_from_segmentation(image.seg, [self._onions[self.focus].body])
             box = next(iter(boxes.values()))[:4] if boxes else None
-        rgb = self.effects.hand(image.rgb, box, _GRIPPER_RGB)
-        return CameraImage(rgb=self.effects.color(rgb, self._clock), depth=image.depth,
+        rgb = self.inspection_effects.hand(image.rgb, box, _GRIPPER_RGB)
+        return CameraImage(rgb=self.inspection_effects.color(rgb, self._clock), depth=image.depth,
                            seg=image.seg)
 
     def inspection_labels(self, image: CameraImage | None = None

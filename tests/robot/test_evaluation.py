@@ -160,3 +160,21 @@ def test_the_evaluation_logs_to_a_valid_rerun_recording(tmp_path, expert_pi):
 def test_the_expert_sorts_fifty_onions_perfectly(expert_pi):
     r = evaluate_policy(expert_pi, n_onions=50, n_blemished=30, seed=0, classify="ground-truth")
     assert (r.tp, r.fp, r.tn, r.fn) == (30, 0, 20, 0) and r.n_steps == 200
+
+
+def test_rendering_the_main_camera_never_changes_what_the_inspection_sees(expert_pi):
+    # on a noisy level the cameras draw noise from streams of their own, so a run that renders
+    # every step (a Rerun log, a Gymnasium observation) sees the same inspection views
+    views = {True: [], False: []}
+
+    def classify(rgb, render):
+        views[render].append(rgb.copy())
+        return Prediction.BAD if rgb.mean() > 100 else Prediction.GOOD
+
+    results = {render: evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=5,
+                                       move_steps=40, difficulty="hard", render=render,
+                                       classify=lambda rgb, r=render: classify(rgb, r))
+               for render in (True, False)}
+    assert results[True] == results[False]
+    assert len(views[True]) == len(views[False]) > 0
+    assert all(np.array_equal(a, b) for a, b in zip(views[True], views[False], strict=True))
