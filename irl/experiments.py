@@ -5,7 +5,9 @@ setting, batch). Each trial draws its batch of demonstrations from seeds derived
 seed, occlusion, noise, length, batch, demonstration index), so every method and every learner
 setting sees the same data, a batch of ``n`` demonstrations is the first ``n`` of a larger one
 (a paired design along the number of demonstrations), and any trial can be re-run alone. Trials
-are independent and run on a process pool.
+are independent: :func:`run_trials` runs them on a process pool or on any
+:class:`concurrent.futures.Executor` (the ``onionsort experiment`` stage passes a Ray-backed one),
+and a trial's result does not depend on where or in which order it ran.
 
 The data always come from the domain's true expert (its ``beta``). The learners can be fitted
 with another beta: a :data:`learner setting <SweepConfig.learners>` is a number (the beta
@@ -27,7 +29,7 @@ import time
 import warnings
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -53,6 +55,7 @@ __all__ = [
     "result_rows",
     "run_sweep",
     "run_trial",
+    "run_trials",
     "sample_batch",
     "summarize",
 ]
@@ -272,19 +275,61 @@ def run_trial(trial: Trial) -> TrialResult:
     )
 
 
-def run_sweep(config: SweepConfig, *, workers: int = 1) -> Iterator[TrialResult]:
-    """Run every trial of the sweep, yielding results as they finish (in trial order).
+def run_trials(
+    trials: Sequence[Trial], *, workers: int = 1, executor: Executor | None = None
+) -> Iterator[tuple[int, TrialResult]]:
+    """Run ``trials``, yielding ``(position in trials, result)`` as each finishes.
 
-    ``workers > 1`` runs trials on a process pool; timings then share the machine, so compare
-    run times only between sweeps run with the same ``workers``.
+    Parameters
+    ----------
+    trials : sequence of Trial
+    workers : int
+        Without ``executor``: ``1`` runs the trials here, in order; more runs them on a process
+        pool of that many workers, yielding in the order they finish.
+    executor : concurrent.futures.Executor, optional
+        Runs the trials instead (e.g. on a cluster); ``workers`` is then not used. It is not
+        shut down here. Trials are submitted as ``executor.submit(run_trial, trial)``, so it
+        must be able to ship both to its workers.
+
+    A trial's result depends only on the trial (its seeds come from its fields), never on the
+    executor or on the order of completion; only ``seconds`` differs from run to run. When the
+    caller stops iterating early, trials not yet started are cancelled.
+    """
+    trials = list(trials)
+    if executor is None and workers <= 1:
+        yield from enumerate(map(run_trial, trials))
+        return
+    pool = executor if executor is not None else ProcessPoolExecutor(max_workers=workers)
+    futures = {}
+    try:
+        futures = {pool.submit(run_trial, t): i for i, t in enumerate(trials)}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    finally:
+        for future in futures:
+            future.cancel()
+        if executor is None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_sweep(
+    config: SweepConfig, *, workers: int = 1, executor: Executor | None = None
+) -> Iterator[TrialResult]:
+    """Run every trial of the sweep, yielding results in trial order (:meth:`SweepConfig.trials`).
+
+    ``workers`` and ``executor`` are those of :func:`run_trials`. With ``workers > 1`` timings
+    share the machine, so compare run times only between sweeps run with the same ``workers``.
     """
     trials = config.trials()
-    logger.info("sweep %s: %d trials on %d worker(s)", config.domain, len(trials), workers)
-    if workers <= 1:
-        yield from map(run_trial, trials)
-        return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        yield from pool.map(run_trial, trials, chunksize=1)
+    where = "the given executor" if executor is not None else f"{max(workers, 1)} worker(s)"
+    logger.info("sweep %s: %d trials on %s", config.domain, len(trials), where)
+    finished: dict[int, TrialResult] = {}
+    next_index = 0
+    for index, result in run_trials(trials, workers=workers, executor=executor):
+        finished[index] = result
+        while next_index in finished:
+            yield finished.pop(next_index)
+            next_index += 1
 
 
 #: The grouping of :func:`summarize`: one summary row per distinct value of these fields.

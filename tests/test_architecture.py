@@ -24,7 +24,7 @@ RULES: dict[str, set[str]] = {
                    "numpy", "irl"},
     "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},
     "onionsort": {"irl", "perception", "state_abstraction", "recordings", "robot", "numpy",
-                  "scipy", "torch", "matplotlib", "tqdm", "pybullet"},
+                  "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray"},
 }
 
 

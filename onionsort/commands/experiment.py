@@ -9,6 +9,9 @@ Examples
         --batches 20 --out runs/efficiency                 # 95% bootstrap intervals per point
     onionsort experiment sorting --trajectories 2,8 --noise 0.3 --occlusion 0.2 \\
         --learner-beta x0.25,x1,x4,paper --batches 20 --out runs/beta   # misspecified beta
+    onionsort experiment forestworld --out runs/forestworld --resume   # after an interruption
+    onionsort experiment forestworld --quick --executor ray            # a local Ray instance
+    RAY_ADDRESS=head-node:6379 onionsort experiment forestworld --executor ray   # a cluster
 """
 
 from __future__ import annotations
@@ -34,9 +37,18 @@ def register(subparsers) -> None:
                    help="comma-separated subset of mmap-birl,map-birl,hidden-data-em,maxent")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                   help="parallel processes (run times are comparable within one run)")
+                   help="parallel processes, or CPUs of a local Ray instance (run times are "
+                        "comparable within one run)")
     p.add_argument("--quick", action="store_true", help="a small sweep that takes seconds")
     p.add_argument("--out", type=Path, help="run folder (default runs/experiment-DOMAIN)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted sweep in --out: keep the trials in its "
+                        "results.csv.partial and run the rest")
+    p.add_argument("--executor", choices=["process", "ray"], default="process",
+                   help="run trials on a local process pool (default) or as Ray tasks "
+                        '(pip install -e ".[ray]")')
+    p.add_argument("--ray-address", help="Ray cluster to join, e.g. auto or ray://head:10001 "
+                   "(default: $RAY_ADDRESS, else a local Ray instance of --workers CPUs)")
     p.set_defaults(func=run)
 
 
@@ -53,7 +65,8 @@ def run(args) -> int:
         trajectories=listed("trajectories"), length=listed("length"),
         learner_beta=listed("learner-beta", "learner"),
         methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
-        seed=args.seed, workers=args.workers, quick=args.quick, out=args.out)
+        seed=args.seed, workers=args.workers, quick=args.quick, out=args.out,
+        executor=args.executor, ray_address=args.ray_address, resume=args.resume)
     summary = run_experiment(config)
     print(format_table(summary["points"]))
     print(f"wrote results.csv, summary.json and {len(summary['plots'])} plots to "

@@ -3,7 +3,13 @@ data-efficiency and misspecified-beta sweeps with bootstrap intervals.
 
 Writes ``results.csv`` (one row per method, occlusion, noise, number of demonstrations, length,
 learner setting and batch), ``summary.json`` (means with 95% percentile-bootstrap intervals over
-batches) and the plots into the run folder; rows go to ``results.csv.partial`` as they finish.
+batches) and the plots into the run folder. Rows go to ``results.csv.partial`` as trials finish,
+beside ``results.csv.partial.json`` (the sweep they belong to); ``resume=True`` keeps those rows
+and runs only the missing trials, so the final ``results.csv`` (rows in trial order) equals that
+of an uninterrupted run, timings aside. Trials run on a local process pool (``executor="process"``)
+or as Ray tasks (``executor="ray"``: the Ray instance this process already joined, else
+``ray_address``, else ``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give
+the same rows.
 
 Example::
 
@@ -12,18 +18,26 @@ Example::
     summary = run_experiment(ExperimentConfig(
         domain="sorting", occlusion=(0.2,), noise=(0.3, 0.45), trajectories=(1, 2, 4, 8),
         learner_beta=("x0.25", "x1", "paper"), batches=20, out=Path("runs/efficiency")))
+    summary = run_experiment(ExperimentConfig(domain="forestworld", executor="ray",
+                                              ray_address="auto", resume=True))
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import dataclasses
+import json
 import logging
+import os
+from concurrent.futures import Executor, Future
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from onionsort.stages.base import check_output_folder, log_config, write_json
 
-__all__ = ["CSV_COLUMNS", "ExperimentConfig", "format_table", "parse_list", "run_experiment"]
+__all__ = ["CSV_COLUMNS", "EXECUTORS", "ExperimentConfig", "format_table", "parse_list",
+           "run_experiment"]
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +56,13 @@ QUICK_POINTS = {
 CSV_COLUMNS = ["method", "occlusion", "noise", "trajectories", "length", "learner",
                "learner_beta", "batch", "ile", "seconds", "normalized_ile", "exact_policy",
                "n_iter", "converged"]
+#: The columns that name a trial (all but its scores): a row's identity when resuming.
+TRIAL_COLUMNS = ("method", "occlusion", "noise", "trajectories", "length", "learner", "batch")
+EXECUTORS = ("process", "ray")
+PARTIAL = "results.csv.partial"
+#: Beside the partial rows: the sweep they belong to, checked by ``resume``.
+PARTIAL_SWEEP = "results.csv.partial.json"
+RAY_EXTRA = 'pip install -e ".[ray]"'
 
 
 def parse_list(text: str, name: str, kind: str = "int") -> tuple:
@@ -83,10 +104,19 @@ class ExperimentConfig:
         domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
     methods : tuple of str
     seed, workers : int
+        ``workers``: processes of the pool, or CPUs of a new local Ray instance.
     quick : bool
         A small sweep that takes seconds.
     out : Path or None
         Run folder (default ``runs/experiment-DOMAIN``).
+    executor : str
+        ``process`` (a local process pool) or ``ray`` (Ray tasks; the ``ray`` extra).
+    ray_address : str or None
+        The Ray cluster to join (``auto``, ``ray://host:10001``, ``host:6379``); None: the
+        ``RAY_ADDRESS`` environment variable, else a new local instance.
+    resume : bool
+        Keep the rows of ``results.csv.partial`` (an interrupted run of this same sweep in
+        this folder) and run only the missing trials.
     """
 
     domain: str
@@ -101,6 +131,17 @@ class ExperimentConfig:
     workers: int = 2
     quick: bool = False
     out: Path | None = None
+    executor: str = "process"
+    ray_address: str | None = None
+    resume: bool = False
+
+    def __post_init__(self) -> None:
+        if self.executor not in EXECUTORS:
+            raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; "
+                             f"got {self.executor!r}")
+        if self.ray_address is not None and self.executor != "ray":
+            raise ValueError(f"ray_address is for executor 'ray'; got executor "
+                             f"{self.executor!r} with ray_address {self.ray_address!r}")
 
     def sweep(self):
         """The :class:`irl.experiments.SweepConfig` this resolves to."""
@@ -127,37 +168,185 @@ class ExperimentConfig:
 
 
 def run_experiment(config: ExperimentConfig) -> dict:
-    """Run the sweep; write the CSV, ``summary.json`` and plots; return the summary."""
+    """Run the sweep; write the CSV, ``summary.json`` and plots; return the summary.
+
+    A ``results.csv.partial`` left in the folder by an interrupted run is continued with
+    ``resume=True`` (refused if it is from a sweep with other parameters) and is otherwise
+    refused rather than overwritten.
+    """
     from tqdm import tqdm
 
-    from irl.experiments import CONFIDENCE, N_RESAMPLES, run_sweep, summarize
+    from irl.experiments import CONFIDENCE, N_RESAMPLES, run_trials, summarize
     from onionsort.plots import plot_sweep
 
     sweep = config.sweep()
     log_config("experiment", sweep)
     out = check_output_folder(config.folder)
     trials = sweep.trials()
-    results = []
-    partial = out / "results.csv.partial"
-    with partial.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        for r in tqdm(run_sweep(sweep, workers=config.workers), total=len(trials),
-                      desc=f"{config.domain} sweep", unit="fit"):
-            results.append(r)
-            writer.writerow(asdict(r))
-            fh.flush()
-    partial.replace(out / "results.csv")
-    points = summarize(results, seed=sweep.seed)
-    summary = {"config": asdict(sweep), "workers": config.workers,
+    partial, sweep_doc = out / PARTIAL, _sweep_doc(sweep)
+    if config.resume and partial.exists():
+        done = _read_partial(out, sweep_doc, trials)
+        logger.info("resuming %s: %d of %d trials already done", partial, len(done), len(trials))
+    elif partial.exists():
+        raise FileExistsError(f"{partial} holds the rows of an interrupted sweep; continue it "
+                              "with --resume, or delete it to start over")
+    else:
+        if config.resume:
+            logger.warning("nothing to resume in %s; running the whole sweep", out)
+        done = {}
+    results = dict(done)
+    pending = [i for i in range(len(trials)) if i not in done]
+    with _executor(config, pending) as executor:
+        if not done and not partial.exists():
+            write_json(out / PARTIAL_SWEEP, sweep_doc)
+            _write_rows(partial, [])
+        try:
+            with partial.open("a", newline="") as fh:
+                writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+                for k, r in tqdm(run_trials([trials[i] for i in pending],
+                                            workers=config.workers, executor=executor),
+                                 initial=len(done), total=len(trials),
+                                 desc=f"{config.domain} sweep", unit="fit"):
+                    results[pending[k]] = r
+                    writer.writerow(asdict(r))
+                    fh.flush()
+        except BaseException:
+            logger.warning("sweep stopped: %d of %d trials are kept in %s; continue with "
+                           "--resume", len(results), len(trials), partial)
+            raise
+    ordered = [results[i] for i in range(len(trials))]
+    _write_rows(out / "results.csv", ordered)
+    partial.unlink()
+    (out / PARTIAL_SWEEP).unlink(missing_ok=True)
+    points = summarize(ordered, seed=sweep.seed)
+    summary = {"config": asdict(sweep), "workers": config.workers, "executor": config.executor,
+               "resumed_trials": len(done),
                "bootstrap": {"method": "percentile, resampling batches",
                              "n_resamples": N_RESAMPLES, "confidence": CONFIDENCE,
                              "seed": sweep.seed},
                "points": points}
     write_json(out / "summary.json", summary)
-    summary["plots"] = [str(p) for p in plot_sweep(results, out, title=config.domain,
+    summary["plots"] = [str(p) for p in plot_sweep(ordered, out, title=config.domain,
                                                    points=points)]
     return summary
+
+
+def _sweep_doc(sweep) -> dict:
+    """The sweep's parameters as JSON reads them back (lists, not tuples)."""
+    return json.loads(json.dumps({"columns": CSV_COLUMNS, "config": asdict(sweep)}))
+
+
+def _write_rows(path: Path, results) -> None:
+    """``results`` as CSV rows under the header, through a temporary name."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+            writer.writeheader()
+            writer.writerows(asdict(r) for r in results)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _read_partial(out: Path, sweep_doc: dict, trials) -> dict:
+    """The finished trials of ``out``'s partial rows, by position in ``trials``; the partial
+    file is rewritten without a last row cut short by the interruption."""
+    from irl.experiments import TrialResult
+
+    partial, meta = out / PARTIAL, out / PARTIAL_SWEEP
+    if not meta.exists():
+        raise ValueError(f"cannot resume: {partial} has no {PARTIAL_SWEEP} naming its sweep; "
+                         "delete it to start over")
+    stored = json.loads(meta.read_text())
+    if stored != sweep_doc:
+        was, now = stored.get("config", {}), sweep_doc["config"]
+        diffs = [f"{k} {was.get(k)!r} there, {now[k]!r} here" for k in now
+                 if was.get(k) != now[k]]
+        if stored.get("columns") != sweep_doc["columns"]:
+            diffs.append(f"columns {stored.get('columns')!r} there, {CSV_COLUMNS!r} here")
+        raise ValueError(f"cannot resume: {partial} is from another sweep ({'; '.join(diffs)}); "
+                         "use the same options or another --out")
+    kinds = {f.name: f.type for f in dataclasses.fields(TrialResult)}
+    convert = {"int": int, "float": float, "str": str,
+               "bool": lambda text: {"True": True, "False": False}[text]}
+    position = {_trial_key(t): i for i, t in enumerate(trials)}
+    with partial.open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        if reader.fieldnames != CSV_COLUMNS:
+            raise ValueError(f"cannot resume: the header of {partial} is {reader.fieldnames}, "
+                             f"not {CSV_COLUMNS}")
+        rows = list(reader)
+    done: dict[int, TrialResult] = {}
+    for n, row in enumerate(rows):
+        try:
+            result = TrialResult(**{k: convert[kinds[k]](row[k]) for k in CSV_COLUMNS})
+        except (KeyError, TypeError, ValueError):
+            if n == len(rows) - 1:  # the row being written when the run was stopped
+                logger.warning("dropping the incomplete last row of %s", partial)
+                break
+            raise ValueError(f"cannot resume: row {n + 2} of {partial} is not a result row; "
+                             "delete the file to start over") from None
+        index = position.get(_trial_key(result))
+        if index is None:
+            raise ValueError(f"cannot resume: row {n + 2} of {partial} is not a trial of this "
+                             "sweep; delete the file to start over")
+        done.setdefault(index, result)
+    _write_rows(partial, [done[i] for i in sorted(done)])
+    return done
+
+
+def _trial_key(item) -> tuple:
+    return tuple(getattr(item, k) for k in TRIAL_COLUMNS)
+
+
+class _RayExecutor(Executor):
+    """Ray tasks behind :class:`concurrent.futures.Executor`'s ``submit``: one CPU per task.
+
+    Joins the Ray instance this process is already connected to if there is one (and leaves
+    it running), else ``address`` (None: ``RAY_ADDRESS``, else a new local instance of
+    ``num_cpus`` CPUs), which :meth:`shutdown` disconnects from.
+    """
+
+    def __init__(self, address: str | None, num_cpus: int) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise ValueError(f"--executor ray needs Ray, an optional extra: {RAY_EXTRA}") from None
+        self._ray = ray
+        self._joined = not ray.is_initialized()
+        if self._joined:
+            local = address is None and not os.environ.get("RAY_ADDRESS")
+            options = {"num_cpus": max(num_cpus, 1), "include_dashboard": False} if local else {}
+            ray.init(address=address, logging_level=logging.WARNING, **options)
+        self._tasks: dict = {}
+        self._refs: list = []
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        task = self._tasks.get(fn)
+        if task is None:
+            task = self._tasks[fn] = self._ray.remote(num_cpus=1)(fn)
+        ref = task.remote(*args, **kwargs)
+        self._refs.append(ref)
+        return ref.future()
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        ray, refs, self._refs = self._ray, self._refs, []
+        if refs:
+            _, running = ray.wait(refs, num_returns=len(refs), timeout=0)
+            for ref in running:
+                ray.cancel(ref)
+        if self._joined:
+            ray.shutdown()
+            self._joined = False
+
+
+def _executor(config: ExperimentConfig, pending: list[int]):
+    """The executor of ``config`` for ``pending`` trials: None (``run_trials``' own process
+    pool) or a Ray executor, as a context manager that shuts it down."""
+    if config.executor != "ray" or not pending:
+        return contextlib.nullcontext()
+    return _RayExecutor(config.ray_address, config.workers)
 
 
 def format_table(points: list[dict]) -> str:
