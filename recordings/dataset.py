@@ -126,7 +126,7 @@ class DatasetWriter:
         folder = self.root / split
         _write_rgb(folder / "color" / f"{name}.png", frame.color)
         depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
-        cv2.imwrite(str(folder / "depth" / f"{name}.png"), depth_mm)
+        _write_png(folder / "depth" / f"{name}.png", depth_mm)
         records.append(frame_record(frame, session, name, task=self.task))
         if frame.inspection is not None:
             close = self._records[split, "inspection"]
@@ -168,7 +168,18 @@ class DatasetWriter:
 
 
 def _write_rgb(path: Path, rgb: np.ndarray) -> None:
-    cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+    _write_png(path, cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    """Write ``image`` (as OpenCV holds it) as a PNG through a temporary name, so a killed
+    run never leaves a truncated image under a frame's name."""
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode an image of shape {image.shape} as PNG for {path}")
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_bytes(buf.tobytes())
+    tmp.replace(path)
 
 
 def _write_json(path: Path, doc) -> None:

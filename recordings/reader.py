@@ -32,11 +32,19 @@ from recordings.schema import (
     END_METADATA,
     FORMAT_NAME,
     READABLE_VERSIONS,
+    ROBOT_METADATA,
     SESSION_METADATA,
     Topic,
     task_of,
 )
 from recordings.steps import group_steps
+from recordings.world import (
+    SceneItem,
+    Transform,
+    read_joint_states,
+    read_scene,
+    read_transforms,
+)
 
 __all__ = [
     "FrameRecord",
@@ -81,6 +89,11 @@ class FrameRecord:
     ``/ground_truth/state`` message, ``boxes`` and ``onions`` the lists of the
     ``/ground_truth/boxes`` and ``/ground_truth/onions`` messages: each is None in a session
     without ground truth.
+
+    The 3D side (:mod:`recordings.world`), None where the file has none: ``transforms`` the
+    ``/tf`` transforms by child frame, ``(parent, translation (3,), rotation (4,) xyzw)``;
+    ``joints`` the ``/joint_states`` positions by joint name; ``scene`` the ``/scene``
+    entities (ground truth).
     """
 
     index: int
@@ -94,6 +107,9 @@ class FrameRecord:
     state: dict | None = None
     boxes: list[dict] | None = None
     onions: list[dict] | None = None
+    transforms: dict[str, Transform] | None = field(default=None, repr=False)
+    joints: dict[str, float] | None = field(default=None, repr=False)
+    scene: list[SceneItem] | None = field(default=None, repr=False)
 
     @property
     def occluded(self) -> bool | None:
@@ -158,6 +174,9 @@ class Session:
     task : TaskDescription
         The task of the session's states and actions: the session record's ``"task"``, or the
         onion-sorting task in files that predate the field.
+    robot : dict or None
+        The ``onionsort.robot`` record of a session whose world has a robot (``name``,
+        ``urdf``, ``root_link``, ``joints``); None otherwise.
     """
 
     path: Path
@@ -173,6 +192,7 @@ class Session:
     perception: dict[int, dict] = field(default_factory=dict, repr=False)
     perception_models: dict | None = None
     task: TaskDescription = SORTING_TASK
+    robot: dict | None = None
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -313,6 +333,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     steps: dict[int, StepTruth] = {}
     perception: dict[int, dict] = {}
     models = None
+    robot = None
     problem = None
     try:
         for kind, name, rec in _scan(path):
@@ -323,6 +344,8 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
                     end = dict(rec.metadata)
                 elif name == PERCEPTION_METADATA:
                     models = _decode_metadata(dict(rec.metadata))
+                elif name == ROBOT_METADATA:
+                    robot = _decode_metadata(dict(rec.metadata))
                 continue
             if meta is None:
                 break  # a session's metadata precedes every message
@@ -376,7 +399,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
                    has_inspection=layout["inspection"],
                    has_ground_truth=truth, steps=complete_steps, _frames=frames,
                    problem=problem, perception=perception, perception_models=models,
-                   task=task)
+                   task=task, robot=robot)
 
 
 def _task(metadata: dict, path: Path) -> TaskDescription:
@@ -432,6 +455,12 @@ def _collect(topic: str, rec: Message, parts: dict[int, dict], steps: dict[int, 
         part[topic] = (bytes(msg.data), (msg.height, msg.width))
     elif topic in (Topic.STEP_CLOCK, Topic.STATE, Topic.BOXES, Topic.ONIONS):
         part[topic] = json.loads(rec.data)
+    elif topic == Topic.TF:
+        part[topic] = read_transforms(rec.data)
+    elif topic == Topic.JOINT_STATES:
+        part[topic] = read_joint_states(rec.data)
+    elif topic == Topic.SCENE:
+        part[topic] = read_scene(rec.data)
 
 
 def _clock_topic(version: str) -> str:
@@ -455,7 +484,8 @@ def _assemble(index: int, part: dict, version: str) -> FrameRecord:
         phase=int(clock.get("phase", 0)), color_jpeg=part[Topic.COLOR], depth_raw=depth,
         depth_shape=shape, inspection_png=part.get(Topic.INSPECTION),
         state=part.get(Topic.STATE), boxes=None if boxes is None else boxes["boxes"],
-        onions=None if onions is None else onions["onions"],
+        onions=None if onions is None else onions["onions"], transforms=part.get(Topic.TF),
+        joints=part.get(Topic.JOINT_STATES), scene=part.get(Topic.SCENE),
     )
 
 

@@ -20,6 +20,9 @@ topic                      schema                      content
                                                        phase (position) within the step
 /inspection/color          foxglove.CompressedImage    inspection view, PNG, first frame of a step
 /inspection/calibration    foxglove.CameraCalibration  pinhole K, P of the inspection view
+/tf                        foxglove.FrameTransforms    ``world`` -> ``camera``, ``inspection``
+                                                       (optical frames) and a robot's links
+/joint_states              foxglove.JointStates        a robot's joint positions
 =========================  ==========================  ==========================================
 
 Ground-truth side (optional):
@@ -32,12 +35,20 @@ topic                      schema                      content
 /ground_truth/boxes        onionsort.GroundTruthBoxes  boxes of visible onions (segmentation)
 /ground_truth/annotations  foxglove.ImageAnnotations   the same boxes, drawable over /camera/color
 /ground_truth/onions       onionsort.GroundTruthOnions  every onion's class and position
+/scene                     foxglove.SceneUpdate        the world's bodies in 3D, onions coloured
+                                                       by class
 =========================  ==========================  ==========================================
 
 Metadata records: ``onionsort.session`` (written first: format and version, ``sensors``
 (``depth``, ``inspection``), ``ground_truth``, ``frames_per_step``, the ``task`` description,
 seed, configuration, software version) and ``onionsort.session.end`` (written last: status,
 frame and step counts).
+
+``/tf`` is there where the cameras' poses are known (a simulated session), ``/joint_states``
+(and a robot's links on ``/tf``) where the world has a robot, whose URDF the metadata record
+``onionsort.robot`` names; :mod:`recordings.world` writes and reads the three 3D topics. They are
+optional within version ``2``: a reader ignores what it does not know, and files without them
+open as before.
 
 Versions: ``2`` added the step clock, made depth and ground truth optional and records which
 sensors a session has. A version-``1`` file (always simulated, always with depth) has no step
@@ -56,6 +67,7 @@ __all__ = [
     "FORMAT_VERSION",
     "JSON_SCHEMAS",
     "READABLE_VERSIONS",
+    "ROBOT_METADATA",
     "SENSOR_JSON_SCHEMAS",
     "SESSION_METADATA",
     "Topic",
@@ -70,6 +82,8 @@ FORMAT_VERSION = "2"
 READABLE_VERSIONS = ("1", "2")
 SESSION_METADATA = "onionsort.session"
 END_METADATA = "onionsort.session.end"
+#: Metadata record of a session whose world has a robot: its name, URDF, root link, joints.
+ROBOT_METADATA = "onionsort.robot"
 
 #: Class ids of onions in box annotations.
 CLASS_NAMES = {0: "good", 1: "blemished"}
@@ -91,8 +105,13 @@ class Topic:
     BOXES = "/ground_truth/boxes"
     ANNOTATIONS = "/ground_truth/annotations"
     ONIONS = "/ground_truth/onions"
+    #: The 3D side (:mod:`recordings.world`): transforms and joint states (sensor side), the
+    #: simulated world's bodies (ground truth).
+    TF = "/tf"
+    JOINT_STATES = "/joint_states"
+    SCENE = "/scene"
     #: Every ground-truth topic: what stripping a session of its ground truth removes.
-    GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS)
+    GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS, SCENE)
 
 
 _INT = {"type": "integer"}

@@ -38,11 +38,20 @@ from recordings.schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
     JSON_SCHEMAS,
+    ROBOT_METADATA,
     SENSOR_JSON_SCHEMAS,
     SESSION_METADATA,
     Topic,
     check_task,
     json_schema_bytes,
+)
+from recordings.urdf import UrdfJoints
+from recordings.world import (
+    World,
+    frame_transforms,
+    joint_states,
+    robot_record,
+    scene_update,
 )
 
 __all__ = [
@@ -184,10 +193,26 @@ class SessionWriter:
         self._file = None
         self._writer: Writer | None = None
         self._channels: dict[str, int] = {}
+        self._kinematics: dict[Path, UrdfJoints] = {}
 
     def __enter__(self) -> SessionWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = self.path.open("wb")
+        # the header, the session record and the channels go to a temporary name first, so the
+        # file's own name never holds a file without them (killed at once, nothing is left but
+        # the temporary); after the rename, frames follow into the same open file
+        tmp = self.path.with_name(self.path.name + ".partial")
+        self._file = tmp.open("wb")
+        try:
+            self._start()
+            tmp.replace(self.path)
+        except BaseException:
+            self._file.close()
+            self._writer, self._file = None, None
+            tmp.unlink(missing_ok=True)
+            raise
+        return self
+
+    def _start(self) -> None:
         self._writer = Writer(self._file, chunk_size=4 * 1024 * 1024,
                               compression=CompressionType.ZSTD, enable_crcs=True)
         self._writer.start(profile="", library=f"onionsort/{self.metadata.get('software', '')}")
@@ -216,7 +241,6 @@ class SessionWriter:
             sid = self._writer.register_schema(name, "jsonschema", json_schema_bytes(schema))
             self._channels[topic] = self._writer.register_channel(topic, "json", sid)
         self._writer.flush()
-        return self
 
     def _has(self, topic: str) -> bool:
         if topic == Topic.DEPTH:
@@ -253,7 +277,8 @@ class SessionWriter:
 
     def write_sensor_frame(self, *, index: int, step: int, phase: int, time_ns: int,
                            color: np.ndarray, depth: np.ndarray | None = None,
-                           inspection: np.ndarray | None = None) -> None:
+                           inspection: np.ndarray | None = None,
+                           world: World | None = None) -> None:
         """Write one frame's sensor side and flush it to the OS.
 
         Parameters
@@ -270,12 +295,21 @@ class SessionWriter:
             float metres; required exactly when the writer was made with ``depth=True``.
         inspection : ndarray of shape (h, w, 3) or None
             The inspection view, on a step's first frame.
+        world : World or None
+            A snapshot of the world the frame shows: its 3D topics are written too
+            (:meth:`write_world`).
         """
         self._sensor_side(index, step, phase, time_ns, color, depth, inspection)
+        if world is not None:
+            self.write_world(world, time_ns, index)
         self._end_frame()
 
     def write_frame(self, frame: TruthFrame) -> None:
-        """Write one simulated frame, sensor side and ground truth, and flush it to the OS."""
+        """Write one simulated frame, sensor side and ground truth, and flush it to the OS.
+
+        A frame that also has a ``world`` snapshot (``robot.world.WorldFrame``) gets its 3D
+        topics written with it (:meth:`write_world`).
+        """
         if not self.ground_truth:
             raise ValueError(f"{self.path} was opened with ground_truth=False; write its "
                              "frames with write_sensor_frame")
@@ -283,6 +317,9 @@ class SessionWriter:
         self._sensor_side(i, frame.step.step, frame.phase, t, frame.color, frame.depth,
                           frame.inspection)
         self._truth_side(frame, t, i)
+        world = getattr(frame, "world", None)
+        if world is not None:
+            self.write_world(world, t, i)
         self._end_frame()
 
     def _sensor_side(self, i, step, phase, t, color, depth, inspection) -> None:
@@ -320,6 +357,47 @@ class SessionWriter:
                 self.inspection_K, iw, ih, "inspection", t).SerializeToString(), t, i)
         if phase == 0:
             self.n_steps += 1
+
+    def write_world(self, world: World, time_ns: int, sequence: int) -> None:
+        """Write the 3D side of ``world`` at ``time_ns`` (see :mod:`recordings.world`).
+
+        ``/tf`` (the cameras and a robot's links) and ``/joint_states`` (with a robot) always;
+        ``/scene`` (the bodies, onions coloured by class) only in a session with ground truth.
+        The first robot seen is described in the ``onionsort.robot`` metadata record. The
+        channels are registered on first use: a session without a world has none of them.
+        Call it between the frame's other messages and its end (:meth:`write_sensor_frame`
+        and :meth:`write_frame` do); ``sequence`` is the frame's index.
+        """
+        if self._writer is None:
+            raise RuntimeError("SessionWriter must be entered (`with SessionWriter(...)`)")
+        robot = world.robot
+        kinematics = None
+        if robot is not None:
+            urdf = Path(robot.urdf)
+            kinematics = self._kinematics.get(urdf)
+            if kinematics is None:
+                kinematics = self._kinematics[urdf] = UrdfJoints(urdf)
+                if len(self._kinematics) == 1:
+                    self._writer.add_metadata(ROBOT_METADATA, robot_record(robot, kinematics))
+        self._write_proto(Topic.TF, frame_transforms(world, time_ns, kinematics), time_ns,
+                          sequence)
+        if robot is not None:
+            self._write_proto(Topic.JOINT_STATES, joint_states(robot, time_ns), time_ns,
+                              sequence)
+        if self.ground_truth and world.shapes:
+            self._write_proto(Topic.SCENE, scene_update(world.shapes, time_ns), time_ns,
+                              sequence)
+
+    def _write_proto(self, topic: str, msg, time_ns: int, sequence: int) -> None:
+        """Write protobuf ``msg`` on ``topic``, registering its schema and channel first if
+        this is the topic's first message."""
+        if topic not in self._channels:
+            cls = type(msg)
+            schema = self._writer.register_schema(
+                cls.DESCRIPTOR.full_name, "protobuf",
+                build_file_descriptor_set(cls).SerializeToString())
+            self._channels[topic] = self._writer.register_channel(topic, "protobuf", schema)
+        self._write(topic, msg.SerializeToString(), time_ns, sequence)
 
     def _end_frame(self) -> None:
         self._writer.flush()  # one chunk per frame, handed to the OS now

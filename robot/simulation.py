@@ -43,10 +43,11 @@ from robot.difficulty import (
     difficulty_rng,
     resolve_difficulty,
 )
-from robot.labels import Frame, OnionLabel, StepLabel
+from robot.labels import OnionLabel, StepLabel
 from robot.occluder import PasserBy, occlusion_schedule
 from robot.scene import Onion, OnionPool, StopGate, build_workcell, connect
 from robot.state_map import HAND_TARGETS, PICK_SPOT, WorldSnapshot, state_of_world
+from robot.world import WorldFrame, WorldProbe, WorldState, camera_pose
 
 __all__ = ["INSPECTION_CAMERA", "SessionConfig", "SortingSession", "expert_model"]
 
@@ -202,6 +203,10 @@ class SortingSession:
         cam = self.config.camera
         self.walker = PasserBy(self.client, self._walker_rng, cam.eye, cam.target)
         self.focus: Onion | None = None
+        self._probe = WorldProbe(self.client, self._named_bodies(), classes={
+            f"onions/{o.onion_id}": int(o.blemished) for o in self.pool.onions})
+        self._cameras = {spec.frame_id: camera_pose(spec)
+                         for spec in (self.config.camera, self.config.inspection)}
         return self
 
     def __exit__(self, *exc) -> None:
@@ -210,6 +215,25 @@ class SortingSession:
             self.client = None
 
     # -- the world ---------------------------------------------------------------------------
+    def _named_bodies(self) -> dict[str, int]:
+        """Every body of the world by its shape name (:class:`robot.world.ShapeState`)."""
+        bodies = {f"workcell/{name}": body for name, body in self.workcell.items()}
+        bodies["gate"] = self.gate.body
+        bodies.update({f"sorter/{part}": body for part, body in zip(
+            ("torso", "legs", "head", "left_arm", "upper_arm", "forearm", "hand"),
+            self.sorter.body_ids, strict=True)})
+        bodies.update({f"passer_by/{part}": body for part, body in zip(
+            ("coat", "head", "legs"), self.walker.body_ids, strict=True)})
+        bodies.update({f"onions/{o.onion_id}": o.body for o in self.pool.onions})
+        return bodies
+
+    def world_state(self) -> WorldState:
+        """The world now, for 3D logging: every body as a primitive (onions with their true
+        class) and the cameras' optical frames; a sorter's world has no robot."""
+        if self.client is None:
+            raise RuntimeError("SortingSession must be entered (`with SortingSession(...)`)")
+        return WorldState(shapes=self._probe.shapes(), cameras=dict(self._cameras))
+
     def _held_position(self, onion: Onion) -> np.ndarray:
         return self.sorter.hand_position + _grip_offset(onion)
 
@@ -255,7 +279,7 @@ class SortingSession:
         return np.stack([hand, HAND_TARGETS[s_next.end_effector]])
 
     def _render(self, index: int, label: StepLabel, phase: int, time_s: float,
-                with_inspection: bool) -> Frame:
+                with_inspection: bool) -> WorldFrame:
         image = render(self.client, self.config.camera, self.lighting)
         onions = self._onion_labels(image.seg)
         inspection, inspection_onions = None, ()
@@ -266,12 +290,13 @@ class SortingSession:
             inspection = self.effects.color(
                 self.effects.hand(close.rgb, focus[0] if focus else None, self.sorter.skin),
                 time_s)
-        return Frame(
+        return WorldFrame(
             index=index, step=label, phase=phase, time_s=time_s,
             color=self.effects.color(image.rgb, time_s, moving=phase > 0),
             depth=self.effects.depth(image.depth), onions=onions,
             occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
             inspection=inspection, inspection_onions=inspection_onions,
+            world=self.world_state(),
         )
 
     def _onion_labels(self, seg: np.ndarray) -> tuple[OnionLabel, ...]:
@@ -288,8 +313,9 @@ class SortingSession:
         )
 
     # -- the run -----------------------------------------------------------------------------
-    def frames(self) -> Iterator[Frame]:
-        """Run the session, yielding its frames in order; :attr:`steps` fills as it goes."""
+    def frames(self) -> Iterator[WorldFrame]:
+        """Run the session, yielding its frames in order, each with a snapshot of the world
+        (:class:`robot.world.WorldFrame`); :attr:`steps` fills as it goes."""
         if self.client is None:
             raise RuntimeError("SortingSession must be entered (`with SortingSession(...)`)")
         cfg = self.config

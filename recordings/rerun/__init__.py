@@ -12,7 +12,10 @@ root           logger                                what
 Shared pieces (:mod:`recordings.rerun.common`): :func:`open_recording` opens a stream to an
 ``.rrd`` file, a spawned viewer or a gRPC URL with one blueprint; the onion classes' annotation
 context comes from :mod:`recordings.schema`; a camera is a static pinhole ``<root>/camera`` with
-``color`` and ``depth`` under it. Importing this package loads the Rerun SDK.
+``color`` and ``depth`` under it. The work cell in 3D (:mod:`recordings.rerun.world`): each
+blueprint has one ``Spatial3DView`` at its root, showing the cameras' frustums, the bodies of the
+work cell and the Sawyer from its URDF, animated from its joint angles. Importing this package
+loads the Rerun SDK.
 """
 
 from __future__ import annotations
@@ -34,12 +37,14 @@ from recordings.rerun.evaluate import (
 from recordings.rerun.learn import learn_blueprint, log_learning
 from recordings.rerun.perceive import PerceptionLogger, read_detections
 from recordings.rerun.session import SessionLogger, session_blueprint
+from recordings.rerun.world import WorldLogger, world_view
 
 __all__ = [
     "EvaluationEvent",
     "EvaluationLogger",
     "PerceptionLogger",
     "SessionLogger",
+    "WorldLogger",
     "class_annotations",
     "close_recording",
     "evaluation_blueprint",
@@ -52,4 +57,5 @@ __all__ = [
     "read_detections",
     "send_series",
     "session_blueprint",
+    "world_view",
 ]

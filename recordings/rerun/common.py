@@ -45,6 +45,8 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
+#: ``.rrd`` files being written, by recording id: (temporary name, final name).
+_PENDING: dict[str, tuple[Path, Path]] = {}
 #: URL schemes of a viewer or server reached over gRPC (``rr.RecordingStream.connect_grpc``).
 GRPC_SCHEMES = ("rerun+http://", "rerun+https://", "rerun://")
 
@@ -85,7 +87,11 @@ def open_recording(application_id: str, target: str | Path,
     elif isinstance(target, str | Path) and Path(text).suffix == ".rrd":
         path = Path(text)
         path.parent.mkdir(parents=True, exist_ok=True)
-        rec.save(path, default_blueprint=blueprint)
+        # written under a temporary name, renamed by close_recording once complete: a process
+        # killed on the way leaves ``NAME.rrd.partial``, never a truncated ``NAME.rrd``
+        partial = path.with_name(path.name + ".partial")
+        rec.save(partial, default_blueprint=blueprint)
+        _PENDING[rec.get_recording_id()] = (partial, path)
     else:
         raise ValueError(f"target must be an .rrd file, 'spawn' or a gRPC URL starting with "
                          f"{' or '.join(GRPC_SCHEMES)}; got {target!r}")
@@ -94,9 +100,13 @@ def open_recording(application_id: str, target: str | Path,
 
 
 def close_recording(rec: rr.RecordingStream) -> None:
-    """Flush everything logged to ``rec`` to its file or viewer and disconnect it."""
+    """Flush everything logged to ``rec`` to its file or viewer and disconnect it; a file gets
+    its final name only now."""
     rec.flush()
     rec.disconnect()
+    partial, path = _PENDING.pop(rec.get_recording_id(), (None, None))
+    if partial is not None:
+        partial.replace(path)
 
 
 def class_annotations() -> rr.AnnotationContext:

@@ -19,6 +19,12 @@ prefix per evaluated policy lets two share a recording)::
     <root>/mdp/{state,action}          Scalars: state index, action index
     <root>/arm/joints                  Scalars: the Sawyer's 7 joint positions (rad)
 
+In 3D (:mod:`recordings.rerun.world`; one 3D view at ``<root>``): given the ``robot`` (its URDF
+and base), the Sawyer's meshes under ``<root>/robot`` with its joints animated at every step
+from the events' ``q``; given ``camera_pose``, the camera's frustum with its image; an event
+that also carries a ``world`` snapshot (:class:`recordings.world.World`) adds the work cell's
+bodies (``<root>/scene/*``: belt, bin, gate, onions in their true classes' colours).
+
 Timeline: ``step`` (the action number).
 """
 
@@ -45,7 +51,9 @@ from recordings.rerun.common import (
     send_series,
     value_labels,
 )
+from recordings.rerun.world import WorldLogger, scene_items, world_view
 from recordings.schema import CLASS_NAMES
+from recordings.world import Pose, Robot
 
 __all__ = [
     "EVALUATE_ROOT",
@@ -140,9 +148,12 @@ def evaluation_blueprint(prefix: str = EVALUATE_ROOT) -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial2DView(origin=f"{prefix}/camera",
-                                  contents=["$origin/**", "- $origin/depth"],
-                                  name="Sawyer station"),
+                rrb.Horizontal(
+                    rrb.Spatial2DView(origin=f"{prefix}/camera",
+                                      contents=["$origin/**", "- $origin/depth"],
+                                      name="Sawyer station"),
+                    world_view(prefix, name="Sawyer station (3D)"),
+                ),
                 rrb.Horizontal(
                     rrb.Spatial2DView(origin=f"{prefix}/inspection", name="inspection"),
                     rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
@@ -183,6 +194,12 @@ class EvaluationLogger:
     task : TaskDescription
         The task of the events' states and actions (names in the decisions and the action
         series); the onion-sorting task by default.
+    robot : Robot or None
+        The robot (``robot.world.RobotState``: its URDF, base pose and joint names, the names
+        of the events' ``q``): shown in 3D from its URDF, its joints animated at every step.
+    camera_pose : Pose or None
+        The main camera's optical frame in the world (``robot.world.camera_pose``): places its
+        frustum and image in 3D.
 
     Examples
     --------
@@ -193,7 +210,8 @@ class EvaluationLogger:
     def __init__(self, target: str | Path, prefix: str = EVALUATE_ROOT,
                  detector: Detect | Any | None = None, *, camera_K: Any = None,
                  application_id: str = "onionsort_evaluate",
-                 task: TaskDescription = SORTING_TASK) -> None:
+                 task: TaskDescription = SORTING_TASK, robot: Robot | None = None,
+                 camera_pose: Pose | None = None) -> None:
         prefix = str(prefix).strip("/")
         if not prefix:
             raise ValueError(f"prefix must name an entity path; got {prefix!r}")
@@ -203,6 +221,9 @@ class EvaluationLogger:
                 raise ValueError(f"detector must be a callable detect(images) or have a "
                                  f"detect method; got {type(detector).__name__}")
             detector = detect
+        if robot is not None and len(robot.joint_names) != _N_JOINTS:
+            raise ValueError(f"robot must name the {_N_JOINTS} joints of the events' q; got "
+                             f"{list(robot.joint_names)}")
         self.prefix = prefix
         self.task = task
         self.detect: Detect | None = detector
@@ -210,6 +231,16 @@ class EvaluationLogger:
         self.rec = open_recording(application_id, target, evaluation_blueprint(prefix))
         log_class_annotations(self.rec)
         self._log_series_names()
+        self._world = WorldLogger(self.rec, prefix)
+        self._camera_fixed = camera_pose is not None
+        if camera_pose is not None:
+            self._world.log_pose(f"{prefix}/camera", camera_pose.position,
+                                 camera_pose.orientation, static=True)
+        self._robot_tree = None if robot is None else self._world.robot_model(robot.urdf)
+        self._joint_names = () if robot is None else tuple(robot.joint_names)
+        if self._robot_tree is not None:
+            self._world.log_robot_base(self._robot_tree, robot.base.position,
+                                       robot.base.orientation, static=True)
         self._rows: dict[str, list] = {}
         self._steps: list[int] = []
         self._pinhole = False
@@ -255,6 +286,12 @@ class EvaluationLogger:
                 rec.log(f"{p}/inspection/detections", _boxes(self.detect([view])[0]))
         text, level = _describe(event, self.task)
         rec.log(f"{p}/decisions", rr.TextLog(text, level=level))
+        world = getattr(event, "world", None)
+        if world is not None:
+            self._world.log_scene(scene_items(world.shapes))
+            camera = world.cameras.get("camera")
+            if camera is not None and not self._camera_fixed:  # else logged static already
+                self._world.log_pose(f"{p}/camera", camera.position, camera.orientation)
         self._buffer(event)
 
     def _buffer(self, event: EvaluationEvent) -> None:
@@ -282,6 +319,10 @@ class EvaluationLogger:
                 index = [rr.TimeColumn(_TIMELINE, sequence=self._steps)]
                 for entity, values in self._rows.items():
                     send_series(self.rec, entity, index, np.asarray(values, float))
+                if self._robot_tree is not None:
+                    self._world.send_joints(self._robot_tree, self._joint_names,
+                                            np.asarray(self._rows[f"{self.prefix}/arm/joints"]),
+                                            index)
         finally:
             close_recording(self.rec)
 

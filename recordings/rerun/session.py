@@ -17,6 +17,13 @@ it. A perceived session's perception topics are logged too, under ``perceive/``
     record/truth/occlusion/*         Scalars per step: fraction (largest view fraction covered
                                      in the step), occluded (0/1)
 
+The work cell in 3D (:mod:`recordings.rerun.world`), from the session's 3D topics where it has
+them: ``record`` is the world (z up); ``record/camera`` and ``record/inspection`` are placed by
+``/tf`` (the inspection view is a pinhole too, so both images show in their frustums);
+``record/scene/*`` holds the bodies of ``/scene`` (belt, bin, gate, sorter, passer-by, onions in
+the colours of their true classes); a session with a robot shows it from its URDF under
+``record/robot``, its joints animated at every frame from ``/joint_states``.
+
 Timelines: ``frame`` and ``step`` (both counted across every session logged to the stream) and
 ``time`` (the recording time of a frame, a duration). Series are sent whole, one
 ``send_columns`` call per series and session, on all three timelines (a step at its first
@@ -31,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+import rerun.urdf as rru
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
@@ -47,6 +55,8 @@ from recordings.rerun.common import (
     value_labels,
 )
 from recordings.rerun.perceive import PerceptionLogger, perception_views
+from recordings.rerun.world import WorldLogger, world_view
+from recordings.world import WORLD_FRAME
 
 __all__ = ["RECORD_ROOT", "SessionLogger", "session_blueprint"]
 
@@ -54,17 +64,22 @@ logger = logging.getLogger(__name__)
 
 RECORD_ROOT = "record"
 _TRUTH = f"{RECORD_ROOT}/truth"
+#: The entity of each camera ``frame_id`` of ``/tf``.
+_CAMERA_ENTITIES = {"camera": f"{RECORD_ROOT}/camera", "inspection": f"{RECORD_ROOT}/inspection"}
 
 
 def session_blueprint() -> rrb.Blueprint:
-    """The layout of logged sessions: camera with ground-truth boxes, depth, inspection view,
-    the true state as text and series, and what perception saw."""
+    """The layout of logged sessions: camera with ground-truth boxes, the work cell in 3D,
+    depth, inspection view, the true state as text and series, and what perception saw."""
     camera = f"{RECORD_ROOT}/camera"
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial2DView(origin=camera, contents=["$origin/**", "- $origin/depth"],
-                                  name="camera + ground-truth boxes"),
+                rrb.Horizontal(
+                    rrb.Spatial2DView(origin=camera, contents=["$origin/**", "- $origin/depth"],
+                                      name="camera + ground-truth boxes"),
+                    world_view(RECORD_ROOT),
+                ),
                 rrb.Horizontal(
                     rrb.Spatial2DView(origin=camera, contents=["$origin/depth"], name="depth"),
                     rrb.Spatial2DView(origin=f"{RECORD_ROOT}/inspection", name="inspection"),
@@ -114,6 +129,7 @@ class SessionLogger:
         self.log_perception = perception
         self.task = task
         log_class_annotations(self.rec)
+        self._world = WorldLogger(self.rec, RECORD_ROOT)
         self._named: set[TaskDescription] = set()
         self._name_series(task)
         log_series_names(self.rec, {
@@ -150,12 +166,19 @@ class SessionLogger:
             return
         frame0, step0 = self._frame, self._step
         self._log_camera(session, frames[0])
+        self._log_inspection_camera(session, frames)
+        tree = None
+        if session.robot is not None and any(f.joints for f in frames):
+            tree = self._world.robot_model(session.robot["urdf"])
         for n, frame in enumerate(frames):
             self._set_time(frame, frame0, step0)
             if n == 0:
                 self.rec.log(f"{RECORD_ROOT}/session", rr.TextDocument(
                     _session_text(session, index), media_type="text/markdown"))
             self._log_frame(session, frame)
+            self._log_world(frame, tree)
+        if tree is not None:
+            self._log_joints(session, frames, tree, frame0, step0)
         if session.has_ground_truth:
             self._log_truth_series(session, frames, frame0, step0)
         if self.log_perception and session.perception:
@@ -173,6 +196,46 @@ class SessionLogger:
             return
         h, w = first.color.shape[:2]
         log_pinhole(self.rec, RECORD_ROOT, K, w, h)
+
+    def _log_inspection_camera(self, session: Session, frames: list[FrameRecord]) -> None:
+        """The inspection view as a pinhole too, so that it shows in 3D where ``/tf`` puts it."""
+        K = session.metadata.get("inspection_K")
+        first = next((f for f in frames if f.inspection_png is not None), None)
+        if K is None or first is None:
+            return
+        h, w = first.inspection.shape[:2]
+        self.rec.log(f"{RECORD_ROOT}/inspection",
+                     rr.Pinhole(image_from_camera=np.asarray(K, float), resolution=[w, h]),
+                     static=True)
+
+    def _log_world(self, frame: FrameRecord, tree: rru.UrdfTree | None) -> None:
+        """The frame's 3D side: camera poses and the robot's base (``/tf``), bodies
+        (``/scene``)."""
+        for frame_id, (parent, t, q) in (frame.transforms or {}).items():
+            if parent != WORLD_FRAME:
+                continue
+            if frame_id in _CAMERA_ENTITIES:
+                self._world.log_pose(_CAMERA_ENTITIES[frame_id], t, q)
+            elif tree is not None and frame_id == tree.root_link().name:
+                self._world.log_robot_base(tree, t, q)
+        if frame.scene:
+            self._world.log_scene(frame.scene)
+
+    def _log_joints(self, session: Session, frames: list[FrameRecord], tree: rru.UrdfTree,
+                    frame0: int, step0: int) -> None:
+        """The robot's joints at every frame that has them, one ``send_columns`` per joint."""
+        names = list(session.robot.get("joints") or [])
+        moving = [f for f in frames if f.joints and all(n in f.joints for n in names)]
+        if not names or not moving:
+            return
+        indexes = [
+            rr.TimeColumn("frame", sequence=[frame0 + f.index for f in moving]),
+            rr.TimeColumn("step", sequence=[step0 + f.step for f in moving]),
+            rr.TimeColumn("time", duration=np.array([f.time_ns for f in moving],
+                                                    "timedelta64[ns]")),
+        ]
+        self._world.send_joints(tree, names, [[f.joints[n] for n in names] for f in moving],
+                                indexes)
 
     def _set_time(self, frame: FrameRecord, frame0: int, step0: int) -> None:
         self.rec.set_time("frame", sequence=frame0 + frame.index)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import logging
 import shutil
 import subprocess
 from collections import defaultdict
@@ -18,8 +20,14 @@ from recordings.rerun import (
     log_learning,
     open_recording,
 )
+from recordings.rewrite import rewrite_session
+from recordings.schema import ROBOT_METADATA
+from recordings.urdf import UrdfJoints, viewer_urdf
+from tests.recordings.test_world import matrix, robot_session
 
 rr_chunk = pytest.importorskip("rerun.chunk")
+SAWYER_LINKS = {"right_arm_base_link", *(f"right_l{k}" for k in range(7))}
+SAWYER_JOINTS = [f"right_j{k}" for k in range(7)]
 
 K = np.array([[100.0, 0.0, 16.0], [0.0, 100.0, 12.0], [0.0, 0.0, 1.0]])
 FPS = 2
@@ -42,6 +50,49 @@ def summary(path) -> dict[str, dict]:
         e["timelines"].update(chunk.timeline_names)
         e["cols"].update(chunk.to_record_batch().schema.names)
     return dict(out)
+
+
+def views(path, kind: str = "3D") -> list[str]:
+    """The origins of the blueprint's views of class ``kind``."""
+    reader = rr_chunk.RrdReader(path)
+    out = []
+    for chunk in reader.store(store=reader.blueprints()[0]).stream():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            for cls, origin in zip(batch.column("ViewBlueprint:class_identifier").to_pylist(),
+                                   batch.column("ViewBlueprint:space_origin").to_pylist(),
+                                   strict=True):
+                if cls == [kind]:
+                    out.extend(origin)
+    return out
+
+
+def rows(path, entity: str, column: str, timeline: str) -> list[tuple]:
+    """``(time, value)`` of every row of ``entity`` that has ``column``, by time."""
+    out = []
+    for chunk in rr_chunk.RrdReader(path).store().stream():
+        if chunk.entity_path.lstrip("/") != entity:
+            continue
+        batch = chunk.to_record_batch()
+        if column in batch.schema.names and timeline in batch.schema.names:
+            out += zip(batch.column(timeline).to_pylist(), batch.column(column).to_pylist(),
+                       strict=True)
+    return sorted(out, key=lambda r: r[0])
+
+
+def assert_sawyer(s: dict, root: str, n: int) -> None:
+    """The Sawyer's 8 visual meshes (static, one Asset3D each, no collision geometry) and a
+    transform of each of its 7 joints at ``n`` times under ``root``."""
+    meshes = {e.split("/")[4] for e in s if e.startswith(f"{root}/robot/sawyer/visual_geometries/")
+              and any(c.startswith("Asset3D:blob") for c in s[e]["cols"])}
+    assert meshes == SAWYER_LINKS
+    assert all(s[e]["static"] == {True} for e in s if e.startswith(f"{root}/robot/sawyer/"))
+    assert not any("collision" in e for e in s)
+    for name in SAWYER_JOINTS:
+        e = s[f"{root}/robot/joints/{name}"]
+        assert e["rows"] == n, name
+        assert {"Transform3D:parent_frame", "Transform3D:child_frame",
+                "Transform3D:quaternion"} <= e["cols"], name
 
 
 def assert_series(s: dict, entity: str, n: int) -> None:
@@ -111,7 +162,7 @@ def test_rgbd_session_with_ground_truth(sessions, tmp_path):
     assert {"record/camera", "record/camera/color", "record/camera/depth",
             "record/camera/color/truth_boxes", "record/truth/state",
             "record/inspection"} <= set(s)
-    assert s["record/camera"]["static"] == {True}
+    assert s["record/camera"]["static_rows"] == 1  # the pinhole; /tf places it in time
     assert s["/"]["static"] == {True} and any("AnnotationContext" in c for c in s["/"]["cols"])
     assert s["record/camera/color"]["rows"] == sim.n_frames
     assert s["record/camera/color"]["timelines"] >= {"frame", "step", "time"}
@@ -121,6 +172,70 @@ def test_rgbd_session_with_ground_truth(sessions, tmp_path):
     assert s["record/truth/factors/onion"]["timelines"] >= {"frame", "step", "time"}
     assert not any(e.startswith("perceive") for e in s)
     assert len(rr_chunk.RrdReader(out).blueprints()) == 1
+    # the work cell in 3D: one view at the world root, the cameras placed by /tf (fixed: one
+    # row each), the static bodies logged once, the moving ones as they move
+    assert views(out) == ["record"]
+    assert s["record"]["static"] == {True}  # view coordinates: z up
+    for camera in ("record/camera", "record/inspection"):
+        assert "Transform3D:translation" in s[camera]["cols"]
+        assert any(c.startswith("Pinhole:") for c in s[camera]["cols"])
+    assert len(rows(out, "record/camera", "Transform3D:translation", "frame")) == 1
+    assert s["record/scene/workcell/boxes"]["rows"] == 1
+    onions = rows(out, "record/scene/onions/spheres", "Ellipsoids3D:class_ids", "frame")
+    assert 1 < len(onions) <= sim.n_frames
+    truth = {f.index: {o["onion_id"]: int(o["blemished"]) for o in f.onions}
+             for f in sim.frames()}
+    for frame, class_ids in onions:
+        assert sorted(class_ids) == sorted(truth[frame].values())
+    assert {"record/scene/sorter/capsules", "record/scene/gate/boxes",
+            "record/scene/passer_by/boxes"} <= set(s)
+    assert not any(e.startswith("record/robot") for e in s)  # a sorter's session
+    verify(out)
+
+
+@pytest.fixture(scope="module")
+def robot_run(tmp_path_factory):
+    return robot_session(tmp_path_factory.mktemp("robot") / "robot.mcap")
+
+
+def test_robot_session_in_3d(robot_run, tmp_path):
+    run = robot_run
+    out = tmp_path / "robot.rrd"
+    with SessionLogger(out) as log:
+        log.log_session(open_session(run.path), 0)
+    s = summary(out)
+    assert_sawyer(s, "record", len(run.q))
+    assert s["record/robot/joints/right_j0"]["timelines"] >= {"frame", "step", "time"}
+    assert s["record/robot/base"]["rows"] == 1  # the base stands still
+    # Rerun's joint transforms (UrdfJoint.compute_transform) equal the URDF's own, which the
+    # MCAP test checks against PyBullet
+    from robot.assets import sawyer_urdf
+
+    kin = UrdfJoints(viewer_urdf(sawyer_urdf()))
+    for k, name in enumerate(SAWYER_JOINTS):
+        logged = rows(out, f"record/robot/joints/{name}", "Transform3D:quaternion", "frame")
+        assert [frame for frame, _ in logged] == list(range(len(run.q)))
+        for (_, quat), q in zip(logged, run.q, strict=True):
+            want = kin.transforms(dict(zip(SAWYER_JOINTS, q, strict=True)))[k]
+            np.testing.assert_allclose(matrix(quat[0]), matrix(want.rotation), atol=1e-5)
+    assert views(out) == ["record"]
+    verify(out)
+
+
+def test_a_robot_whose_urdf_is_gone_is_left_out_of_3d(robot_run, tmp_path, caplog):
+    path = tmp_path / "moved.mcap"
+    record = dict(open_session(robot_run.path).robot, urdf=str(tmp_path / "gone.urdf"))
+    record["joints"] = json.dumps(record["joints"])
+    rewrite_session(robot_run.path, path, drop_metadata=(ROBOT_METADATA,),
+                    add=lambda writer: {ROBOT_METADATA: record})
+    out = tmp_path / "moved.rrd"
+    with caplog.at_level(logging.WARNING), SessionLogger(out) as log:
+        log.log_session(open_session(path), 0)
+    assert "gone.urdf" in caplog.text and "left out of the 3D view" in caplog.text
+    s = summary(out)
+    assert not any(e.startswith("record/robot") for e in s)
+    assert s["record/camera/color"]["rows"] == len(robot_run.q)  # the rest is logged
+    assert "record/scene/workcell/boxes" in s
     verify(out)
 
 
@@ -198,6 +313,7 @@ class FakeStep:
     depth: np.ndarray | None = field(default=None, repr=False)
     inspection: np.ndarray | None = field(default=None, repr=False)
     q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+    world: object = field(default=None, repr=False)
 
     @property
     def precision(self) -> float:
@@ -224,17 +340,39 @@ def test_evaluation(tmp_path):
         return [FakeDetection(np.array([[1.0, 1.0, 5.0, 6.0]]), np.array([1]),
                               np.array([0.8])) for _ in images]
 
+    from robot.assets import sawyer_urdf
+    from robot.camera import CameraSpec
+    from robot.station import ROBOT_BASE
+    from robot.world import Pose, RobotState, ShapeState, WorldState, camera_pose
+
+    sawyer = RobotState(name="sawyer", urdf=sawyer_urdf(), base=Pose(ROBOT_BASE, [0, 0, 0, 1]),
+                        joint_names=tuple(SAWYER_JOINTS), positions=np.zeros(7))
+    pose = Pose([0, 0, 0], [0, 0, 0, 1])
+    world = WorldState(shapes=(
+        ShapeState("workcell/belt", "box", np.array([3.0, 0.3, 0.04]), np.array([0.2] * 4), pose),
+        ShapeState("onions/0", "sphere", np.full(3, 0.07), np.ones(4), pose, class_id=1),
+    ), cameras={"camera": camera_pose(CameraSpec())})
     n = 6
-    with EvaluationLogger(out, detector=detect, camera_K=K) as log:
+    with EvaluationLogger(out, detector=detect, camera_K=K, robot=sawyer,
+                          camera_pose=camera_pose(CameraSpec())) as log:
         for t in range(n):
             log.on_step(FakeStep(
                 step=t, state=11, action=t % 5, next_state=17, perceived=0 if t == 2 else None,
                 fate="bin" if t == 3 else None, tp=t // 2, fp=t // 3,
                 color=np.zeros((24, 32, 3), np.uint8), depth=np.ones((24, 32), np.float32),
                 inspection=np.zeros((12, 16, 3), np.uint8) if t == 2 else None,
-                q=np.full(7, 0.1 * t)))
+                q=np.full(7, 0.1 * t), world=world))
     assert calls == [1]
     s = summary(out)
+    assert_sawyer(s, "evaluate", n)
+    assert s["evaluate/robot/base"]["static"] == {True}
+    assert s["evaluate/camera"]["static"] == {True}
+    assert "Transform3D:translation" in s["evaluate/camera"]["cols"]
+    assert s["evaluate/scene/onions/spheres"]["rows"] == 1
+    assert views(out) == ["evaluate"]
+    joints = rows(out, "evaluate/robot/joints/right_j3", "Transform3D:quaternion", "step")
+    assert [t for t, _ in joints] == list(range(n))
+    assert not np.allclose(joints[0][1], joints[-1][1])  # the arm moved
     for entity in ("metrics/precision", "metrics/recall", "counts/tp", "counts/fn",
                    "mdp/state", "mdp/action", "arm/joints"):
         assert_series(s, f"evaluate/{entity}", n)
