@@ -41,3 +41,19 @@ def test_readme_stages_example_runs(tmp_path, monkeypatch):
     assert len(scope["sessions"]) == 4
     assert len(scope["model"]["policy_indices"]) == 48
     assert (tmp_path / "runs/study/mmap/model.json").is_file()
+
+
+@pytest.mark.slow
+def test_readme_gymnasium_example_matches_evaluate(capsys):
+    from irl.domains.onion_sorting import onion_sorting
+    from robot.evaluation import evaluate_policy
+
+    text = (ROOT / "README.md").read_text()
+    example = next(b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S)
+                   if "Sorting-v0" in b)
+    scope: dict = {}
+    exec(compile(example, "README.md", "exec"), scope)
+    counts = [int(x) for x in capsys.readouterr().out.split()[-4:]]
+    result = evaluate_policy(onion_sorting().expert_policy(), n_onions=6, n_blemished=3, seed=0,
+                             classify=scope["inspection_classifier"](scope["detector"]))
+    assert counts == [result.tp, result.fp, result.tn, result.fn]
