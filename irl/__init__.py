@@ -15,7 +15,7 @@ baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, on tabular MDPs with linear rew
 from irl import domains
 from irl.demonstrations import Demonstration, Trajectory
 from irl.domains import Domain, TaskDescription
-from irl.exceptions import ConvergenceWarning
+from irl.exceptions import ConvergenceWarning, NotFittedError
 from irl.learners import (
     LEARNERS,
     MAPBIRL,
@@ -53,6 +53,7 @@ __all__ = [
     "HiddenDataEM",
     "LearnerSpec",
     "MaxEntIRL",
+    "NotFittedError",
     "ObservationModel",
     "TabularMDP",
     "TaskDescription",

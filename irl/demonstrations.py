@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from irl._random import check_random_state
+from irl._validation import check_int, check_real, describe
 
 __all__ = [
     "OCCLUDED",
@@ -41,7 +42,12 @@ class Demonstration:
     observations: tuple[int | None, ...]
 
     def __post_init__(self) -> None:
-        obs = tuple(self.observations)
+        raw = self.observations
+        if isinstance(raw, (str, bytes, dict, set)) or not hasattr(raw, "__iter__"):
+            raise TypeError(
+                f"observations must be a sequence of int or None; got {describe(raw)}"
+            )
+        obs = tuple(raw)
         clean: list[int | None] = []
         for t, o in enumerate(obs):
             if o is None:
@@ -84,13 +90,28 @@ class Demonstration:
         The observation index is ``s * n_actions + a``, as in
         :func:`irl.observation.identity_observation_model`.
         """
-        states, actions = np.asarray(states), np.asarray(actions)
-        if states.shape != actions.shape or states.ndim != 1:
+        n_actions = check_int(n_actions, "n_actions", low=1)
+        states, actions = _indices(states, "states"), _indices(actions, "actions")
+        if states.shape != actions.shape:
             raise ValueError(
                 f"states and actions must be 1-D of equal length; got {states.shape} and "
                 f"{actions.shape}"
             )
-        mask = np.zeros(len(states), bool) if occluded is None else np.asarray(occluded, bool)
+        if actions.size and actions.max() >= n_actions:
+            raise ValueError(f"actions must lie in [0, {n_actions}); got {actions.max()}")
+        if occluded is None:
+            mask = np.zeros(len(states), bool)
+        else:
+            mask = np.asarray(occluded)
+            if mask.shape != states.shape:
+                raise ValueError(
+                    f"occluded must have the shape of states {states.shape}; got {mask.shape}"
+                )
+            if mask.dtype != bool and not (
+                np.issubdtype(mask.dtype, np.number) and np.isin(mask, (0, 1)).all()
+            ):
+                raise TypeError(f"occluded must hold booleans; got dtype {mask.dtype}")
+            mask = mask.astype(bool)
         obs = states * n_actions + actions
         return cls(observations=[None if m else int(o) for o, m in zip(obs, mask, strict=True)])
 
@@ -103,7 +124,7 @@ class Trajectory:
     actions: np.ndarray = field(repr=False)
 
     def __post_init__(self) -> None:
-        s, a = np.asarray(self.states, dtype=np.int64), np.asarray(self.actions, dtype=np.int64)
+        s, a = _indices(self.states, "states"), _indices(self.actions, "actions")
         if s.shape != a.shape or s.ndim != 1:
             raise ValueError(
                 f"states and actions must be 1-D of equal length; got {s.shape} and {a.shape}"
@@ -115,13 +136,33 @@ class Trajectory:
         return len(self.states)
 
 
+def _indices(values, name: str) -> np.ndarray:
+    """A 1-D array of non-negative integers, or raise naming ``name``."""
+    if values is None or isinstance(values, (str, bytes, dict, set)):
+        raise TypeError(f"{name} must be a 1-D array of integers; got {describe(values)}")
+    try:
+        arr = np.asarray(values)
+    except ValueError as exc:  # ragged
+        raise ValueError(f"{name} must be a 1-D array of integers; got {exc}") from None
+    if arr.size and (arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer)):
+        raise TypeError(f"{name} must be a 1-D array of integers; got dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D; got shape {arr.shape}")
+    if arr.size and arr.min() < 0:
+        raise ValueError(f"{name} must be >= 0; got {arr.min()}")
+    return arr.astype(np.int64)
+
+
 def check_demonstrations(demos, n_observations: int) -> list[Demonstration]:
     """Validate a collection of demonstrations against an observation space.
 
-    Raises ``TypeError``/``ValueError`` naming the demonstration (and step) at fault.
+    Raises ``TypeError``/``ValueError`` naming the demonstration (``demos[i]``) and the step at
+    fault.
     """
     if isinstance(demos, Demonstration):
         raise TypeError("demos must be a sequence of Demonstration; got a single Demonstration")
+    if demos is None or isinstance(demos, (str, bytes, dict)) or not hasattr(demos, "__iter__"):
+        raise TypeError(f"demos must be a sequence of Demonstration; got {describe(demos)}")
     demos = list(demos)
     if not demos:
         raise ValueError("demos must hold at least one Demonstration; got none")
@@ -133,7 +174,7 @@ def check_demonstrations(demos, n_observations: int) -> list[Demonstration]:
         if bad.size:
             t = int(bad[0])
             raise ValueError(
-                f"demonstration {i}, step {t}: observation {obs[t]} is out of range for an "
+                f"demos[{i}], step {t}: observation {obs[t]} is out of range for an "
                 f"observation model with {n_observations} observations"
             )
     return demos
@@ -152,7 +193,7 @@ def pack_observations(demos: Sequence[Demonstration], n_observations: int) -> np
     if bad.size:
         i, t = bad[0]
         raise ValueError(
-            f"demonstration {i}, step {t}: observation {packed[i, t]} is out of range for an "
+            f"demos[{i}], step {t}: observation {packed[i, t]} is out of range for an "
             f"observation model with {n_observations} observations"
         )
     return packed
@@ -166,8 +207,15 @@ def sample_trajectory(
     The first state is drawn from ``mdp.initial`` unless ``initial_state`` is given.
     """
     rng = check_random_state(seed)
-    if length < 1:
-        raise ValueError(f"length must be >= 1; got {length}")
+    length = check_int(length, "length", low=1)
+    policy = np.asarray(policy, dtype=float)
+    if policy.shape != (mdp.n_states, mdp.n_actions):
+        raise ValueError(
+            f"policy must have shape (S, A) = ({mdp.n_states}, {mdp.n_actions}); got "
+            f"{policy.shape}"
+        )
+    if initial_state is not None:
+        initial_state = check_int(initial_state, "initial_state", low=0, high=mdp.n_states - 1)
     states = np.empty(length, dtype=np.int64)
     actions = np.empty(length, dtype=np.int64)
     s = rng.choice(mdp.n_states, p=mdp.initial) if initial_state is None else int(initial_state)
@@ -188,8 +236,9 @@ def observe(
     ``o ~ O[s_t, a_t, :]``.
     """
     rng = check_random_state(seed)
-    if not 0.0 <= occlusion <= 1.0:
-        raise ValueError(f"occlusion must be in [0, 1]; got {occlusion}")
+    occlusion = check_real(occlusion, "occlusion", low=0.0, high=1.0)
+    if not isinstance(trajectory, Trajectory):
+        raise TypeError(f"trajectory must be an irl.Trajectory; got {type(trajectory).__name__}")
     T = len(trajectory)
     n_hidden = round(occlusion * T)
     hidden = np.zeros(T, bool)

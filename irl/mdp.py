@@ -12,11 +12,12 @@ matrix for a sparse MDP.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
-from irl._validation import check_probability_rows
+from irl._validation import as_float_array, check_probability_rows, check_real, describe
 
 __all__ = ["TabularMDP"]
 
@@ -49,6 +50,11 @@ class TabularMDP:
         action_names: Sequence[str] | None = None,
         feature_names: Sequence[str] | None = None,
     ) -> None:
+        if transitions is None or isinstance(transitions, (str, bytes)):
+            raise TypeError(
+                "transitions must be an (S, A, S) array or a sequence of A (S, S) matrices; "
+                f"got {describe(transitions)}"
+            )
         self.transitions = transitions
         if sp.issparse(transitions) or (
             isinstance(transitions, Sequence) and not isinstance(transitions, np.ndarray)
@@ -60,23 +66,19 @@ class TabularMDP:
         self.n_states = n_states
         self.n_actions = n_actions
 
-        features = np.asarray(features, dtype=float)
-        if features.ndim != 3 or features.shape[:2] != (n_states, n_actions):
+        features = as_float_array(features, "features")
+        if features.ndim != 3 or features.shape[:2] != (n_states, n_actions) \
+                or features.shape[2] < 1:
             raise ValueError(
-                f"features must have shape (S, A, K) = ({n_states}, {n_actions}, K) to match "
-                f"transitions; got {features.shape}"
+                f"features must have shape (S, A, K) = ({n_states}, {n_actions}, K >= 1) to "
+                f"match transitions; got {features.shape}"
             )
-        if not np.all(np.isfinite(features)):
-            raise ValueError("features must be finite; got NaN or inf entries")
         self.features = features
         self.n_features = features.shape[2]
 
-        discount = float(discount)
-        if not 0.0 <= discount < 1.0:
-            raise ValueError(f"discount must be in [0, 1); got {discount}")
-        self.discount = discount
+        self.discount = check_real(discount, "discount", low=0.0, high=1.0, high_open=True)
 
-        initial = np.asarray(initial, dtype=float)
+        initial = as_float_array(initial, "initial")
         if initial.shape != (n_states,):
             raise ValueError(f"initial must have shape (S,) = ({n_states},); got {initial.shape}")
         check_probability_rows(initial[None, :], "initial")
@@ -95,15 +97,22 @@ class TabularMDP:
         """Reward table ``R[s, a] = phi[s, a] . theta`` of shape (S, A)."""
         return self.features @ self.check_theta(theta)
 
-    def check_theta(self, theta: np.ndarray) -> np.ndarray:
-        """Return ``theta`` as a float vector of length K, or raise ``ValueError``."""
-        theta = np.asarray(theta, dtype=float)
+    def check_theta(self, theta: np.ndarray, name: str = "theta") -> np.ndarray:
+        """Return ``theta`` as a finite float vector of length K, or raise naming ``name``."""
+        if theta is None or isinstance(theta, (str, bytes, dict, set)):
+            raise TypeError(f"{name} must be an array of {self.n_features} numbers; got "
+                            f"{describe(theta)}")
+        try:
+            theta = np.asarray(theta, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{name} must be an array of {self.n_features} numbers; got "
+                            f"{describe(theta)} ({exc})") from None
         if theta.shape != (self.n_features,):
             raise ValueError(
-                f"theta must have shape (K,) = ({self.n_features},); got {theta.shape}"
+                f"{name} must have shape (K,) = ({self.n_features},); got {theta.shape}"
             )
         if not np.all(np.isfinite(theta)):
-            raise ValueError(f"theta must be finite; got {theta}")
+            raise ValueError(f"{name} must be finite; got {describe(theta)}")
         return theta
 
     # -- flat-operator kernels (shared by the solvers and forward-backward) ------------------
@@ -122,6 +131,55 @@ class TabularMDP:
         flat_mass = mass.reshape(-1, self.n_states * self.n_actions)
         out = (self._flat.T @ flat_mass.T).T
         return np.asarray(out).reshape((*lead, self.n_states))
+
+    # -- the same kernels in log space (exact at any dynamic range; used where the scaled
+    # linear-space messages of forward-backward would underflow) ---------------------------
+
+    @cached_property
+    def _log_operator(self) -> dict[str, np.ndarray]:
+        """The positive entries of ``P[s * A + a, s']`` and their logs, by row and by column."""
+        csr = sp.csr_matrix(self._flat, dtype=float)
+        csr.eliminate_zeros()
+        csr.sort_indices()
+        csc = csr.tocsc()
+        csc.sort_indices()
+        return {
+            "row_ptr": csr.indptr, "row_index": csr.indices, "row_log": np.log(csr.data),
+            "col_ptr": csc.indptr, "col_index": csc.indices, "col_log": np.log(csc.data),
+        }
+
+    @cached_property
+    def log_initial(self) -> np.ndarray:
+        """``log p0[s]``, ``-inf`` where ``p0`` is 0."""
+        out = np.full(self.n_states, -np.inf)
+        positive = self.initial > 0
+        out[positive] = np.log(self.initial[positive])
+        return out
+
+    @cached_property
+    def min_log_transition(self) -> float:
+        """``log`` of the smallest positive transition probability."""
+        return float(self._log_operator["row_log"].min())
+
+    def log_expect_next(self, log_values: np.ndarray) -> np.ndarray:
+        """``log sum_s' T[s, a, s'] exp(log_values[..., s'])``, shape (..., S, A).
+
+        ``log_values`` has shape (..., S), batch axes first; ``-inf`` entries are zeros.
+        """
+        op = self._log_operator
+        lead = log_values.shape[:-1]
+        lv = log_values.reshape(-1, self.n_states)
+        terms = lv[:, op["row_index"]] + op["row_log"]
+        out = segment_logsumexp(terms, op["row_ptr"])
+        return out.reshape((*lead, self.n_states, self.n_actions))
+
+    def log_push_forward(self, log_mass: np.ndarray) -> np.ndarray:
+        """``log sum_{s, a} exp(log_mass[..., s, a]) T[s, a, s']``, shape (..., S)."""
+        op = self._log_operator
+        lead = log_mass.shape[:-2]
+        lm = log_mass.reshape(-1, self.n_states * self.n_actions)
+        terms = lm[:, op["col_index"]] + op["col_log"]
+        return segment_logsumexp(terms, op["col_ptr"]).reshape((*lead, self.n_states))
 
     def next_state_distribution(self, state: int, action: int) -> np.ndarray:
         """``T[state, action, :]`` as a dense vector of shape (S,)."""
@@ -142,10 +200,34 @@ class TabularMDP:
         )
 
 
-def _flatten_dense(transitions: np.ndarray) -> tuple[np.ndarray, int, int]:
-    T = np.asarray(transitions, dtype=float)
-    if T.ndim != 3 or T.shape[0] != T.shape[2]:
-        raise ValueError(f"transitions must have shape (S, A, S); got {T.shape}")
+def segment_logsumexp(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """``logsumexp`` of ``values[:, indptr[j]:indptr[j + 1]]`` for each segment j.
+
+    ``values`` has shape (B, n) with finite or ``-inf`` entries; the result has shape
+    (B, len(indptr) - 1), ``-inf`` for an empty segment or one of ``-inf`` only.
+    """
+    n_seg = len(indptr) - 1
+    out = np.full((values.shape[0], n_seg), -np.inf)
+    lengths = np.diff(indptr)
+    nonempty = lengths > 0
+    if not nonempty.any():
+        return out
+    starts = indptr[:-1][nonempty]
+    top = np.maximum.reduceat(values, starts, axis=1)
+    top = np.where(np.isfinite(top), top, 0.0)
+    shifted = values - np.repeat(top, lengths[nonempty], axis=1)
+    sums = np.add.reduceat(np.exp(shifted), starts, axis=1)
+    with np.errstate(divide="ignore"):
+        out[:, nonempty] = np.log(sums) + top
+    return out
+
+
+def _flatten_dense(transitions) -> tuple[np.ndarray, int, int]:
+    T = as_float_array(transitions, "transitions")
+    if T.ndim != 3 or T.shape[0] != T.shape[2] or min(T.shape) < 1:
+        raise ValueError(
+            f"transitions must have shape (S, A, S) with S, A >= 1; got {T.shape}"
+        )
     n_states, n_actions = T.shape[:2]
     flat = np.ascontiguousarray(T.reshape(n_states * n_actions, n_states))
     check_probability_rows(flat, "transitions")
@@ -158,12 +240,22 @@ def _flatten_sparse(transitions) -> tuple[sp.csr_matrix, int, int]:
             "transitions given as sparse must be a sequence of one (S, S) matrix per action; "
             f"got a single {type(transitions).__name__}"
         )
-    mats = [sp.csr_matrix(m, dtype=float) for m in transitions]
+    mats = []
+    for a, m in enumerate(transitions):
+        try:
+            mats.append(sp.csr_matrix(m if sp.issparse(m) else as_float_array(
+                m, f"transitions[{a}]", ndim=2), dtype=float))
+        except (TypeError, ValueError) as exc:
+            if f"transitions[{a}]" in str(exc):
+                raise
+            raise TypeError(
+                f"transitions[{a}] must be an (S, S) matrix; got {describe(m)}"
+            ) from None
     if not mats:
         raise ValueError("transitions must hold at least one action's matrix; got none")
     n_states = mats[0].shape[0]
     for a, m in enumerate(mats):
-        if m.shape != (n_states, n_states):
+        if m.shape != (n_states, n_states) or n_states < 1:
             raise ValueError(
                 f"transitions[{a}] must have shape (S, S) = ({n_states}, {n_states}); "
                 f"got {m.shape}"
@@ -181,6 +273,8 @@ def _flatten_sparse(transitions) -> tuple[sp.csr_matrix, int, int]:
 def _names(names, n: int, argname: str, prefix: str) -> list[str]:
     if names is None:
         return [f"{prefix}{i}" for i in range(n)]
+    if isinstance(names, (str, bytes)) or not isinstance(names, Sequence | np.ndarray):
+        raise TypeError(f"{argname} must be a sequence of {n} str; got {describe(names)}")
     names = [str(x) for x in names]
     if len(names) != n:
         raise ValueError(f"{argname} must have {n} entries; got {len(names)}")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from irl._validation import as_float_array, as_index_array
 from irl.mdp import TabularMDP
 from irl.solvers import OptimalQSolver, policy_values
 
@@ -18,8 +19,15 @@ __all__ = [
 ]
 
 
+def _check(mdp, true_theta, learned_theta) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(mdp, TabularMDP):
+        raise TypeError(f"mdp must be an irl.TabularMDP; got {type(mdp).__name__}")
+    return mdp.check_theta(true_theta, "true_theta"), mdp.check_theta(learned_theta,
+                                                                      "learned_theta")
+
+
 def _expert_and_learned_values(mdp: TabularMDP, true_theta, learned_theta):
-    true_theta, learned_theta = mdp.check_theta(true_theta), mdp.check_theta(learned_theta)
+    true_theta, learned_theta = _check(mdp, true_theta, learned_theta)
     solver = OptimalQSolver(mdp)
     pi_e = solver.solve(true_theta).policy
     pi_l = solver.solve(learned_theta).policy
@@ -48,11 +56,12 @@ def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta, states=None) -> 
 
     An action counts as optimal if its true ``Q*`` is within 1e-9 of the best (ties allowed).
     """
-    true_theta, learned_theta = mdp.check_theta(true_theta), mdp.check_theta(learned_theta)
+    true_theta, learned_theta = _check(mdp, true_theta, learned_theta)
+    idx = (np.arange(mdp.n_states) if states is None
+           else as_index_array(states, "states", size=mdp.n_states))
     solver = OptimalQSolver(mdp)
     Q = solver.q_values(true_theta)
     pi_l = solver.solve(learned_theta).policy
-    idx = np.arange(mdp.n_states) if states is None else np.asarray(states)
     tol = 1e-9 * (1.0 + np.abs(Q).max())
     wrong = Q[idx, pi_l[idx]] < Q[idx].max(axis=1) - tol
     return float(wrong.mean())
@@ -61,10 +70,14 @@ def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta, states=None) -> 
 def reward_distance(true_theta, learned_theta) -> float:
     """Euclidean distance between unit-normalized weight vectors (the scale of a reward is not
     identifiable from behaviour), in [0, 2]."""
-    a, b = np.asarray(true_theta, float), np.asarray(learned_theta, float)
+    a = as_float_array(true_theta, "true_theta", ndim=1)
+    b = as_float_array(learned_theta, "learned_theta", ndim=1)
     if a.shape != b.shape:
-        raise ValueError(f"weight vectors differ in shape: {a.shape} and {b.shape}")
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
-    if na == 0 or nb == 0:
-        raise ValueError("reward_distance is undefined for an all-zero weight vector")
-    return float(np.linalg.norm(a / na - b / nb))
+        raise ValueError(
+            f"learned_theta must have the shape of true_theta {a.shape}; got {b.shape}"
+        )
+    for name, v in (("true_theta", a), ("learned_theta", b)):
+        if not np.any(v):
+            raise ValueError(f"{name} must not be all zeros (reward_distance is undefined)")
+    a, b = a / np.abs(a).max(), b / np.abs(b).max()  # no overflow in the norms
+    return float(np.linalg.norm(a / np.linalg.norm(a) - b / np.linalg.norm(b)))

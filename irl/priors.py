@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from irl._random import check_random_state
+from irl._validation import as_float_array, check_int
 
 __all__ = ["GaussianPrior"]
 
@@ -18,39 +19,46 @@ class GaussianPrior:
     """
 
     def __init__(self, mean=0.0, std=1.0) -> None:
-        self.mean = np.asarray(mean, dtype=float)
-        self.std = np.asarray(std, dtype=float)
-        if self.mean.ndim > 1 or self.std.ndim > 1:
-            raise ValueError(
-                f"mean and std must be scalars or 1-D; got shapes {self.mean.shape} and "
-                f"{self.std.shape}"
-            )
-        if not np.all(np.isfinite(self.mean)):
-            raise ValueError(f"mean must be finite; got {self.mean}")
-        if not np.all(self.std > 0) or not np.all(np.isfinite(self.std)):
-            raise ValueError(f"std must be positive and finite; got {self.std}")
+        self.mean = as_float_array(mean, "mean")
+        self.std = as_float_array(std, "std")
+        for name, v in (("mean", self.mean), ("std", self.std)):
+            if v.ndim > 1 or v.size == 0:
+                raise ValueError(f"{name} must be a scalar or a non-empty 1-D array; got shape "
+                                 f"{v.shape}")
+        if not np.all(self.std > 0):
+            raise ValueError(f"std must be positive; got {self.std.min()} among its entries")
+
+    def check_theta(self, theta) -> np.ndarray:
+        """``theta`` as a finite 1-D float array whose length matches the prior's, or raise."""
+        theta = as_float_array(theta, "theta", ndim=1)
+        self._broadcast(theta.shape[0])
+        return theta
 
     def _broadcast(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         for name, v in (("mean", self.mean), ("std", self.std)):
             if v.ndim == 1 and v.shape[0] != n:
-                raise ValueError(f"prior {name} has {v.shape[0]} entries but theta has {n}")
+                raise ValueError(
+                    f"prior must have one {name} per weight (K = {n}) or a scalar; its {name} "
+                    f"has {v.shape[0]} entries"
+                )
         return np.broadcast_to(self.mean, (n,)), np.broadcast_to(self.std, (n,))
 
     def log_prob(self, theta: np.ndarray) -> float:
         """``log p(theta)``, normalized."""
-        theta = np.asarray(theta, dtype=float)
+        theta = self.check_theta(theta)
         mu, sd = self._broadcast(theta.shape[0])
         z = (theta - mu) / sd
         return float(-0.5 * (z @ z) - np.log(sd).sum() - 0.5 * theta.shape[0] * np.log(2 * np.pi))
 
     def grad_log_prob(self, theta: np.ndarray) -> np.ndarray:
         """``d log p / dtheta = -(theta - mean) / std^2``."""
-        theta = np.asarray(theta, dtype=float)
+        theta = self.check_theta(theta)
         mu, sd = self._broadcast(theta.shape[0])
         return -(theta - mu) / sd**2
 
     def sample(self, n_features: int, seed=None) -> np.ndarray:
         """One draw of theta, shape (n_features,)."""
+        n_features = check_int(n_features, "n_features", low=1)
         mu, sd = self._broadcast(n_features)
         return check_random_state(seed).normal(mu, sd)
 

@@ -7,10 +7,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from irl._random import check_random_state
+from irl._validation import check_int, check_real
 from irl.demonstrations import Demonstration, Trajectory, observe, sample_trajectory
 from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
-from irl.observation import ObservationModel
+from irl.observation import ObservationModel, check_compatible
 from irl.priors import GaussianPrior
 from irl.solvers import OptimalQSolver, boltzmann_policy
 
@@ -106,8 +107,12 @@ class Domain:
         trajectories : list of Trajectory
             The ground truth behind each demonstration.
         """
+        n = check_int(n, "n", low=1)
+        length = check_int(length, "length", low=1)
+        occlusion = check_real(occlusion, "occlusion", low=0.0, high=1.0)
         rng = check_random_state(seed)
         om = self.observation_model if observation_model is None else observation_model
+        check_compatible(self.mdp, om)
         policy = self.expert_policy()
         trajectories = [sample_trajectory(self.mdp, policy, length, rng) for _ in range(n)]
         demos = [observe(tr, om, occlusion, rng) for tr in trajectories]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from irl._validation import check_real
 from irl.domains.base import Domain
 from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
@@ -79,8 +80,7 @@ def _features() -> np.ndarray:
 
 def tunnel_confusion(noise: float) -> np.ndarray:
     """``C[s, s']``: the goal is seen at the tunnel entrance with probability ``noise``."""
-    if not 0.0 <= noise <= 1.0:
-        raise ValueError(f"noise must be in [0, 1]; got {noise}")
+    noise = check_real(noise, "noise", low=0.0, high=1.0)
     C = np.eye(GRID * GRID)
     C[sector(*GOAL), sector(*GOAL)] = 1.0 - noise
     C[sector(*GOAL), sector(*TUNNEL)] = noise
@@ -101,6 +101,9 @@ def forestworld(
     discount, beta : float
         gamma = 0.99 as in the paper; beta is the fugitive's Boltzmann rationality.
     """
+    success = check_real(success, "success", low=0.0, high=1.0)
+    beta = check_real(beta, "beta", low=0.0, low_open=True)
+    noise = check_real(noise, "noise", low=0.0, high=1.0)
     initial = np.ones(GRID * GRID)
     for cell in (*AVOIDABLE, GOAL):
         initial[sector(*cell)] = 0.0

@@ -43,6 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from irl._validation import check_real
 from irl.domains.base import Domain
 from irl.domains.task import TaskDescription
 from irl.mdp import TabularMDP
@@ -282,8 +283,7 @@ def sorting_observation_model(noise: float) -> ObservationModel:
     Each of the three factors is misread with probability ``1 - (1 - noise)^(1/3)``, so the
     observed state is wrong with probability ``noise``; actions are observed exactly.
     """
-    if not 0.0 <= noise < 1.0:
-        raise ValueError(f"noise must be in [0, 1); got {noise}")
+    noise = check_real(noise, "noise", low=0.0, high=1.0, high_open=True)
     per_factor = 1.0 - (1.0 - noise) ** (1.0 / len(FACTOR_SIZES))
     return factored_observation_model(
         [factor_confusion(n, per_factor) for n in FACTOR_SIZES], n_actions=N_ACTIONS
@@ -304,6 +304,9 @@ def onion_sorting(
     discount, beta : float
         The paper's gamma = 0.99, and the sorter's Boltzmann rationality.
     """
+    noise = check_real(noise, "noise", low=0.0, high=1.0, high_open=True)
+    blemish_rate = check_real(blemish_rate, "blemish_rate", low=0.0, high=1.0)
+    beta = check_real(beta, "beta", low=0.0, low_open=True)
     initial = np.zeros(N_STATES)
     for s in (
         SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD),

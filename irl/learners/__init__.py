@@ -1,5 +1,6 @@
 """IRL learners: MMAP-BIRL and the baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, by name."""
 
+from irl.learners.base import LearnerBase
 from irl.learners.birl import MAPBIRL, MMAPBIRL
 from irl.learners.maxent import HiddenDataEM, MaxEntIRL
 from irl.learners.registry import (
@@ -15,6 +16,7 @@ __all__ = [
     "MAPBIRL",
     "MMAPBIRL",
     "HiddenDataEM",
+    "LearnerBase",
     "LearnerSpec",
     "MaxEntIRL",
     "make_estimator",

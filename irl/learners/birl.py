@@ -11,30 +11,51 @@ learners maximize ``log p(theta) + sum_demos log P(demo | theta)`` and share the
 time of the posterior marginals ``P(s_t, a_t | o, theta)`` from forward-backward; for MAP-BIRL,
 ``G`` counts the observed pairs taken at face value. ``dQ = dQ*/dtheta`` comes from one linear
 solve per greedy policy and is cached (:class:`irl.solvers.OptimalQSolver`).
+
+The policy enters the likelihood as ``log pi = log_softmax(beta Q*)``, never exponentiated
+first, so the likelihood stays finite at any finite theta (see :mod:`irl.inference`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from irl._random import check_random_state
-from irl.demonstrations import Demonstration, check_demonstrations
+from irl._validation import check_int, check_real, describe
+from irl.demonstrations import Demonstration
 from irl.inference import posterior_stats
+from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.mdp import TabularMDP
-from irl.observation import ObservationModel, check_compatible
+from irl.observation import ObservationModel
 from irl.priors import GaussianPrior
-from irl.solvers import OptimalQSolver, OptimalSolution, boltzmann_policy
+from irl.solvers import OptimalQSolver, OptimalSolution, log_boltzmann_policy
 
 __all__ = ["MAPBIRL", "MMAPBIRL"]
 
 OPTIMIZERS = ("lbfgs", "gradient-ascent")
 
 
-class _BayesianIRL:
-    """Shared machinery: objective, gradient, optimizers. Subclasses define ``_pair_stats``."""
+@dataclass(frozen=True)
+class _Model:
+    """The validated model of one call: what the likelihood and its gradient need."""
+
+    mdp: TabularMDP
+    observation_model: ObservationModel
+    beta: float
+    prior: GaussianPrior
+    solver: OptimalQSolver
+
+
+class _BayesianIRL(LearnerBase):
+    """Shared machinery: objective, gradient, optimizers. Subclasses define ``_pair_stats``.
+
+    Nothing is computed at construction: every call (``fit``, ``log_likelihood``, ...) checks
+    the current hyperparameters and builds its solver from the current ``mdp``.
+    """
 
     def __init__(
         self,
@@ -66,105 +87,133 @@ class _BayesianIRL:
         self.epsilon = epsilon
         self.init = init
         self.seed = seed
-        self._solver = OptimalQSolver(mdp)
 
     # -- the model ------------------------------------------------------------------------
 
-    @property
-    def prior_(self) -> GaussianPrior:
-        return GaussianPrior() if self.prior is None else self.prior
+    def _check_model(self) -> _Model:
+        """Validate ``mdp``, ``observation_model``, ``beta`` and ``prior``; a fresh solver."""
+        self._check_problem()
+        beta = check_real(self.beta, "beta", low=0.0, low_open=True)
+        prior = GaussianPrior() if self.prior is None else self.prior
+        if not isinstance(prior, GaussianPrior):
+            raise TypeError(f"prior must be an irl.GaussianPrior or None; got "
+                            f"{describe(self.prior)}")
+        prior._broadcast(self.mdp.n_features)
+        return _Model(self.mdp, self.observation_model, beta, prior, OptimalQSolver(self.mdp))
 
-    def _policy(self, theta: np.ndarray) -> tuple[OptimalSolution, np.ndarray]:
-        sol = self._solver.solve(theta)
-        return sol, boltzmann_policy(sol.q_values(theta), self.beta)
+    def _check_call(self, theta, demos) -> tuple[_Model, np.ndarray, list[Demonstration]]:
+        model = self._check_model()
+        demos = self._check_problem(demos)
+        return model, self.mdp.check_theta(theta), demos
 
-    def _pair_stats(self, pi, demos) -> tuple[float, np.ndarray]:
-        """``(log-likelihood, G[s, a])`` of the demonstrations under policy ``pi``."""
+    @staticmethod
+    def _log_policy(model: _Model, theta: np.ndarray) -> tuple[OptimalSolution, np.ndarray]:
+        sol = model.solver.solve(theta)
+        return sol, log_boltzmann_policy(sol.q_values(theta), model.beta)
+
+    def _pair_stats(self, model: _Model, log_pi, demos) -> tuple[float, np.ndarray]:
+        """``(log-likelihood, G[s, a])`` of the demonstrations under ``log pi``."""
         raise NotImplementedError
 
-    def _likelihood_and_gradient(self, theta, demos) -> tuple[float, np.ndarray]:
-        sol, pi = self._policy(theta)
-        ll, G = self._pair_stats(pi, demos)
+    def _likelihood_and_gradient(self, model: _Model, theta, demos) -> tuple[float, np.ndarray]:
+        sol, log_pi = self._log_policy(model, theta)
+        ll, G = self._pair_stats(model, log_pi, demos)
+        pi = np.exp(log_pi)
         expected_dQ = np.einsum("sa,sak->sk", pi, sol.dQ)
-        grad = self.beta * (
+        grad = model.beta * (
             np.einsum("sa,sak->k", G, sol.dQ) - np.einsum("s,sk->k", G.sum(axis=1), expected_dQ)
         )
         return ll, grad
 
-    def _check(self, theta, demos) -> tuple[np.ndarray, list[Demonstration]]:
-        check_compatible(self.mdp, self.observation_model)
-        if not np.isscalar(self.beta) or not self.beta > 0:
-            raise ValueError(f"beta must be a positive number; got {self.beta!r}")
-        demos = check_demonstrations(demos, self.observation_model.n_observations)
-        theta = None if theta is None else self.mdp.check_theta(theta)
-        return theta, demos
-
     def log_likelihood(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:
-        """Natural log of ``prod_demos P(o_1..T | theta)``."""
-        theta, demos = self._check(theta, demos)
-        return float(self._pair_stats(self._policy(theta)[1], demos)[0])
+        """Natural log of ``prod_demos P(o_1..T | theta)``; finite for any finite theta
+        unless a demonstration is impossible under the model (a ``ValueError``)."""
+        model, theta, demos = self._check_call(theta, demos)
+        return float(self._pair_stats(model, self._log_policy(model, theta)[1], demos)[0])
 
     def log_likelihood_gradient(
         self, theta: np.ndarray, demos: Sequence[Demonstration]
     ) -> np.ndarray:
         """Gradient of :meth:`log_likelihood` in theta, shape (K,)."""
-        theta, demos = self._check(theta, demos)
-        return self._likelihood_and_gradient(theta, demos)[1]
+        model, theta, demos = self._check_call(theta, demos)
+        return self._likelihood_and_gradient(model, theta, demos)[1]
 
     def log_posterior(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:
         """``log p(theta) + log-likelihood`` (up to the evidence)."""
-        theta, demos = self._check(theta, demos)
-        return self.log_likelihood(theta, demos) + self.prior_.log_prob(theta)
+        model, theta, demos = self._check_call(theta, demos)
+        ll = self._pair_stats(model, self._log_policy(model, theta)[1], demos)[0]
+        return float(ll) + model.prior.log_prob(theta)
 
     def log_posterior_gradient(
         self, theta: np.ndarray, demos: Sequence[Demonstration]
     ) -> np.ndarray:
         """Gradient of :meth:`log_posterior`, shape (K,)."""
-        theta, demos = self._check(theta, demos)
-        return self._likelihood_and_gradient(theta, demos)[1] + self.prior_.grad_log_prob(theta)
+        model, theta, demos = self._check_call(theta, demos)
+        grad = self._likelihood_and_gradient(model, theta, demos)[1]
+        return grad + model.prior.grad_log_prob(theta)
 
     # -- fitting --------------------------------------------------------------------------
 
+    def _check_search(self) -> dict:
+        """Validate the optimizer's hyperparameters."""
+        if not isinstance(self.optimizer, str):
+            raise TypeError(f"optimizer must be one of {OPTIMIZERS}; got "
+                            f"{describe(self.optimizer)}")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {OPTIMIZERS}; got {self.optimizer!r}")
+        return {
+            "n_restarts": check_int(self.n_restarts, "n_restarts", low=1),
+            "max_iter": check_int(self.max_iter, "max_iter", low=1),
+            "tol": check_real(self.tol, "tol", low=0.0),
+            "step_size": check_real(self.step_size, "step_size", low=0.0, low_open=True),
+            "decay": check_real(self.decay, "decay", low=0.0, high=1.0, low_open=True),
+            "epsilon": check_real(self.epsilon, "epsilon", low=0.0),
+            "init": self._check_init(),
+            "rng": check_random_state(self.seed),
+        }
+
     def fit(self, demos: Sequence[Demonstration]):
-        """Find the MAP reward weights. Sets ``theta_``, ``policy_``, ``n_iter_``, ``history_``.
+        """Find the MAP reward weights. Sets ``theta_``, ``policy_``, ``log_posterior_``,
+        ``n_iter_``, ``history_``, ``converged_`` and ``prior_``.
+
+        Every hyperparameter is checked here (``ValueError``/``TypeError`` naming it), and the
+        solver is built from the current ``mdp`` and ``beta``.
 
         Returns
         -------
         self
         """
-        _, demos = self._check(None, demos)
-        if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer must be one of {OPTIMIZERS}; got {self.optimizer!r}")
-        if self.n_restarts < 1:
-            raise ValueError(f"n_restarts must be >= 1; got {self.n_restarts}")
-        rng = check_random_state(self.seed)
-        prior = self.prior_
-        K = self.mdp.n_features
-        first = (
-            np.broadcast_to(prior.mean, (K,)).astype(float)
-            if self.init is None else self.mdp.check_theta(self.init)
-        )
-        starts = [first] + [prior.sample(K, rng) for _ in range(self.n_restarts - 1)]
+        model = self._check_model()
+        search = self._check_search()
+        demos = self._check_problem(demos)
+        prior, K = model.prior, self.mdp.n_features
+        first = (np.broadcast_to(prior.mean, (K,)).astype(float)
+                 if search["init"] is None else search["init"])
+        starts = [first] + [prior.sample(K, search["rng"]) for _ in range(search["n_restarts"] - 1)]
 
         def objective(theta):
-            ll, grad = self._likelihood_and_gradient(theta, demos)
+            ll, grad = self._likelihood_and_gradient(model, theta, demos)
             return ll + prior.log_prob(theta), grad + prior.grad_log_prob(theta)
 
         if self.optimizer == "lbfgs":
-            res = maximize_lbfgs(objective, starts, max_iter=self.max_iter, tol=self.tol)
+            res = maximize_lbfgs(objective, starts, max_iter=search["max_iter"],
+                                 tol=search["tol"])
         else:
             gamma = self.mdp.discount
-            threshold = self.epsilon * (1 - gamma) / gamma if gamma > 0 else self.epsilon
+            eps = search["epsilon"]
+            threshold = eps * (1 - gamma) / gamma if gamma > 0 else eps
             res = maximize_gradient_ascent(
-                objective, starts, step_size=self.step_size, decay=self.decay,
-                threshold=threshold, max_iter=self.max_iter,
+                objective, starts, step_size=search["step_size"], decay=search["decay"],
+                threshold=threshold, max_iter=search["max_iter"],
             )
+        self._solver = model.solver
         self.theta_ = res.theta
         self.log_posterior_ = res.value
         self.n_iter_ = res.n_iter
         self.history_ = res.history
         self.converged_ = res.converged
-        self.policy_ = self._solver.solve(self.theta_).policy
+        self.prior_ = prior
+        self.policy_ = model.solver.solve(self.theta_).policy
         return self
 
 
@@ -205,6 +254,10 @@ class MMAPBIRL(_BayesianIRL):
     seed : int or Generator, optional
         Seeds the restarts.
 
+    Every parameter is stored as given and checked by ``fit`` (and by the ``log_*`` methods,
+    which need ``mdp``, ``observation_model``, ``beta`` and ``prior``); change them with
+    ``set_params`` or by assignment.
+
     Attributes
     ----------
     theta_ : ndarray of shape (K,)
@@ -214,10 +267,14 @@ class MMAPBIRL(_BayesianIRL):
     n_iter_ : int
     history_ : list of dict
     converged_ : bool
+        False when the optimizer hit ``max_iter`` or was stopped by trial points where the
+        objective was not finite (a :class:`~irl.ConvergenceWarning` says which).
+    prior_ : GaussianPrior
+        The prior used: ``prior``, or the standard normal when it is None.
     """
 
-    def _pair_stats(self, pi, demos):
-        stats = posterior_stats(self.mdp, pi, demos, self.observation_model)
+    def _pair_stats(self, model, log_pi, demos):
+        stats = posterior_stats(model.mdp, log_pi, demos, model.observation_model)
         return float(stats.log_likelihood.sum()), stats.occupancy.sum(axis=0)
 
 
@@ -230,9 +287,10 @@ class MAPBIRL(_BayesianIRL):
     the theta-independent ``log p0 + sum log T``). Parameters are those of :class:`MMAPBIRL`.
     """
 
-    def _pair_stats(self, pi, demos):
-        G = face_value_counts(demos, self.observation_model)
-        return float((G[G > 0] * np.log(pi[G > 0])).sum()), G
+    def _pair_stats(self, model, log_pi, demos):
+        G = face_value_counts(demos, model.observation_model)
+        seen = G > 0
+        return float((G[seen] * log_pi[seen]).sum()), G
 
 
 def face_value_counts(demos: Sequence[Demonstration], observation_model) -> np.ndarray:
@@ -246,7 +304,7 @@ def face_value_counts(demos: Sequence[Demonstration], observation_model) -> np.n
         if np.any(pairs[:, 1] < 0):
             t = int(np.flatnonzero(obs >= 0)[np.flatnonzero(pairs[:, 1] < 0)[0]])
             raise ValueError(
-                f"demonstration {i}, step {t}: observation {obs[t]} reports no action, so it "
+                f"demos[{i}], step {t}: observation {obs[t]} reports no action, so it "
                 "cannot be taken at face value (use MMAPBIRL or HiddenDataEM)"
             )
         np.add.at(G, (pairs[:, 0], pairs[:, 1]), 1.0)

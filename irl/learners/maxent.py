@@ -25,14 +25,16 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from irl.demonstrations import Demonstration, check_demonstrations
+from irl._validation import check_int, check_real
+from irl.demonstrations import Demonstration
 from irl.exceptions import ConvergenceWarning
 from irl.inference import posterior_stats
+from irl.learners.base import LearnerBase
+from irl.learners.optimize import maximize_lbfgs
 from irl.mdp import TabularMDP
-from irl.observation import ObservationModel, check_compatible
+from irl.observation import ObservationModel
 from irl.solvers import OptimalQSolver
 
 __all__ = [
@@ -96,45 +98,31 @@ def mce_dual(mdp: TabularMDP, theta: np.ndarray, groups: Groups, l2: float):
 
 
 def _fit_dual(mdp, groups: Groups, theta0: np.ndarray, l2: float, max_iter: int, tol: float):
-    res = minimize(
-        lambda th: mce_dual(mdp, th, groups, l2), theta0, jac=True, method="L-BFGS-B",
-        options={"maxiter": max_iter, "ftol": tol, "gtol": tol},
-    )
-    return np.asarray(res.x), int(res.nit), float(res.fun)
+    """Minimize the MCE dual by L-BFGS-B from ``theta0``; ``(theta, n_iter, converged,
+    history)``. A non-finite dual is a failed line-search step
+    (:func:`irl.learners.optimize.maximize_lbfgs`)."""
+
+    def objective(th):
+        value, grad = mce_dual(mdp, th, groups, l2)
+        return -value, -grad
+
+    res = maximize_lbfgs(objective, [theta0], max_iter=max_iter, tol=tol, warn=False)
+    return res.theta, res.n_iter, res.converged, res.history
 
 
-class _MCEBase:
-    def __init__(
-        self,
-        mdp: TabularMDP,
-        observation_model: ObservationModel,
-        *,
-        l2: float = 0.01,
-        max_iter: int = 100,
-        tol: float = 1e-3,
-        m_step_max_iter: int = 200,
-        m_step_tol: float = 1e-8,
-        init: np.ndarray | None = None,
-    ) -> None:
-        self.mdp = mdp
-        self.observation_model = observation_model
-        self.l2 = l2
-        self.max_iter = max_iter
-        self.tol = tol
-        self.m_step_max_iter = m_step_max_iter
-        self.m_step_tol = m_step_tol
-        self.init = init
+class _MCEBase(LearnerBase):
+    """Shared checks and fitted state of the maximum-causal-entropy learners."""
 
-    def _prepare(self, demos) -> list[Demonstration]:
-        check_compatible(self.mdp, self.observation_model)
-        if self.l2 < 0:
-            raise ValueError(f"l2 must be >= 0; got {self.l2}")
-        return check_demonstrations(demos, self.observation_model.n_observations)
+    def _check_mce(self) -> dict:
+        return {
+            "l2": check_real(self.l2, "l2", low=0.0),
+            "max_iter": check_int(self.max_iter, "max_iter", low=1),
+            "tol": check_real(self.tol, "tol", low=0.0),
+            "init": self._check_init(),
+        }
 
-    def _theta0(self) -> np.ndarray:
-        if self.init is None:
-            return np.zeros(self.mdp.n_features)
-        return self.mdp.check_theta(self.init)
+    def _theta0(self, init) -> np.ndarray:
+        return np.zeros(self.mdp.n_features) if init is None else init
 
     def _finish(self, theta: np.ndarray) -> None:
         self.theta_ = theta
@@ -142,6 +130,8 @@ class _MCEBase:
 
     def soft_policy(self, length: int) -> np.ndarray:
         """The fitted time-indexed soft policy ``pi[t, s, a]`` for a trajectory of ``length``."""
+        self._check_fitted()
+        length = check_int(length, "length", low=1)
         log_pi, _ = soft_backward(self.mdp, self.mdp.reward(self.theta_), length)
         return time_indexed(log_pi, length)
 
@@ -151,7 +141,18 @@ class MaxEntIRL(_MCEBase):
 
     Observations are read at face value (``observation_model.nominal``) and each maximal run of
     consecutive observed steps is a trajectory of its own; occluded steps are dropped and noise
-    is ignored. ``max_iter`` and ``tol`` bound the L-BFGS fit of the dual.
+    is ignored.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    observation_model : ObservationModel
+    l2 : float, default 0.01
+        Weak L2 penalty that keeps weights finite.
+    max_iter, tol : int, float
+        Bounds of the L-BFGS fit of the dual.
+    init : ndarray of shape (K,), optional
+        Initial weights (zeros by default).
 
     Attributes
     ----------
@@ -160,32 +161,38 @@ class MaxEntIRL(_MCEBase):
         Greedy optimal (discounted) policy for ``theta_``, as for every learner.
     n_iter_ : int
     history_ : list of dict
+        Per evaluation of the dual: ``iteration`` and ``value`` (minus the dual).
+    converged_ : bool
+        Whether L-BFGS met ``tol`` before ``max_iter``.
     """
 
     def __init__(self, mdp, observation_model, *, l2=0.01, max_iter=500, tol=1e-8, init=None):
-        super().__init__(mdp, observation_model, l2=l2, max_iter=max_iter, tol=tol, init=init)
+        self.mdp = mdp
+        self.observation_model = observation_model
+        self.l2 = l2
+        self.max_iter = max_iter
+        self.tol = tol
+        self.init = init
 
     def fit(self, demos: Sequence[Demonstration]):
-        demos = self._prepare(demos)
+        """Fit the reward weights to the observed runs; returns ``self``."""
+        self._check_problem()
+        params = self._check_mce()
+        demos = self._check_problem(demos)
         groups = observed_segments(demos, self.mdp, self.observation_model)
-        history: list[dict] = []
-
-        def f(th):
-            value, grad = mce_dual(self.mdp, th, groups, self.l2)
-            history.append({"iteration": len(history), "value": -value})
-            return value, grad
-
-        res = minimize(
-            f, self._theta0(), jac=True, method="L-BFGS-B",
-            options={"maxiter": self.max_iter, "ftol": self.tol, "gtol": self.tol},
+        theta, n_iter, converged, history = _fit_dual(
+            self.mdp, groups, self._theta0(params["init"]), params["l2"], params["max_iter"],
+            params["tol"],
         )
-        if res.status == 1:
+        if not converged:
             warnings.warn(
-                f"MaxEntIRL stopped at max_iter={self.max_iter}", ConvergenceWarning, stacklevel=2
+                f"MaxEntIRL stopped at max_iter={params['max_iter']} (or at a non-finite dual) "
+                f"before reaching tol={params['tol']}", ConvergenceWarning, stacklevel=2,
             )
-        self.n_iter_ = int(res.nit)
+        self.n_iter_ = n_iter
         self.history_ = history
-        self._finish(np.asarray(res.x))
+        self.converged_ = converged
+        self._finish(theta)
         return self
 
 
@@ -207,7 +214,7 @@ def observed_segments(demos, mdp: TabularMDP, observation_model) -> Groups:
             if np.any(pairs[:, 1] < 0):
                 step = t + int(np.flatnonzero(pairs[:, 1] < 0)[0])
                 raise ValueError(
-                    f"demonstration {i}, step {step}: observation {obs[step]} reports no "
+                    f"demos[{i}], step {step}: observation {obs[step]} reports no "
                     "action, so it cannot be taken at face value (use HiddenDataEM or MMAPBIRL)"
                 )
             H = end - t
@@ -218,7 +225,11 @@ def observed_segments(demos, mdp: TabularMDP, observation_model) -> Groups:
             fbar += mdp.features[pairs[:, 0], pairs[:, 1]].sum(axis=0)
             t = end
     if not groups:
-        raise ValueError("every step of every demonstration is occluded: nothing to learn from")
+        raise ValueError(
+            "demos must hold at least one observed step; every step of every demonstration is "
+            "occluded, so MaxEntIRL has nothing to learn from (MMAPBIRL and HiddenDataEM accept "
+            "this)"
+        )
     return groups
 
 
@@ -250,23 +261,57 @@ class HiddenDataEM(_MCEBase):
     history_ : list of dict
         Per iteration: ``log_likelihood`` of the observations under the E-step policy and the
         weight change ``delta``.
+    converged_ : bool
+        Whether the weights changed by less than ``tol`` before ``max_iter``.
     """
+
+    def __init__(
+        self,
+        mdp: TabularMDP,
+        observation_model: ObservationModel,
+        *,
+        l2: float = 0.01,
+        max_iter: int = 100,
+        tol: float = 1e-3,
+        m_step_max_iter: int = 200,
+        m_step_tol: float = 1e-8,
+        init: np.ndarray | None = None,
+    ) -> None:
+        self.mdp = mdp
+        self.observation_model = observation_model
+        self.l2 = l2
+        self.max_iter = max_iter
+        self.tol = tol
+        self.m_step_max_iter = m_step_max_iter
+        self.m_step_tol = m_step_tol
+        self.init = init
 
     def e_step(self, theta: np.ndarray, demos: Sequence[Demonstration]):
         """Posterior statistics of the demonstrations under the soft policy of ``theta``."""
+        demos = self._check_problem(demos)
+        theta = self.mdp.check_theta(theta)
+        return self._e_step(theta, demos)
+
+    def _e_step(self, theta, demos):
         log_pi, _ = soft_backward(self.mdp, self.mdp.features @ theta, max(len(d) for d in demos))
         return posterior_stats(
             self.mdp, None, demos, self.observation_model,
-            policies_by_length=lambda T: time_indexed(log_pi, T),
+            log_policies_by_length=lambda T: log_pi[:T][::-1],
         )
 
     def fit(self, demos: Sequence[Demonstration]):
-        demos = self._prepare(demos)
-        theta = self._theta0()
+        """Fit by EM; returns ``self``. Every hyperparameter is checked here."""
+        self._check_problem()
+        params = self._check_mce()
+        m_max_iter = check_int(self.m_step_max_iter, "m_step_max_iter", low=1)
+        m_tol = check_real(self.m_step_tol, "m_step_tol", low=0.0)
+        demos = self._check_problem(demos)
+        theta = self._theta0(params["init"])
         history: list[dict] = []
         converged = False
-        for it in range(self.max_iter):
-            stats = self.e_step(theta, demos)
+        delta = np.inf
+        for it in range(params["max_iter"]):
+            stats = self._e_step(theta, demos)
             groups: Groups = {}
             for i, d in enumerate(demos):
                 D0, fbar = groups.setdefault(
@@ -274,9 +319,7 @@ class HiddenDataEM(_MCEBase):
                 )
                 D0 += stats.initial[i]
                 fbar += np.einsum("sa,sak->k", stats.occupancy[i], self.mdp.features)
-            new, _, _ = _fit_dual(
-                self.mdp, groups, theta, self.l2, self.m_step_max_iter, self.m_step_tol
-            )
+            new, _, _, _ = _fit_dual(self.mdp, groups, theta, params["l2"], m_max_iter, m_tol)
             delta = float(np.max(np.abs(new - theta)))
             history.append({
                 "iteration": it,
@@ -284,13 +327,13 @@ class HiddenDataEM(_MCEBase):
                 "delta": delta,
             })
             theta = new
-            if delta < self.tol:
+            if delta < params["tol"]:
                 converged = True
                 break
         if not converged:
             warnings.warn(
-                f"HiddenDataEM stopped at max_iter={self.max_iter} with the weights still "
-                f"changing by {delta:.3g} > tol={self.tol}",
+                f"HiddenDataEM stopped at max_iter={params['max_iter']} with the weights still "
+                f"changing by {delta:.3g} > tol={params['tol']}",
                 ConvergenceWarning, stacklevel=2,
             )
         self.n_iter_ = len(history)

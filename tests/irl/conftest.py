@@ -67,3 +67,47 @@ def brute_force(mdp, pi, om, demo):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def brute_force_log(mdp, log_pi, om, demo):
+    """``log P(o)`` and the marginals ``P(s_t, a_t | o)`` by enumerating all sequences with
+    every product kept in log space, for policies far too peaked for :func:`brute_force`
+    (``log_pi[s, a]``)."""
+    from scipy.special import logsumexp
+
+    S, A = mdp.n_states, mdp.n_actions
+    with np.errstate(divide="ignore"):
+        log_T, log_O, log_p0 = np.log(mdp.transitions), np.log(om.probs), np.log(mdp.initial)
+    obs = demo.observations
+    L = len(obs)
+    seqs = np.array(list(itertools.product(range(S * A), repeat=L)))
+    s, a = seqs // A, seqs % A
+    terms = log_p0[s[:, 0]] + log_pi[s, a].sum(axis=1)
+    for t in range(L):
+        if obs[t] is not None:
+            terms = terms + log_O[s[:, t], a[:, t], obs[t]]
+        if t + 1 < L:
+            terms = terms + log_T[s[:, t], a[:, t], s[:, t + 1]]
+    total = float(logsumexp(terms))
+    marg = np.zeros((L, S, A))
+    for t in range(L):
+        for x in range(S * A):
+            hit = seqs[:, t] == x
+            if hit.any():
+                marg[t, x // A, x % A] = np.exp(logsumexp(terms[hit]) - total)
+    return total, marg
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Report the fuzzing tally of tests/irl/test_fuzz.py when it ran."""
+    import sys
+
+    fuzz = sys.modules.get("tests.irl.test_fuzz")
+    tally = getattr(fuzz, "TALLY", None)
+    if not tally or not (tally["bad"] or tally["edge"]):
+        return
+    terminalreporter.write_line(
+        f"irl API fuzzing: {tally['bad']} bad inputs tried, {tally['bad_clear']} answered by a "
+        f"one-line ValueError/TypeError naming the argument; {tally['edge']} legal edge cases "
+        f"tried, {tally['edge_ok']} worked or were refused by name"
+    )

@@ -3,7 +3,6 @@ import pytest
 
 import irl
 from irl.inference import forward_backward, posterior_stats
-from irl.solvers import boltzmann_policy
 from tests.irl.conftest import (
     brute_force,
     random_demo,
@@ -12,15 +11,16 @@ from tests.irl.conftest import (
 )
 
 
+@pytest.mark.parametrize("method", ["auto", "log"])
 @pytest.mark.parametrize("sparse", [False, True])
 @pytest.mark.parametrize("seed", range(6))
-def test_forward_backward_equals_enumeration(seed, sparse):
+def test_forward_backward_equals_enumeration(seed, sparse, method):
     rng = np.random.default_rng(seed)
     mdp = random_mdp(rng, sparse=sparse)
     om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
     pi = rng.dirichlet(np.ones(mdp.n_actions), size=mdp.n_states)
     demos = [random_demo(rng, length, om.n_observations) for length in (1, 3, 4, 4)]
-    stats = posterior_stats(mdp, pi, demos, om)
+    stats = posterior_stats(mdp, np.log(pi), demos, om, method=method)
     for i, d in enumerate(demos):
         dense = random_mdp(np.random.default_rng(seed)) if sparse else mdp
         ll, marg = brute_force(dense, pi, om, d)
@@ -29,13 +29,14 @@ def test_forward_backward_equals_enumeration(seed, sparse):
         np.testing.assert_allclose(stats.initial[i], marg[0].sum(axis=1), atol=1e-10)
 
 
-def test_time_varying_policy_equals_enumeration(rng):
+@pytest.mark.parametrize("method", ["auto", "log"])
+def test_time_varying_policy_equals_enumeration(rng, method):
     mdp = random_mdp(rng)
     om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
     demo = random_demo(rng, 4, om.n_observations)
     pis = rng.dirichlet(np.ones(mdp.n_actions), size=(4, mdp.n_states))
     packed = demo.as_array()[None]
-    stats = forward_backward(mdp, pis, packed, om.emissions)
+    stats = forward_backward(mdp, np.log(pis), packed, om.log_emissions, method=method)
     ll, marg = brute_force(mdp, pis, om, demo)
     assert stats.log_likelihood[0] == pytest.approx(ll, rel=1e-10)
     np.testing.assert_allclose(stats.occupancy[0], marg.sum(axis=0), atol=1e-10)
@@ -45,29 +46,74 @@ def test_all_occluded_demo_has_likelihood_one(rng):
     mdp = random_mdp(rng)
     om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
     pi = rng.dirichlet(np.ones(mdp.n_actions), size=mdp.n_states)
-    stats = posterior_stats(mdp, pi, [irl.Demonstration(observations=[None] * 5)], om)
+    stats = posterior_stats(mdp, np.log(pi), [irl.Demonstration(observations=[None] * 5)], om)
     assert stats.log_likelihood[0] == pytest.approx(0.0, abs=1e-12)
     assert stats.occupancy[0].sum() == pytest.approx(5.0)
 
 
-def test_ten_thousand_steps_stay_finite_and_normalized():
+def test_ten_thousand_steps_equal_the_closed_form_likelihood():
+    """A fully observed, noise-free demonstration has a closed-form likelihood,
+    ``log p0(s_1) + sum_t log pi(a_t | s_t) + sum_t log T(s_t, a_t, s_{t+1})``: 10,000 steps of
+    forward-backward (and of the log-space pass) must reproduce it, and the posterior must put
+    each step on its observed pair."""
+    dom = irl.domains.onion_sorting(noise=0.0)
+    mdp, A = dom.mdp, dom.mdp.n_actions
+    om = irl.identity_observation_model(mdp.n_states, A)
+    _, (traj,) = dom.sample(1, 10_000, occlusion=0.0, seed=1)
+    demo = irl.Demonstration.from_pairs(traj.states, traj.actions, A)
+    log_pi = np.log(dom.expert_policy())
+    s, a = traj.states, traj.actions
+    T = mdp.transitions
+    expected = (np.log(mdp.initial[s[0]]) + log_pi[s, a].sum()
+                + np.log(T[s[:-1], a[:-1], s[1:]]).sum())
+    assert expected < -1000  # e^expected underflows: only log space can hold it
+    counts = np.zeros((mdp.n_states, A))
+    np.add.at(counts, (s, a), 1.0)
+    for method in ("auto", "log"):
+        stats = posterior_stats(mdp, log_pi, [demo], om, method=method)
+        assert stats.log_likelihood[0] == pytest.approx(expected, rel=1e-12)
+        np.testing.assert_allclose(stats.occupancy[0], counts, atol=1e-8)
+
+
+def test_ten_thousand_noisy_occluded_steps_agree_on_both_passes():
     dom = irl.domains.onion_sorting(noise=0.3)
     demos, _ = dom.sample(2, 10_000, occlusion=0.3, seed=1)
-    pi = dom.expert_policy()
-    stats = posterior_stats(dom.mdp, pi, demos, dom.observation_model)
-    assert np.all(np.isfinite(stats.log_likelihood))
-    assert np.all(stats.log_likelihood < -1000)  # far below float underflow if not in log space
-    np.testing.assert_allclose(stats.occupancy.sum(axis=(1, 2)), 10_000, rtol=1e-9)
-    assert np.all(stats.occupancy >= 0)
+    log_pi = np.log(dom.expert_policy())
+    fast = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    exact = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model, method="log")
+    np.testing.assert_allclose(fast.log_likelihood, exact.log_likelihood, rtol=1e-11)
+    np.testing.assert_allclose(fast.occupancy, exact.occupancy, atol=1e-8)
+    np.testing.assert_allclose(fast.occupancy.sum(axis=(1, 2)), 10_000, rtol=1e-9)
 
 
-def test_cost_is_independent_of_occlusion_pattern(rng):
-    """Occluded steps are marginalized, never enumerated: a fully occluded long demo works."""
+def _count_operator_calls(mdp, monkeypatch) -> dict[str, int]:
+    """Count the transition-operator products forward-backward makes on ``mdp``."""
+    calls = {"push_forward": 0, "expect_next": 0, "log_push_forward": 0, "log_expect_next": 0}
+    for name in calls:
+        method = getattr(mdp, name)
+
+        def counted(*args, _name=name, _method=method):
+            calls[_name] += 1
+            return _method(*args)
+
+        monkeypatch.setattr(mdp, name, counted)
+    return calls
+
+
+@pytest.mark.parametrize("occlusion", [0.0, 0.5, 1.0])
+def test_cost_is_independent_of_occlusion(occlusion, monkeypatch):
+    """The work is one push through T per step forward and one backward, whatever is occluded:
+    occluded steps are marginalized, never enumerated, and never send the scaled pass to the
+    slower log-space one."""
     dom = irl.domains.onion_sorting(noise=0.3)
-    pi = boltzmann_policy(np.zeros((dom.mdp.n_states, dom.mdp.n_actions)), 1.0)
-    demo = irl.Demonstration(observations=[None] * 2000)
-    stats = posterior_stats(dom.mdp, pi, [demo], dom.observation_model)
-    assert stats.log_likelihood[0] == pytest.approx(0.0, abs=1e-9)
+    demos, _ = dom.sample(3, 200, occlusion=occlusion, seed=4)
+    log_pi = np.log(dom.expert_policy())
+    calls = _count_operator_calls(dom.mdp, monkeypatch)
+    stats = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    assert calls == {"push_forward": 199, "expect_next": 199, "log_push_forward": 0,
+                     "log_expect_next": 0}
+    if occlusion == 1.0:
+        assert stats.log_likelihood == pytest.approx(0.0, abs=1e-9)
 
 
 def test_impossible_demonstration_names_demo_and_step():
@@ -77,5 +123,37 @@ def test_impossible_demonstration_names_demo_and_step():
     # A fugitive cannot jump from (0, 0) to (3, 3) in one move.
     ok = irl.Demonstration.from_pairs([0, 1], [0, 0], A)
     jump = irl.Demonstration.from_pairs([0, 15], [0, 0], A)
-    with pytest.raises(ValueError, match=r"demonstration 1, step 1"):
-        posterior_stats(dom.mdp, pi, [ok, jump], dom.observation_model)
+    with pytest.raises(ValueError, match=r"demos\[1\], step 1: observation \d+ is impossible"):
+        posterior_stats(dom.mdp, np.log(pi), [ok, jump], dom.observation_model)
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_log_space_kernels_equal_the_linear_ones(sparse, rng):
+    """log_push_forward / log_expect_next are the logs of push_forward / expect_next, with -inf
+    for zero mass and for a state nothing leads to (an empty column of T)."""
+    T = rng.dirichlet(np.ones(4), size=(4, 3))
+    T[:, :, 3] = 0.0  # state 3 is never entered
+    T[1, 2, 1:] = 0.0  # a row with one successor
+    T /= T.sum(axis=2, keepdims=True)
+    if sparse:
+        import scipy.sparse as sps
+
+        transitions = [sps.csr_matrix(T[:, a, :]) for a in range(3)]
+    else:
+        transitions = T
+    mdp = irl.TabularMDP(transitions=transitions, features=np.zeros((4, 3, 1)), discount=0.5,
+                         initial=np.full(4, 0.25))
+    mass = rng.random((2, 4, 3))
+    mass[0, 2] = 0.0
+    values = rng.random((2, 4))
+    values[1, 0] = 0.0
+    with np.errstate(divide="ignore"):
+        log_mass, log_values = np.log(mass), np.log(values)
+        pushed = np.log(mdp.push_forward(mass))
+        expected = np.log(np.moveaxis(mdp.expect_next(values.T), 2, 0))
+    np.testing.assert_allclose(mdp.log_push_forward(log_mass), pushed, rtol=1e-13)
+    np.testing.assert_allclose(mdp.log_expect_next(log_values), expected, rtol=1e-13)
+    assert np.all(mdp.log_push_forward(log_mass)[:, 3] == -np.inf)
+    # shifting every input by c shifts every output by c: nothing under- or overflows
+    np.testing.assert_allclose(mdp.log_push_forward(log_mass - 5000.0),
+                               mdp.log_push_forward(log_mass) - 5000.0, rtol=1e-13)

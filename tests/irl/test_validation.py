@@ -60,7 +60,7 @@ def test_observation_out_of_range_names_demo_and_step(cls):
     good = irl.Demonstration(observations=[0, 1])
     bad = irl.Demonstration(observations=[0, None, 64])
     est = cls(dom.mdp, dom.observation_model)
-    with pytest.raises(ValueError, match=r"demonstration 1, step 2: observation 64 is out of"):
+    with pytest.raises(ValueError, match=r"demos\[1\], step 2: observation 64 is out of"):
         est.fit([good, bad])
 
 
@@ -69,7 +69,7 @@ def test_impossible_demonstration_is_refused_by_mmap_birl():
     A = dom.mdp.n_actions
     jump = irl.Demonstration.from_pairs([0, 0, 15], [0, 0, 0], A)
     est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
-    with pytest.raises(ValueError, match=r"demonstration 0, step 2: .* impossible"):
+    with pytest.raises(ValueError, match=r"demos\[0\], step 2: .* impossible"):
         est.log_likelihood(dom.true_theta, [jump])
 
 
