@@ -97,8 +97,9 @@ def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera
 class DatasetWriter:
     """Writes frames into a new dataset folder; refuses to overwrite an existing one.
 
-    ``labels.json`` of each split is rewritten (atomically) as frames arrive, so an interrupted
-    run leaves a readable dataset of the frames written so far. ``task`` (the onion-sorting task
+    ``labels.json`` of each split is rewritten (atomically) as frames arrive; ``dataset.json``,
+    the mark of a finished dataset, is written by :meth:`close` alone, so an interrupted run
+    never leaves a folder that reads as a finished dataset. ``task`` (the onion-sorting task
     by default) names the factors of the records and is stored in ``dataset.json`` under
     ``"task"``.
     """

@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
-from mcap.reader import make_reader
 
 from onionsort.cli import main
 from onionsort.stages.models import CLASSIFIER_FILE, DEFAULT_MODELS, DETECTOR_FILE
@@ -18,34 +18,116 @@ def _rerun_cli():
     return str(local) if local.exists() else shutil.which("rerun")
 
 
-@pytest.mark.skipif(not (DEFAULT_MODELS / DETECTOR_FILE).exists()
-                    or not (DEFAULT_MODELS / CLASSIFIER_FILE).exists(),
-                    reason="the shipped perception models are missing")
+SHIPPED = pytest.mark.skipif(not (DEFAULT_MODELS / DETECTOR_FILE).exists()
+                             or not (DEFAULT_MODELS / CLASSIFIER_FILE).exists(),
+                             reason="the shipped perception models are missing")
+CELLS = ("tp", "fp", "tn", "fn")
+
+
+def _recount(onions: list[dict]) -> dict[str, int]:
+    """TP/FP/TN/FN counted onion by onion from their true class and their fate."""
+    return {"tp": sum(o["blemished"] and o["fate"] == "bin" for o in onions),
+            "fp": sum(not o["blemished"] and o["fate"] == "bin" for o in onions),
+            "tn": sum(not o["blemished"] and o["fate"] == "line" for o in onions),
+            "fn": sum(o["blemished"] and o["fate"] == "line" for o in onions)}
+
+
+@SHIPPED
 def test_quick_demo_runs_end_to_end(tmp_path, capsys):
+    from irl.domains.onion_sorting import onion_sorting
+    from irl.metrics import inverse_learning_error
+    from onionsort.stages.demo import METHODS, SIZES
+    from recordings import open_session
+    from state_abstraction.calibration import load_calibration
+
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "--out", str(out)]) == 0
-    results = json.loads((out / "results.json").read_text())
-    assert set(results["methods"]) == {"mmap-birl", "map-birl", "hidden-data-em"}
-    for r in results["methods"].values():
-        (run,) = r["per_repeat"]
-        assert [r[k] for k in ("tp", "fp", "tn", "fn")] == [run[k] for k in ("tp", "fp", "tn",
-                                                                             "fn")]
-        assert r["tp"] + r["fp"] + r["tn"] + r["fn"] == 10 and r["ile"] == run["ile"]
-        low, high = r["precision_ci"]
-        assert low <= r["precision"] <= high
     said = capsys.readouterr().out
-    assert "| mmap-birl | paper (physical robot) | 23 | 2 | 18 | 7 |" in said
-    assert "| map-birl | ours (simulation, 1 repeat(s)) |" in said
+    results = json.loads((out / "results.json").read_text())
+    size = SIZES[True]
+    assert set(results["methods"]) == set(METHODS)
+    assert (results["sessions"], results["onions"], results["blemished"]) == (
+        size["sessions"], size["onions"], size["blemished"])
 
+    # every recorded step was perceived once: an observation exactly where it was not occluded
     sessions = sorted((out / "sessions").glob("*.mcap"))
-    assert len(sessions) == 4
+    assert len(sessions) == size["sessions"]
+    n_occluded = 0
     for path in sessions:
-        with path.open("rb") as fh:
-            topics = {ch.topic for _, ch, _ in make_reader(fh, validate_crcs=True)
-                      .iter_messages()}
-        assert "/perception/state" in topics
+        session = open_session(path)  # CRC-validated
+        assert session.status == "complete"
+        assert len(session.steps) == len(session.step_frames()) == size["steps"]
+        assert sorted(session.perception) == list(range(size["steps"]))
+        for msg in session.perception.values():
+            assert (msg["observation"] is None) == bool(msg["occluded"])
+        n_occluded += sum(bool(m["occluded"]) for m in session.perception.values())
+
+    calibration_path = out / "calibration" / "calibration.json"
+    calibration = load_calibration(calibration_path)
+    assert results["state_error_rate"] == pytest.approx(calibration.state_error_rate)
+    assert results["pair_error_rate"] == pytest.approx(calibration.pair_error_rate)
+
+    domain = onion_sorting()
+    for method, pooled in results["methods"].items():
+        run = out / method
+        model = json.loads((run / "model.json").read_text())
+        evaluation = json.loads((run / "evaluation.json").read_text())
+        (repeat,) = pooled["per_repeat"]
+        # learned from exactly the recorded, perceived steps, through this calibration
+        assert model["method"] == method == evaluation["method"]
+        assert model["sessions"] == [str(p) for p in sessions]
+        assert model["n_steps"] == size["sessions"] * size["steps"]
+        assert model["n_occluded"] == n_occluded
+        assert Path(model["observation_model"]) == calibration_path
+        # the policy written is the learned one, named state by state
+        assert [(p["state"], p["action"]) for p in model["policy"]] == [
+            (domain.state_names[s], domain.action_names[a])
+            for s, a in enumerate(model["policy_indices"])]
+        # the repeat's result is this run's evaluation, recounted onion by onion
+        onions = evaluation["onions"]
+        assert len(onions) == size["onions"]
+        assert sum(o["blemished"] for o in onions) == size["blemished"]
+        counts = _recount(onions)
+        assert {k: evaluation[k] for k in CELLS} == counts == {k: repeat[k] for k in CELLS}
+        assert repeat["undecided"] == evaluation["undecided"] == sum(
+            not o["decided"] for o in onions)
+        # one repeat: the pooled counts are its counts; precision and recall are theirs
+        assert {k: pooled[k] for k in CELLS} == counts
+        tp, fp, fn = counts["tp"], counts["fp"], counts["fn"]
+        precision = tp / (tp + fp) if tp + fp else 0.0
+        recall = tp / (tp + fn) if tp + fn else 0.0
+        for r in (pooled, repeat, evaluation):
+            assert r["precision"] == pytest.approx(precision)
+            assert r["recall"] == pytest.approx(recall)
+        for key, value in (("precision_ci", precision), ("recall_ci", recall)):
+            low, high = pooled[key]
+            assert 0.0 <= low <= value <= high <= 1.0
+        # the reward reported is the one written, and the ILE is that reward's
+        assert repeat["theta"] == model["theta"]
+        theta = np.array([model["theta"][name] for name in domain.task.feature_names])
+        ile = inverse_learning_error(domain.mdp, domain.true_theta, theta)
+        assert repeat["ile"] == pytest.approx(ile) and pooled["ile"] == pytest.approx(ile)
+        # the table prints these numbers
+        assert (f"| {method} | ours (simulation, 1 repeat(s)) | {tp} | {fp} | {counts['tn']} | "
+                f"{fn} | {precision:.3f}") in said
+    assert "| mmap-birl | paper (physical robot) | 23 | 2 | 18 | 7 |" in said
+
+    # the Sawyer sorted with the policy of model.json: sorting again with it, seed and models
+    # as the demo did, gives the same onions the same fates
+    from onionsort.stages.evaluate import inspection_classifier
+    from onionsort.stages.models import PerceptionModels
+    from robot.evaluation import evaluate_policy
+
+    model = json.loads((out / "mmap-birl" / "model.json").read_text())
+    again = evaluate_policy(np.array(model["policy_indices"]), n_onions=size["onions"],
+                            n_blemished=size["blemished"], seed=results["seed"],
+                            classify=inspection_classifier(PerceptionModels.load().detector))
+    evaluation = json.loads((out / "mmap-birl" / "evaluation.json").read_text())
+    assert [o.to_dict() for o in again.onions] == evaluation["onions"]
+
     rrds = sorted(out.rglob("*.rrd"))
     assert {p.name for p in rrds} >= {"sessions.rrd", "learn.rrd", "evaluation.rrd"}
+    assert not list(out.rglob("*.partial"))
     cli = _rerun_cli()
     if cli is None:
         pytest.skip("the rerun CLI is not installed")
@@ -55,6 +137,7 @@ def test_quick_demo_runs_end_to_end(tmp_path, capsys):
 
     # a second run into the same folder is refused rather than mixing two demos
     assert main(["demo", "--quick", "--out", str(out)]) == 2
+    assert "already holds a demo" in capsys.readouterr().err
 
 
 def test_precision_and_recall_intervals_pool_repeats_and_contain_the_pooled_value():
@@ -75,8 +158,7 @@ def test_precision_and_recall_intervals_pool_repeats_and_contain_the_pooled_valu
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (DEFAULT_MODELS / DETECTOR_FILE).exists(),
-                    reason="the shipped perception models are missing")
+@SHIPPED
 def test_quick_demo_with_repeats_reports_per_repeat_results_and_intervals(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "--repeats", "2", "--sessions", "2", "--out", str(out)]) == 0

@@ -55,15 +55,25 @@ def write_json(path: Path, doc) -> Path:
 
 
 def check_output_folder(folder: Path, what: str = "--out") -> Path:
-    """Create ``folder`` (and parents) now, before any expensive work, or fail clearly."""
+    """Create ``folder`` (and parents) now and make sure a file can be written in it, before
+    any expensive work, or fail clearly (``ValueError`` naming ``what`` and the folder)."""
+    import tempfile
+
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
         raise ValueError(f"{what} {folder} is a file, not a folder; choose another") from None
-    except (NotADirectoryError, PermissionError, OSError) as exc:
+    except OSError as exc:
         raise ValueError(f"{what} {folder} cannot be created ({exc.strerror or exc}); "
                          "choose another") from None
+    try:  # a folder that exists may still refuse files (permissions, a read-only disk)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".onionsort-probe-",
+                                         suffix=".partial"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"{what} {folder} cannot be written to ({exc.strerror or exc}); "
+                         "choose another folder or change its permissions") from None
     return folder
 
 
@@ -73,8 +83,8 @@ def output_folder(folder: Path, what: str = "--out") -> Iterator[Path]:
     this call created it and it is still empty: a failed run leaves nothing behind."""
     folder = Path(folder)
     existed = folder.exists()
-    check_output_folder(folder, what)
     try:
+        check_output_folder(folder, what)
         yield folder
     except BaseException:
         if not existed:

@@ -28,8 +28,16 @@ import numpy as np
 from onionsort.stages.base import log_config, output_folder, refuse_existing
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 
-__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "calibrate", "detector_map",
-           "dataset_identity", "eval_perception", "inspection_calls", "measure_perception"]
+__all__ = [
+    "CalibrateConfig",
+    "PerceptionEvalConfig",
+    "calibrate",
+    "dataset_identity",
+    "detector_map",
+    "eval_perception",
+    "inspection_calls",
+    "measure_perception",
+]
 
 logger = logging.getLogger(__name__)
 

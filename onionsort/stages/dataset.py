@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, log_config
+from onionsort.stages.base import check_difficulty, check_output_folder, log_config
 
 __all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
 
@@ -63,6 +63,7 @@ class DatasetConfig:
     difficulty: str = "clean"
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "out", Path(self.out))
         for level in self.levels:
             check_difficulty(level)
         if self.frames < 1:
@@ -107,9 +108,13 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
 
     from onionsort import __version__
     from recordings.dataset import DatasetWriter
-    from robot.simulation import SessionConfig, SortingSession, expert_model
 
     log_config("dataset", config)
+    if (config.out / "dataset.json").exists():
+        raise FileExistsError(f"{config.out} already holds a dataset; choose a new --out")
+    check_output_folder(config.out)
+    from robot.simulation import SessionConfig, SortingSession, expert_model
+
     levels = config.levels
     session_configs = [SessionConfig(n_steps=config.steps_per_session,
                                      occlusion=config.occlusion,
@@ -142,9 +147,13 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
                         written += 1
                         bar.update()
                 writer.flush(split)
-    finally:
-        writer.close()
-    views = _robot_views(writer, config) if config.robot_onions else 0
+        views = _robot_views(writer, config) if config.robot_onions else 0
+    except BaseException:
+        # the labels written so far stay, but no dataset.json: an interrupted dataset never
+        # reads as a finished one (a SIGKILL leaves the same)
+        writer.flush()
+        raise
+    writer.close()
     return DatasetSummary(written, {s: plan.count(s) for s in dict.fromkeys(plan)}, views)
 
 
@@ -161,14 +170,11 @@ def _robot_views(writer, config: DatasetConfig) -> int:
             else ["train"] * len(sizes))
     seeds = np.random.SeedSequence([config.seed, 0x5A3E7]).spawn(len(sizes))
     n = 0
-    try:
-        for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
-                                                     desc="robot views", unit="line-up")):
-            level = config.levels[k % len(config.levels)]
-            for index, rgb, labels in robot_inspection_views(size, seed, level):
-                writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
-                n += 1
-            writer.flush(split)
-    finally:
-        writer.close()
+    for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
+                                                 desc="robot views", unit="line-up")):
+        level = config.levels[k % len(config.levels)]
+        for index, rgb, labels in robot_inspection_views(size, seed, level):
+            writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
+            n += 1
+        writer.flush(split)
     return n

@@ -91,9 +91,7 @@ def demo(config: DemoConfig) -> dict:
     torch.set_num_threads(2)
     start = time.perf_counter()
     out = config.out
-    if (out / "results.json").exists():
-        raise FileExistsError(f"{out} already holds a demo (results.json); choose a new --out")
-    check_output_folder(out)
+    _check_new_folder(out)
     size = dict(SIZES[config.quick])
     if config.sessions is not None:
         size["sessions"] = config.sessions
@@ -134,6 +132,20 @@ def demo(config: DemoConfig) -> dict:
                "seconds": round(time.perf_counter() - start, 1)}
     write_json(out / "results.json", results)
     return results
+
+
+def _check_new_folder(out: Path) -> None:
+    """The demo writes a whole run folder: refuse one that holds anything (a finished demo, or
+    one stopped half way), and make sure a new one can be written, before any work starts."""
+    if out.is_dir():
+        held = sorted(p.name for p in out.iterdir())
+        if held:
+            what = ("a demo (results.json)" if "results.json" in held
+                    else "files of an earlier or interrupted run: " + ", ".join(held[:4])
+                    + (", ..." if len(held) > 4 else ""))
+            raise FileExistsError(f"--out {out} already holds {what}; choose a new --out "
+                                  "(or remove the folder to run the demo there again)")
+    check_output_folder(out)
 
 
 def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, seed: int,

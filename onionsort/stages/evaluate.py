@@ -19,7 +19,12 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, log_config, write_json
+from onionsort.stages.base import (
+    check_difficulty,
+    check_output_folder,
+    log_config,
+    write_json,
+)
 from onionsort.stages.learn import load_policy
 
 __all__ = ["EvaluateConfig", "evaluate", "inspection_classifier"]
@@ -94,14 +99,16 @@ def evaluate(config: EvaluateConfig, models=None):
     Returns ``(result, summary)``: the :class:`robot.evaluation.EvaluationResult` and the dict
     written to ``evaluation.json``.
     """
+    log_config("evaluate", config)
+    actions, doc = load_policy(config.run)
+    check_output_folder(config.run, "RUN_DIR")  # it takes evaluation.json: writable?
+
     import torch
 
     from onionsort.stages.models import PerceptionModels
     from robot.evaluation import evaluate_policy
 
-    log_config("evaluate", config)
     torch.set_num_threads(2)
-    actions, doc = load_policy(config.run)
     detector = None
     if config.ground_truth_inspection:
         classify = "ground-truth"

@@ -142,6 +142,10 @@ class ExperimentConfig:
         if self.ray_address is not None and self.executor != "ray":
             raise ValueError(f"ray_address is for executor 'ray'; got executor "
                              f"{self.executor!r} with ray_address {self.ray_address!r}")
+        if self.batches is not None and self.batches < 1:
+            raise ValueError(f"batches must be >= 1; got {self.batches}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1; got {self.workers}")
 
     def sweep(self):
         """The :class:`irl.experiments.SweepConfig` this resolves to."""
@@ -157,7 +161,7 @@ class ExperimentConfig:
                     "length": 15 if self.domain == "forestworld" else 20}
         return SweepConfig(
             domain=self.domain, points=tuple(points), methods=tuple(self.methods),
-            batches=self.batches or defaults["batches"],
+            batches=self.batches if self.batches is not None else defaults["batches"],
             trajectories=self.trajectories or defaults["trajectories"],
             length=self.length or defaults["length"],
             learners=tuple(self.learner_beta or ("x1",)), seed=self.seed)

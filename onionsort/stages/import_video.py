@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import log_config
+from onionsort.stages.base import check_output_folder, log_config
 
 __all__ = ["ImportConfig", "import_video", "perceived_labels", "perceived_segmentation",
            "segmentation_scores"]
@@ -213,6 +213,7 @@ def import_video(config: ImportConfig):
     from recordings.sources import VideoFileSource, default_intrinsics, load_intrinsics
 
     log_config("import", config)
+    check_output_folder(Path(config.out).parent, f"the folder of --out {config.out}")
     with _open(config) as source:
         name = source.name
         K = (load_intrinsics(config.intrinsics) if config.intrinsics is not None

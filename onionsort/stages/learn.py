@@ -127,27 +127,27 @@ def learn(config: LearnConfig) -> dict:
 
     log_config("learn", config)
     refuse_existing(config.out / MODEL_FILE, config.overwrite)
-    base = onion_sorting()
-    calibration = load_calibration(config.calibration, task=base.task)
-    sessions = [open_session(p) for p in config.sessions]
-    for session in sessions:
-        if session.task != base.task:
-            raise ValueError(f"{session.path} records the task {session.task.name!r}, not "
-                             f"{base.task.name!r} that learn fits")
-    mismatch = []
-    for session in sessions:
-        try:
-            if session.perception:
-                _check_provenance(session, calibration, config.calibration)
-        except ValueError as exc:
-            if not config.allow_model_mismatch:
-                raise
-            mismatch.append(str(exc))
-            logger.warning("allowed by --allow-model-mismatch: %s", exc)
-    demos = [s.perceived_demonstration() for s in sessions]
-    domain = dataclasses.replace(base, observation_model=calibration.observation_model())
-    estimator = make_estimator(config.method, domain, seed=config.seed)
-    with output_folder(config.out) as out:
+    with output_folder(config.out) as out:  # checked before anything is read or fitted
+        base = onion_sorting()
+        calibration = load_calibration(config.calibration, task=base.task)
+        sessions = [open_session(p) for p in config.sessions]
+        for session in sessions:
+            if session.task != base.task:
+                raise ValueError(f"{session.path} records the task {session.task.name!r}, not "
+                                 f"{base.task.name!r} that learn fits")
+        mismatch = []
+        for session in sessions:
+            try:
+                if session.perception:
+                    _check_provenance(session, calibration, config.calibration)
+            except ValueError as exc:
+                if not config.allow_model_mismatch:
+                    raise
+                mismatch.append(str(exc))
+                logger.warning("allowed by --allow-model-mismatch: %s", exc)
+        demos = [s.perceived_demonstration() for s in sessions]
+        domain = dataclasses.replace(base, observation_model=calibration.observation_model())
+        estimator = make_estimator(config.method, domain, seed=config.seed)
         estimator.fit(demos)
         theta = np.asarray(estimator.theta_, float)
         policy = np.asarray(estimator.policy_, int)

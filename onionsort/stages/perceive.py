@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import log_config
+from onionsort.stages.base import check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
 
 __all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
@@ -78,11 +78,20 @@ class PerceivedSession:
 
 def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
              ) -> list[PerceivedSession]:
-    """Perceive every session of ``config``; return a summary of each."""
+    """Perceive every session of ``config``; return a summary of each.
+
+    Every session is checked first (a readable session, not perceived yet unless
+    ``config.replace``, in a folder that takes the rewrite, with steps of the classifier's
+    frame count), so a bad one is refused before any model runs or any file changes.
+    """
     from tqdm import tqdm
 
     log_config("perceive", config)
+    frames_per_step = _check_sessions(config)
     models = PerceptionModels.load(config.models) if models is None else models
+    for path, fps in frames_per_step.items():
+        if fps != models.frames_per_step:
+            raise ValueError(_frame_count_error(path, fps, models.frames_per_step))
     out = []
     for path in tqdm(config.sessions, desc="perceive", unit="session"):
         out.append(perceive_session(models, path, replace=config.replace,
@@ -90,6 +99,28 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
         logger.info("%s: %d steps, %d called occluded", path, out[-1].n_steps,
                     out[-1].n_occluded)
     return out
+
+
+def _check_sessions(config: PerceiveConfig) -> dict[Path, int]:
+    """Open every session of ``config`` (raising what the reader raises for a file that is not
+    a complete session); return the frames per step of each."""
+    from recordings.reader import open_session
+
+    frames_per_step = {}
+    for path in config.sessions:
+        session = open_session(path)
+        if session.perception_models is not None and not config.replace:
+            raise FileExistsError(f"{path} already holds perception topics; pass --replace to "
+                                  "perceive it again")
+        check_output_folder(Path(path).parent, f"the folder of {path}")
+        frames_per_step[Path(path)] = session.frames_per_step
+    return frames_per_step
+
+
+def _frame_count_error(path, frames_per_step: int, classifier_frames: int) -> str:
+    return (f"{path}: its steps have {frames_per_step} frames; the state classifier reads "
+            f"steps of {classifier_frames}; record it again with `onionsort record "
+            f"--frames-per-step {classifier_frames}`")
 
 
 def perceive_session(models: PerceptionModels, path: Path | str, *, replace: bool = False,
@@ -107,9 +138,8 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
 
     session = open_session(path)
     if session.frames_per_step != models.frames_per_step:
-        raise ValueError(f"{path}: its steps have {session.frames_per_step} frames; the state "
-                         f"classifier reads steps of {models.frames_per_step} (record with "
-                         f"--frames-per-step {models.frames_per_step})")
+        raise ValueError(_frame_count_error(path, session.frames_per_step,
+                                            models.frames_per_step))
     steps = session.step_frames()
     if not steps:
         raise ValueError(f"{path}: perception found no complete step in {session.n_frames} "

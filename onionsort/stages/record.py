@@ -18,7 +18,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, check_output_folder, log_config
+from onionsort.stages.base import check_difficulty, log_config, output_folder
 
 __all__ = ["RecordConfig", "record"]
 
@@ -64,12 +64,29 @@ class RecordConfig:
 
     def __post_init__(self) -> None:
         check_difficulty(self.difficulty)
-        if self.sessions < 1:
-            raise ValueError(f"sessions must be >= 1; got {self.sessions}")
+        for name in ("sessions", "steps_per_session", "frames_per_step"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+        if not 0.0 <= self.occlusion <= 1.0:
+            raise ValueError(f"occlusion must be in [0, 1]; got {self.occlusion}")
+        if min(self.width, self.height) < 8:
+            raise ValueError(f"width and height must be >= 8; got {self.width}x{self.height}")
 
 
 def record(config: RecordConfig) -> list[Path]:
     """Record ``config.sessions`` sessions; return their paths."""
+    log_config("record", config)
+    with output_folder(config.out) as out:  # checked before anything is imported or rendered
+        paths = [out / f"session_{i:03d}.mcap" for i in range(config.sessions)]
+        existing = [p for p in paths if p.exists()]
+        if existing and not config.overwrite:
+            raise FileExistsError(f"{existing[0]} exists ({len(existing)} session files in "
+                                  f"{out}); pass --overwrite or choose another --out")
+        _record_sessions(config, paths)
+    return paths
+
+
+def _record_sessions(config: RecordConfig, paths: list[Path]) -> None:
     import dataclasses
     import platform
     import signal
@@ -83,19 +100,12 @@ def record(config: RecordConfig) -> list[Path]:
     from robot.camera import CameraSpec, intrinsics
     from robot.simulation import SessionConfig, SortingSession, expert_model
 
-    log_config("record", config)
     session_config = SessionConfig(
         n_steps=config.steps_per_session, occlusion=config.occlusion,
         frames_per_step=config.frames_per_step,
         camera=dataclasses.replace(CameraSpec(), width=config.width, height=config.height),
         difficulty=config.difficulty,
     )
-    out = check_output_folder(config.out)
-    paths = [out / f"session_{i:03d}.mcap" for i in range(config.sessions)]
-    existing = [p for p in paths if p.exists()]
-    if existing and not config.overwrite:
-        raise FileExistsError(f"{existing[0]} exists ({len(existing)} session files in {out}); "
-                              "pass --overwrite or choose another --out")
     policy, initial = expert_model(session_config.blemish_rate)
     seeds = np.random.SeedSequence(config.seed).spawn(config.sessions)
     rerun_logger = None
@@ -138,4 +148,3 @@ def record(config: RecordConfig) -> list[Path]:
             signal.signal(sig, handler)
         if rerun_logger is not None:
             rerun_logger.close()
-    return paths
