@@ -4,6 +4,9 @@ The sensor side is all a session needs: every frame with its colour image (depth
 inspection view where the sensor has them) and its step clock. Ground truth is read where the
 file has it and is ``None`` elsewhere (a session imported from a camera or a video).
 
+A robot's sorting run (``onionsort evaluate``) adds each step's decision and, with ground
+truth, the running TP/FP/TN/FN (:attr:`Session.decisions`, :attr:`Session.sorting_counts`).
+
 The file is scanned sequentially with CRC validation, so a truncated file (a recording killed
 outright) or a corrupt one is detected at the first bad record; everything before it is
 recovered. Opening such a file raises :class:`RecordingDamagedError` naming the file and what
@@ -177,6 +180,12 @@ class Session:
     robot : dict or None
         The ``onionsort.robot`` record of a session whose world has a robot (``name``,
         ``urdf``, ``root_link``, ``joints``); None otherwise.
+    decisions : dict of int -> dict
+        The ``/evaluation/decision`` message of each step of a robot's sorting run (the action,
+        states, the onion in focus, what was perceived, the fate); empty in other sessions.
+    sorting_counts : dict of int -> dict
+        The ``/evaluation/counts`` message of each step (running ``tp``, ``fp``, ``tn``,
+        ``fn``, ``precision``, ``recall``); empty without a robot's run or ground truth.
     """
 
     path: Path
@@ -193,6 +202,8 @@ class Session:
     perception_models: dict | None = None
     task: TaskDescription = SORTING_TASK
     robot: dict | None = None
+    decisions: dict[int, dict] = field(default_factory=dict, repr=False)
+    sorting_counts: dict[int, dict] = field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -332,6 +343,7 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
     parts: dict[int, dict] = {}
     steps: dict[int, StepTruth] = {}
     perception: dict[int, dict] = {}
+    evaluation: dict[str, dict[int, dict]] = {Topic.DECISION: {}, Topic.COUNTS: {}}
     models = None
     robot = None
     problem = None
@@ -352,6 +364,10 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
             if name == PerceptionTopic.STATE:
                 msg = json.loads(rec.data)
                 perception[int(msg["step"])] = msg
+                continue
+            if name in evaluation:
+                msg = json.loads(rec.data)
+                evaluation[name][int(msg["step"])] = msg
                 continue
             _collect(name, rec, parts, steps)
     except Exception as exc:  # any failure to parse the rest is damage: CRC, EOF, zstd, struct
@@ -399,7 +415,8 @@ def open_session(path: str | Path, *, recover: bool = False) -> Session:
                    has_inspection=layout["inspection"],
                    has_ground_truth=truth, steps=complete_steps, _frames=frames,
                    problem=problem, perception=perception, perception_models=models,
-                   task=task, robot=robot)
+                   task=task, robot=robot, decisions=evaluation[Topic.DECISION],
+                   sorting_counts=evaluation[Topic.COUNTS])
 
 
 def _task(metadata: dict, path: Path) -> TaskDescription:

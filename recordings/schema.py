@@ -23,6 +23,8 @@ topic                      schema                      content
 /tf                        foxglove.FrameTransforms    ``world`` -> ``camera``, ``inspection``
                                                        (optical frames) and a robot's links
 /joint_states              foxglove.JointStates        a robot's joint positions
+/evaluation/decision       onionsort.Decision          a robot's run: the action it took at each
+                                                       step, what it perceived, the onion's fate
 =========================  ==========================  ==========================================
 
 Ground-truth side (optional):
@@ -37,6 +39,8 @@ topic                      schema                      content
 /ground_truth/onions       onionsort.GroundTruthOnions  every onion's class and position
 /scene                     foxglove.SceneUpdate        the world's bodies in 3D, onions coloured
                                                        by class
+/evaluation/counts         onionsort.SortingCounts     a robot's run: running TP, FP, TN, FN,
+                                                       precision and recall after each step
 =========================  ==========================  ==========================================
 
 Metadata records: ``onionsort.session`` (written first: format and version, ``sensors``
@@ -48,7 +52,9 @@ frame and step counts).
 (and a robot's links on ``/tf``) where the world has a robot, whose URDF the metadata record
 ``onionsort.robot`` names; :mod:`recordings.world` writes and reads the three 3D topics. They are
 optional within version ``2``: a reader ignores what it does not know, and files without them
-open as before.
+open as before. So are the two ``/evaluation/*`` topics of a session that records a robot's own
+sorting run (``onionsort evaluate``; :data:`EVALUATION_JSON_SCHEMAS`), once per step (their
+``sequence`` is the step number).
 
 Versions: ``2`` added the step clock, made depth and ground truth optional and records which
 sensors a session has. A version-``1`` file (always simulated, always with depth) has no step
@@ -63,6 +69,7 @@ __all__ = [
     "CLASS_COLORS",
     "CLASS_NAMES",
     "END_METADATA",
+    "EVALUATION_JSON_SCHEMAS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "JSON_SCHEMAS",
@@ -110,8 +117,12 @@ class Topic:
     TF = "/tf"
     JOINT_STATES = "/joint_states"
     SCENE = "/scene"
+    #: A robot's own sorting run, once per step: its decisions (sensor side: what the robot
+    #: did and perceived) and the running TP/FP/TN/FN (ground truth: they need true classes).
+    DECISION = "/evaluation/decision"
+    COUNTS = "/evaluation/counts"
     #: Every ground-truth topic: what stripping a session of its ground truth removes.
-    GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS, SCENE)
+    GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS, SCENE, COUNTS)
 
 
 _INT = {"type": "integer"}
@@ -176,6 +187,42 @@ JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
             }}},
         },
         "required": ["frame", "onions"],
+    }),
+}
+
+
+_INT_OR_NULL = {"type": ["integer", "null"]}
+_STR_OR_NULL = {"type": ["string", "null"]}
+
+#: The JSON topics of a robot's sorting run (optional; once per step, ``sequence`` = step).
+EVALUATION_JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
+    Topic.DECISION: ("onionsort.Decision", {
+        "type": "object",
+        "description": "One step of a robot's sorting run: in state it took action and "
+                       "reached next_state (flat indices of the session's task, with their "
+                       "names); the onion in focus afterwards, the class the robot perceived "
+                       "if this step inspected it, and the onion's fate (bin or line) if this "
+                       "step decided it. What the robot knows; no ground truth.",
+        "properties": {
+            "step": _INT, "frame": _INT, "state": _INT, "state_name": _STR, "action": _INT,
+            "action_name": _STR, "next_state": _INT, "next_state_name": _STR,
+            "onion": _INT_OR_NULL, "perceived": _STR_OR_NULL, "fate": _STR_OR_NULL,
+        },
+        "required": ["step", "state", "action", "next_state"],
+    }),
+    Topic.COUNTS: ("onionsort.SortingCounts", {
+        "type": "object",
+        "description": "The running confusion counts of a robot's sorting run after a step, "
+                       "blemished the positive class: tp blemished in the bin, fp good in the "
+                       "bin, tn good left on the line, fn blemished left on the line; "
+                       "precision tp/(tp+fp) and recall tp/(tp+fn), 0 where undefined; the "
+                       "true class of the onion in focus.",
+        "properties": {
+            "step": _INT, "frame": _INT, "onion": _INT_OR_NULL,
+            "blemished": {"type": ["boolean", "null"]}, "tp": _INT, "fp": _INT, "tn": _INT,
+            "fn": _INT, "decided": _INT, "precision": _NUM, "recall": _NUM,
+        },
+        "required": ["step", "tp", "fp", "tn", "fn", "precision", "recall"],
     }),
 }
 

@@ -2,7 +2,9 @@
 
 A frame's sensor side (colour, depth where the sensor has it, calibration, the step clock,
 the inspection view) is written by :meth:`SessionWriter.write_sensor_frame`; a simulated frame
-adds its ground truth with :meth:`SessionWriter.write_frame`. See :mod:`recordings.schema`.
+adds its ground truth with :meth:`SessionWriter.write_frame`. A robot's sorting run adds each
+step's decision and running counts with :meth:`SessionWriter.write_decision`. See
+:mod:`recordings.schema`.
 
 Every frame's messages go into their own zstd chunk that is flushed to the OS before the next
 frame is rendered (:meth:`mcap.writer.Writer.flush`). A process killed outright (SIGKILL, power
@@ -17,7 +19,7 @@ import json
 import logging
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -35,6 +37,7 @@ from recordings.schema import (
     CLASS_COLORS,
     CLASS_NAMES,
     END_METADATA,
+    EVALUATION_JSON_SCHEMAS,
     FORMAT_NAME,
     FORMAT_VERSION,
     JSON_SCHEMAS,
@@ -56,6 +59,7 @@ from recordings.world import (
 
 __all__ = [
     "SessionWriter",
+    "SortingDecision",
     "box_annotations",
     "calibration_message",
     "encode_color",
@@ -74,6 +78,49 @@ _RGBA = {k: (*(c / 255.0 for c in rgb), 1.0) for k, rgb in CLASS_COLORS.items()}
 #: ``state`` and ``action``); a factor may not take one of these names.
 _STATE_KEYS = ("frame", "step", "phase", "time_s", "state", "action", "occluded",
                "occluded_fraction")
+#: The factor of the task whose values a decision's ``perceived`` holds.
+_PERCEIVED_FACTOR = "prediction"
+
+
+class SortingDecision(Protocol):
+    """One step of a robot's sorting run, as :meth:`SessionWriter.write_decision` reads it
+    (``robot.evaluation.EvaluationStep`` satisfies it).
+
+    ``state``, ``action`` and ``next_state`` are flat indices of the session's task; ``onion``
+    the line-up index of the onion in focus after the step, ``blemished`` its true class;
+    ``perceived`` the classifier's answer (a value index of the task's ``prediction`` factor)
+    if the step inspected it; ``fate`` (``"bin"`` or ``"line"``) if the step decided it;
+    ``tp`` .. ``recall`` running over the onions decided so far.
+    """
+
+    @property
+    def step(self) -> int: ...
+    @property
+    def state(self) -> int: ...
+    @property
+    def action(self) -> int: ...
+    @property
+    def next_state(self) -> int: ...
+    @property
+    def onion(self) -> int | None: ...
+    @property
+    def blemished(self) -> bool | None: ...
+    @property
+    def perceived(self) -> int | None: ...
+    @property
+    def fate(self) -> str | None: ...
+    @property
+    def tp(self) -> int: ...
+    @property
+    def fp(self) -> int: ...
+    @property
+    def tn(self) -> int: ...
+    @property
+    def fn(self) -> int: ...
+    @property
+    def precision(self) -> float: ...
+    @property
+    def recall(self) -> float: ...
 
 
 def _stamp(msg, time_ns: int) -> None:
@@ -273,7 +320,60 @@ class SessionWriter:
                                  publish_time=time_ns, sequence=sequence)
 
     def _write_json(self, topic: str, obj: dict, time_ns: int, sequence: int) -> None:
+        if topic not in self._channels:  # an optional topic: registered on first use
+            name, schema = EVALUATION_JSON_SCHEMAS[topic]
+            sid = self._writer.register_schema(name, "jsonschema", json_schema_bytes(schema))
+            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
         self._write(topic, json.dumps(obj, separators=(",", ":")).encode(), time_ns, sequence)
+
+    def write_decision(self, decision: SortingDecision, *, frame: int, time_ns: int) -> None:
+        """Write one step of a robot's sorting run and flush it to the OS.
+
+        ``/evaluation/decision`` (what the robot did and perceived) always, and in a session
+        with ground truth ``/evaluation/counts`` (the running TP/FP/TN/FN, precision and
+        recall after the step); both with ``sequence`` the step number. ``frame`` is the index
+        of the step's first frame and ``time_ns`` its time. The channels are registered on
+        first use: a session without a robot's run has none of them.
+
+        Raises
+        ------
+        ValueError
+            If the decision's action or states are not indices of the session's task, or its
+            ``fate`` is not ``"bin"``, ``"line"`` or None.
+        """
+        if self._writer is None:
+            raise RuntimeError("SessionWriter must be entered (`with SessionWriter(...)`)")
+        task, step = self.task, int(decision.step)
+        fate = decision.fate
+        if fate not in (None, "bin", "line"):
+            raise ValueError(f"decision.fate must be 'bin', 'line' or None; got {fate!r} at "
+                             f"step {step}")
+        for name in ("state", "next_state"):
+            s = int(getattr(decision, name))
+            if not 0 <= s < task.n_states:
+                raise ValueError(f"decision.{name} must be in [0, {task.n_states}) for task "
+                                 f"{task.name!r}; got {s} at step {step}")
+        perceived = decision.perceived
+        if perceived is not None:
+            perceived = (task.value_name(_PERCEIVED_FACTOR, int(perceived))
+                         if _PERCEIVED_FACTOR in task.factor_names else str(int(perceived)))
+        onion = None if decision.onion is None else int(decision.onion)
+        self._write_json(Topic.DECISION, {
+            "step": step, "frame": int(frame), "state": int(decision.state),
+            "state_name": task.state_name(int(decision.state)),
+            "action": int(decision.action), "action_name": _action_name(task, decision.action),
+            "next_state": int(decision.next_state),
+            "next_state_name": task.state_name(int(decision.next_state)),
+            "onion": onion, "perceived": perceived, "fate": fate}, time_ns, step)
+        if self.ground_truth:
+            counts = {k: int(getattr(decision, k)) for k in ("tp", "fp", "tn", "fn")}
+            blemished = None if decision.blemished is None else bool(decision.blemished)
+            self._write_json(Topic.COUNTS, {
+                "step": step, "frame": int(frame), "onion": onion, "blemished": blemished,
+                **counts, "decided": sum(counts.values()),
+                "precision": float(decision.precision), "recall": float(decision.recall)},
+                time_ns, step)
+        self._writer.flush()
 
     def write_sensor_frame(self, *, index: int, step: int, phase: int, time_ns: int,
                            color: np.ndarray, depth: np.ndarray | None = None,

@@ -18,6 +18,12 @@ FN     blemished onion left on line    TN     good onion left on the line
 ``precision = TP / (TP + FP)`` and ``recall = TP / (TP + FN)``; a ratio with a zero denominator
 (nothing binned; no blemished onion) is defined as 0.0, as scikit-learn's
 ``zero_division=0``.
+
+For logging and recording, :func:`evaluate_policy` reports the station at rest before the first
+action (``on_start``, a :class:`StationView`) and after every action (``on_step``, an
+:class:`EvaluationStep`: the decision, the running counts and the same view): the camera's
+images when rendering, the onions in the world, a snapshot of the world in 3D
+(:class:`robot.world.WorldState`) and the joints.
 """
 
 from __future__ import annotations
@@ -37,13 +43,16 @@ from irl.domains.onion_sorting import (
     encode_state,
 )
 from robot.difficulty import Difficulty
-from robot.station import Classifier, SawyerStation, StationStep
+from robot.labels import OnionLabel
+from robot.station import STEP_DURATION_S, Classifier, SawyerStation, StationStep
+from robot.world import WorldState
 
 __all__ = [
     "EvaluationStep",
     "OnionOutcome",
     "SortingResult",
     "SortingTally",
+    "StationView",
     "evaluate_policy",
     "greedy_actions",
 ]
@@ -175,6 +184,13 @@ class EvaluationStep(_PrecisionRecall):
         uint8 RGB of the inspection view, if this action inspected the onion.
     q : ndarray of shape (7,)
         The Sawyer's joint positions after the action.
+    time_s : float
+        The station's clock after the action, ``(step + 1) * STEP_DURATION_S``.
+    onions : tuple of OnionLabel
+        The onions in the world after the action, with their boxes in ``color`` when
+        rendering (:meth:`robot.station.SawyerStation.onion_labels`).
+    world : WorldState or None
+        The world in 3D after the action (:meth:`robot.station.SawyerStation.world_state`).
     """
 
     step: int
@@ -193,6 +209,38 @@ class EvaluationStep(_PrecisionRecall):
     depth: np.ndarray | None = field(default=None, repr=False)
     inspection: np.ndarray | None = field(default=None, repr=False)
     q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+    time_s: float = 0.0
+    onions: tuple[OnionLabel, ...] = field(default=(), repr=False)
+    world: WorldState | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class StationView:
+    """The station at rest at ``time_s``: before the first action (:func:`evaluate_policy`'s
+    ``on_start``), or after an action (an :class:`EvaluationStep` has the same fields).
+
+    Attributes
+    ----------
+    time_s : float
+        The station's clock.
+    color : ndarray of shape (H, W, 3) or None
+        uint8 RGB of the main camera (when rendering).
+    depth : ndarray of shape (H, W) or None
+        float32 depth in metres (when rendering).
+    onions : tuple of OnionLabel
+        The onions in the world, with their boxes in ``color`` when rendering.
+    world : WorldState
+        The world in 3D.
+    q : ndarray of shape (7,)
+        The Sawyer's joint positions.
+    """
+
+    time_s: float
+    color: np.ndarray | None = field(repr=False)
+    depth: np.ndarray | None = field(repr=False)
+    onions: tuple[OnionLabel, ...] = field(repr=False)
+    world: WorldState = field(repr=False)
+    q: np.ndarray = field(repr=False)
 
 
 def greedy_actions(actions: np.ndarray) -> np.ndarray:
@@ -243,6 +291,7 @@ def evaluate_policy(
     move_steps: int = 120,
     on_step: Callable[[EvaluationStep], None] | None = None,
     difficulty: Difficulty | str = "clean",
+    on_start: Callable[[StationView], None] | None = None,
 ) -> SortingResult:
     """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
 
@@ -261,7 +310,8 @@ def evaluate_policy(
     max_steps_per_onion : int
         The episode's step budget is ``n_onions * max_steps_per_onion`` actions.
     render : bool
-        Render the main camera after every action (passed to ``on_step``).
+        Render the main camera after every action (passed to ``on_step``), and before the first
+        one for ``on_start``. The inspection view and the counts never depend on it.
     move_steps : int
         Physics steps per arm motion (see :class:`robot.station.SawyerStation`).
     on_step : callable, optional
@@ -269,6 +319,9 @@ def evaluate_policy(
     difficulty : Difficulty or str
         Perception difficulty of the station (:mod:`robot.difficulty`): the onions' blemishes
         and the inspection view the classifier reads; ``"clean"`` by default.
+    on_start : callable, optional
+        Called once with a :class:`StationView` of the station before the first action (its
+        image drawn with noise of its own, so it changes no later render).
 
     Returns
     -------
@@ -285,13 +338,21 @@ def evaluate_policy(
     if n_blemished > n_onions:
         raise ValueError(f"n_blemished must be <= n_onions={n_onions}; got {n_blemished}")
     max_steps_per_onion = _check_int("max_steps_per_onion", max_steps_per_onion, 1)
-    if on_step is not None and not callable(on_step):
-        raise TypeError(f"on_step must be callable or None; got {type(on_step).__name__}")
+    for name, callback in (("on_step", on_step), ("on_start", on_start)):
+        if callback is not None and not callable(callback):
+            raise TypeError(f"{name} must be callable or None; got {type(callback).__name__}")
     budget = n_onions * max_steps_per_onion
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
                        move_steps=move_steps, render_every_step=render,
                        difficulty=difficulty) as station:
         tally = SortingTally(station.blemished)
+        if on_start is not None:
+            image = station.render(initial=True) if render else None
+            on_start(StationView(
+                time_s=0.0, color=None if image is None else image.rgb,
+                depth=None if image is None else image.depth,
+                onions=station.onion_labels(None if image is None else image.seg),
+                world=station.world_state(), q=station.arm.q))
         n_steps = 0
         while n_steps < budget and not tally.complete:
             s = station.state
@@ -307,6 +368,9 @@ def evaluate_policy(
                     color=None if done.image is None else done.image.rgb,
                     depth=None if done.image is None else done.image.depth,
                     inspection=done.inspection, q=done.q,
+                    time_s=(n_steps + 1) * STEP_DURATION_S,
+                    onions=station.onion_labels(None if done.image is None else done.image.seg),
+                    world=station.world_state(),
                 ))
             n_steps += 1
         perceived = [station.perceived(i) for i in range(n_onions)]

@@ -18,6 +18,11 @@ facing the belt. Each :class:`~irl.domains.onion_sorting.SortAction` is a motion
   above the pick spot;
 - PLACE_IN_BIN moves over the bin and releases the onion, which drops into it.
 
+For 3D logging, :meth:`SawyerStation.world_state` snapshots the work cell, the gate, the onions
+on the belt, held or in the bin (with their classes), both cameras and the Sawyer's joints
+(:mod:`robot.world`); :func:`station_robot` describes the Sawyer as it stands here before a
+station exists (a logger draws it from its URDF).
+
 An action that the MDP says does nothing in the current state (``next_state(s, a) == s``) does
 nothing physically. After every action the state read off the world (:meth:`SawyerStation.state`)
 must equal ``next_state(s, a, blemished=<the class the classifier perceived>)``: the prediction
@@ -49,6 +54,7 @@ from irl.domains.onion_sorting import (
     SortingState,
     next_state,
 )
+from robot.assets import sawyer_urdf
 from robot.camera import (
     CameraImage,
     CameraSpec,
@@ -64,6 +70,7 @@ from robot.difficulty import (
     difficulty_rng,
     resolve_difficulty,
 )
+from robot.labels import OnionLabel
 from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
 from robot.scene import GATE_X, StopGate, build_workcell, connect
 from robot.simulation import INSPECTION_CAMERA
@@ -76,17 +83,21 @@ from robot.state_map import (
     WorldSnapshot,
     state_of_world,
 )
+from robot.world import Pose, RobotState, WorldProbe, WorldState, camera_pose, robot_state
 
 __all__ = [
     "GROUND_TRUTH",
     "ROBOT_BASE",
     "ROBOT_BASE_YAW",
     "ROBOT_TARGETS",
+    "SAWYER_JOINTS",
     "START_STATE",
+    "STEP_DURATION_S",
     "Classifier",
     "SawyerStation",
     "StationStep",
     "make_lineup",
+    "station_robot",
 ]
 
 logger = logging.getLogger(__name__)
@@ -102,6 +113,11 @@ ROBOT_BASE = np.array([0.30, 0.70, 0.90])
 """Where the Sawyer's base stands: behind the sorter's stance, on a pedestal."""
 ROBOT_BASE_YAW = -np.pi / 2
 """The base faces -y, across the belt (as the sorter did)."""
+SAWYER_JOINTS = tuple(f"right_j{k}" for k in range(7))
+"""The Sawyer's joints in the order of a joint vector ``q`` (7,) (its URDF's names)."""
+STEP_DURATION_S = 2.0
+"""The station's clock per action (s): action ``t`` runs from ``t * STEP_DURATION_S`` to
+``(t + 1) * STEP_DURATION_S`` (the difficulty's lighting drift follows it)."""
 
 #: Flange (``right_l6``'s frame, :meth:`Sawyer.end_effector`) to the held onion's surface: the
 #: link's tool face is 2.45 cm out along the flange's axis, the suction cup 1 cm more.
@@ -132,12 +148,23 @@ _INSPECT_YAWS = (0.0, -2 * np.pi / 3, -4 * np.pi / 3)  # wrist turns while the c
 _BIN_SLOTS = 9  # onions per layer in the bin (3 x 3)
 _BIN_LAYERS = 4
 _GRIPPER_RGB = (72.0, 72.0, 78.0)  # the suction gripper's grey, drawn over a held onion
-_STEP_S = 2.0  # station clock per action, for the difficulty's lighting drift
 
 
 def _down(yaw: float) -> tuple[float, ...]:
     """Quaternion (x, y, z, w) of the flange pointing down, turned by ``yaw`` about z."""
     return tuple(p.getQuaternionFromEuler([np.pi, 0.0, -yaw]))
+
+
+def station_robot(positions: np.ndarray | None = None) -> RobotState:
+    """The Sawyer as it stands in the station: its URDF, its base on the pedestal
+    (:data:`ROBOT_BASE`, turned by :data:`ROBOT_BASE_YAW`), its joints :data:`SAWYER_JOINTS` at
+    ``positions`` (7,) (zeros by default). What a logger needs to draw the robot before a
+    station runs; :meth:`SawyerStation.world_state` reads the same from the simulator."""
+    q = np.zeros(len(SAWYER_JOINTS)) if positions is None else positions
+    half = ROBOT_BASE_YAW / 2
+    return RobotState(name="sawyer", urdf=sawyer_urdf(),
+                      base=Pose(ROBOT_BASE, [0.0, 0.0, np.sin(half), np.cos(half)]),
+                      joint_names=SAWYER_JOINTS, positions=q)
 
 
 def make_lineup(
@@ -305,6 +332,8 @@ class SawyerStation:
         # the inspection camera's noise is a stream of its own: whether the main camera renders
         # (a Rerun log, a Gymnasium observation) never changes what the detector sees
         self.inspection_effects = self.effects.with_rng(difficulty_rng(self._difficulty_seq, 1))
+        # and so has the view before the first action, rendered only for a recording of it
+        self._initial_effects = self.effects.with_rng(difficulty_rng(self._difficulty_seq, 2))
         self._clock = 0.0
         try:
             self.lighting: Lighting = sample_lighting(self._scene_rng)
@@ -315,6 +344,12 @@ class SawyerStation:
             self._q_rest = self.arm.inverse_kinematics(ROBOT_TARGETS[Location.CONVEYOR])
             self.arm.reset(self._q_rest)
             self._onions = self._make_onions()
+            bodies = {f"workcell/{name}": body for name, body in self.workcell.items()}
+            bodies["gate"] = self.gate.body
+            bodies.update({f"onions/{o.index}": o.body for o in self._onions})
+            self._probe = WorldProbe(self.client, bodies, classes={
+                f"onions/{o.index}": int(o.appearance.blemished) for o in self._onions})
+            self._urdf = sawyer_urdf()
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -333,6 +368,36 @@ class SawyerStation:
         if self.client is None:
             raise RuntimeError("SawyerStation must be entered (`with SawyerStation(...)`)")
         return self.client
+
+    def world_state(self) -> WorldState:
+        """The world now, for 3D logging (:class:`robot.world.WorldState`): the work cell (its
+        pedestal too), the gate and the onions that are in the world (on the belt, held, in the
+        bin; not those parked out of it), each onion with its true class; the optical frames of
+        the main camera and the inspection view; the Sawyer's base and joint positions."""
+        client = self._require_client()
+        shapes = tuple(s for s in self._probe.shapes() if s.pose.position[2] > _PARKED[2] / 2)
+        cameras = {spec.frame_id: camera_pose(spec) for spec in (self.camera, self.inspection)}
+        return WorldState(shapes=shapes, cameras=cameras,
+                          robot=robot_state(client, self.arm.body, self.arm.joints,
+                                            self._urdf))
+
+    def onion_labels(self, seg: np.ndarray | None = None) -> tuple[OnionLabel, ...]:
+        """The onions in the world now (not those parked out of it), in line-up order, with
+        their true class, position and whether each is in focus; with ``seg`` (H, W), the
+        segmentation of a main-camera render, each visible one's box in that view."""
+        self._require_client()
+        boxes = {} if seg is None else boxes_from_segmentation(seg, [o.body for o in self._onions])
+        out = []
+        for o in self._onions:
+            position = self.position(o.index)
+            if position[2] <= _PARKED[2] / 2:
+                continue
+            box = boxes.get(o.body)
+            out.append(OnionLabel(onion_id=o.index, blemished=bool(o.appearance.blemished),
+                                  position=position, in_focus=o.index == self.focus,
+                                  box=None if box is None else tuple(box[:4]),
+                                  visible_pixels=0 if box is None else box[4]))
+        return tuple(out)
 
     def _pedestal(self) -> int:
         half = [0.13, 0.13, ROBOT_BASE[2] / 2]
@@ -443,13 +508,19 @@ class SawyerStation:
         self.arm.reset(start)
         return errors
 
-    def render(self) -> CameraImage:
-        """The main camera's view now (with the difficulty's image effects)."""
+    def render(self, *, initial: bool = False) -> CameraImage:
+        """The main camera's view now (with the difficulty's image effects).
+
+        ``initial`` draws the effects' noise from a stream of its own, for the view before the
+        first action: rendering it (to record the run from its start) never changes the
+        renders after the actions.
+        """
         image = render(self._require_client(), self.camera, self.lighting)
         if self.difficulty.is_clean:
             return image
-        return CameraImage(rgb=self.effects.color(image.rgb, self._clock),
-                           depth=self.effects.depth(image.depth), seg=image.seg)
+        effects = self._initial_effects if initial else self.effects
+        return CameraImage(rgb=effects.color(image.rgb, self._clock),
+                           depth=effects.depth(image.depth), seg=image.seg)
 
     def render_inspection(self) -> CameraImage:
         """The inspection view now, as the classifier reads it: with the difficulty's image
@@ -638,7 +709,7 @@ class SawyerStation:
                 f"action must be a SortAction in [0, {len(SortAction)}); got {action!r}"
             ) from None
         s = self.state
-        self._clock += _STEP_S
+        self._clock += STEP_DURATION_S
         applies = next_state(s, a, blemished=False) != s or next_state(s, a, blemished=True) != s
         errs: list[float] = []
         perceived, inspection = None, None

@@ -1,4 +1,5 @@
-"""``onionsort evaluate``: a run's policy sorts onions; bad run folders are clear errors."""
+"""``onionsort evaluate``: a run's policy sorts onions (evaluation.json, .rrd, .mcap); bad run
+folders are clear errors."""
 
 import json
 
@@ -27,6 +28,22 @@ def test_the_experts_policy_sorts_perfectly_with_perfect_inspection(tmp_path, ca
     saved = json.loads((run / "evaluation.json").read_text())
     assert saved["inspection"] == "ground truth" and len(saved["onions"]) == 6
     assert (run / "evaluation.rrd").stat().st_size > 0
+    # the run as a session: one frame per action, its counts ending at evaluation.json's
+    from recordings import open_session
+
+    session = open_session(run / "evaluation.mcap")
+    assert session.n_frames == len(session.decisions) == saved["n_steps"]
+    last = session.sorting_counts[saved["n_steps"] - 1]
+    assert {k: last[k] for k in ("tp", "fp", "tn", "fn")} == {"tp": 4, "fp": 0, "tn": 2, "fn": 0}
+    assert not list(run.glob("*.partial"))
+
+
+def test_no_rerun_and_no_mcap_write_the_evaluation_only(tmp_path, capsys):
+    run = _run_dir(tmp_path, onion_sorting().expert_policy().argmax(axis=1))
+    assert main(["evaluate", str(run), "--onions", "2", "--blemished", "1",
+                 "--ground-truth-inspection", "--no-rerun", "--no-mcap"]) == 0
+    assert f"wrote {run / 'evaluation.json'}\n" in capsys.readouterr().out
+    assert {p.name for p in run.iterdir()} == {"model.json", "evaluation.json"}
 
 
 def test_run_folders_without_a_valid_model_are_refused(tmp_path, capsys):

@@ -3,12 +3,17 @@
 Loads the greedy policy of ``onionsort learn``'s run folder and lets the Sawyer sort a line-up
 of onions in PyBullet, inspection by the detector. Reports TP (blemished in bin), FP (good in
 bin), TN (good left on the line), FN (blemished left on the line), precision and recall, and
-writes ``RUN_DIR/evaluation.json`` and ``RUN_DIR/evaluation.rrd``.
+writes ``RUN_DIR/evaluation.json``, ``RUN_DIR/evaluation.rrd`` (Rerun: the cameras, decisions,
+counts, and the work cell and the Sawyer in 3D) and ``RUN_DIR/evaluation.mcap`` (the run as a
+session for Foxglove, ``rerun mcap convert`` or ``recordings.open_session``: cameras, inspection
+views, ``/tf``, ``/joint_states``, ``/scene``, each step's decision and the running
+TP/FP/TN/FN).
 
 Examples
 --------
     onionsort evaluate runs/learn-mmap --onions 50 --blemished 30 --seed 0
     onionsort evaluate runs/learn-mmap --ground-truth-inspection --json
+    onionsort evaluate runs/learn-mmap --no-rerun --no-mcap   # evaluation.json only
 """
 
 from __future__ import annotations
@@ -30,6 +35,8 @@ def register(subparsers) -> None:
     parser.add_argument("--ground-truth-inspection", action="store_true",
                         help="perfect inspection instead of the detector (for comparison)")
     parser.add_argument("--no-rerun", action="store_true", help="skip the Rerun recording")
+    parser.add_argument("--no-mcap", action="store_true",
+                        help="skip the session MCAP of the run (evaluation.mcap)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     from robot.difficulty import DIFFICULTY_LEVELS
 
@@ -44,7 +51,7 @@ def run(args) -> int:
     result, out = evaluate(EvaluateConfig(
         run=args.run, onions=args.onions, blemished=args.blemished, seed=args.seed,
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
-        rerun=not args.no_rerun, difficulty=args.difficulty))
+        rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap))
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall")}))
@@ -52,5 +59,7 @@ def run(args) -> int:
     print(f"{out['method']}: {args.onions} onions ({args.blemished} blemished), "
           f"inspection by the {out['inspection']}")
     print(result.table())
-    print(f"wrote {args.run / 'evaluation.json'}")
+    written = ["evaluation.json", *(["evaluation.rrd"] if not args.no_rerun else []),
+               *(["evaluation.mcap"] if not args.no_mcap else [])]
+    print(f"wrote {', '.join(str(args.run / name) for name in written)}")
     return 0

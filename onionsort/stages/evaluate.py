@@ -5,7 +5,13 @@ of onions in PyBullet: every abstract action is a real motion (IK, suction grasp
 onion's class at inspection comes from the detector on the inspection view, so perception
 errors count. Reports TP (blemished in bin), FP (good in bin), TN (good left on the line), FN
 (blemished left on the line), precision and recall into ``RUN/evaluation.json``, with a Rerun
-recording of the sort (``RUN/evaluation.rrd``).
+recording of the sort (``RUN/evaluation.rrd``: the camera, the inspection views, the decisions,
+the counts, and the work cell and the Sawyer in 3D) and the run as a session
+(``RUN/evaluation.mcap``, :mod:`recordings`): one frame per action, showing the station at rest
+before it (camera, depth, ground truth, ``/tf``, ``/joint_states``, ``/scene``), the inspection
+view the classifier read, and each step's decision and running TP/FP/TN/FN
+(``/evaluation/decision``, ``/evaluation/counts``). Both files are written under temporary
+names and renamed once complete.
 
 Example::
 
@@ -15,9 +21,11 @@ Example::
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from onionsort.stages.base import (
     check_difficulty,
@@ -49,6 +57,9 @@ class EvaluateConfig:
         Perfect inspection instead of the detector (for comparison).
     rerun : bool
         Write ``evaluation.rrd``.
+    mcap : bool
+        Write ``evaluation.mcap``, the run as a session (Foxglove, ``rerun mcap convert``,
+        :func:`recordings.open_session`).
     difficulty : str
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
         today's station).
@@ -62,6 +73,7 @@ class EvaluateConfig:
     ground_truth_inspection: bool = False
     rerun: bool = True
     difficulty: str = "clean"
+    mcap: bool = True
 
     def __post_init__(self) -> None:
         check_difficulty(self.difficulty)
@@ -90,8 +102,53 @@ def inspection_classifier(detector):
     return classify
 
 
+class _SessionRecorder:
+    """Writes an evaluation's steps to a session: frame ``t`` (step ``t``, one frame a step)
+    shows the station at rest before action ``t``, labelled with that action; it carries the
+    inspection view the action's classifier read, and the action's decision and the counts
+    after it. The view before action ``t + 1`` is the one after action ``t``."""
+
+    def __init__(self, writer) -> None:
+        self.writer = writer
+        self._view: Any = None
+
+    def on_start(self, view) -> None:
+        self._view = view
+
+    def on_step(self, event) -> None:
+        from robot.labels import StepLabel
+        from robot.world import WorldFrame
+
+        view, t = self._view, int(event.step)
+        if view is None:
+            raise RuntimeError("the evaluation reported a step before its start")
+        time_ns = round(view.time_s * 1e9)
+        self.writer.write_decision(event, frame=t, time_ns=time_ns)
+        self.writer.write_frame(WorldFrame(
+            index=t, step=StepLabel(step=t, state=int(event.state), action=int(event.action),
+                                    next_state=int(event.next_state), occluded=False),
+            phase=0, time_s=view.time_s, color=view.color, depth=view.depth,
+            onions=view.onions, inspection=event.inspection, world=view.world))
+        self._view = event
+
+
+def _session_metadata(config: EvaluateConfig, doc: dict, resolved: dict) -> dict:
+    import platform
+
+    import numpy as np
+    import pybullet
+
+    from onionsort import __version__
+
+    return {"source": "onionsort evaluate", "seed": config.seed, "config": resolved,
+            "method": doc.get("method"), "software": f"onionsort {__version__}",
+            "versions": {"python": platform.python_version(), "numpy": np.__version__,
+                         "pybullet_api": pybullet.getAPIVersion()},
+            "policy": f"greedy policy of {Path(config.run) / 'model.json'}"}
+
+
 def evaluate(config: EvaluateConfig, models=None):
-    """Evaluate a run's policy; write ``evaluation.json`` (and ``.rrd``).
+    """Evaluate a run's policy; write ``evaluation.json`` (and ``.rrd``, ``.mcap``).
 
     ``models`` (:class:`~onionsort.stages.models.PerceptionModels`) are used instead of loading
     ``config.models`` again, as ``demo`` does for its many evaluations.
@@ -99,14 +156,17 @@ def evaluate(config: EvaluateConfig, models=None):
     Returns ``(result, summary)``: the :class:`robot.evaluation.EvaluationResult` and the dict
     written to ``evaluation.json``.
     """
-    log_config("evaluate", config)
+    resolved = log_config("evaluate", config)
     actions, doc = load_policy(config.run)
     check_output_folder(config.run, "RUN_DIR")  # it takes evaluation.json: writable?
 
     import torch
 
     from onionsort.stages.models import PerceptionModels
+    from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
+    from robot.station import station_robot
+    from robot.world import camera_pose
 
     torch.set_num_threads(2)
     detector = None
@@ -116,21 +176,40 @@ def evaluate(config: EvaluateConfig, models=None):
         loaded = PerceptionModels.load(config.models) if models is None else models
         detector = loaded.detector
         classify = inspection_classifier(detector)
-    logger_ = None
-    if config.rerun:
-        from recordings.rerun import EvaluationLogger
-        from robot.camera import CameraSpec, intrinsics
-
-        logger_ = EvaluationLogger(Path(config.run) / "evaluation.rrd", detector=detector,
-                                   camera_K=intrinsics(CameraSpec()))
+    on_step, recorder = [], None
+    session = Path(config.run) / "evaluation.mcap"
+    partial = session.with_name(session.name + ".partial")
     try:
-        result = evaluate_policy(actions, n_onions=config.onions, n_blemished=config.blemished,
-                                 seed=config.seed, classify=classify, render=config.rerun,
-                                 difficulty=config.difficulty,
-                                 on_step=None if logger_ is None else logger_.on_step)
+        with contextlib.ExitStack() as stack:
+            if config.rerun:
+                from recordings.rerun import EvaluationLogger
+
+                on_step.append(stack.enter_context(EvaluationLogger(
+                    Path(config.run) / "evaluation.rrd", detector=detector,
+                    camera_K=intrinsics(CameraSpec()), robot=station_robot(),
+                    camera_pose=camera_pose(CameraSpec()))).on_step)
+            if config.mcap:
+                from recordings import SessionWriter
+                from robot.simulation import INSPECTION_CAMERA
+
+                recorder = _SessionRecorder(stack.enter_context(SessionWriter(
+                    partial, _session_metadata(config, doc, resolved), intrinsics(CameraSpec()),
+                    intrinsics(INSPECTION_CAMERA), frames_per_step=1, overwrite=True)))
+                on_step.append(recorder.on_step)
+
+            def each_step(event) -> None:
+                for call in on_step:
+                    call(event)
+
+            result = evaluate_policy(
+                actions, n_onions=config.onions, n_blemished=config.blemished,
+                seed=config.seed, classify=classify, render=config.rerun or config.mcap,
+                difficulty=config.difficulty, on_step=each_step if on_step else None,
+                on_start=None if recorder is None else recorder.on_start)
+        if recorder is not None:
+            partial.replace(session)
     finally:
-        if logger_ is not None:
-            logger_.close()
+        partial.unlink(missing_ok=True)  # a run that failed leaves no session behind
     summary = {"method": doc.get("method"), "seed": config.seed,
                "difficulty": config.difficulty, "inspection":
                "ground truth" if config.ground_truth_inspection else "detector",

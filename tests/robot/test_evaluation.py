@@ -178,3 +178,54 @@ def test_rendering_the_main_camera_never_changes_what_the_inspection_sees(expert
     assert results[True] == results[False]
     assert len(views[True]) == len(views[False]) > 0
     assert all(np.array_equal(a, b) for a, b in zip(views[True], views[False], strict=True))
+
+
+def test_every_step_carries_the_world_in_3d(expert_run):
+    from robot.station import SAWYER_JOINTS, STEP_DURATION_S, station_robot
+
+    _, events = expert_run
+    standing = station_robot()
+    for e in events:
+        robot = e.world.robot
+        assert robot.joint_names == SAWYER_JOINTS
+        np.testing.assert_allclose(robot.positions, e.q, atol=1e-12)
+        np.testing.assert_allclose(robot.base.position, standing.base.position, atol=1e-6)
+        np.testing.assert_allclose(robot.base.orientation, standing.base.orientation,
+                                   atol=1e-6)
+        assert set(e.world.cameras) == {"camera", "inspection"}
+        assert e.time_s == (e.step + 1) * STEP_DURATION_S
+        shapes = {s.name: s for s in e.world.shapes}
+        assert {"workcell/belt", "workcell/pedestal", "gate"} <= set(shapes)
+        # the onions in the world are the labelled ones, none parked below it
+        assert {n for n in shapes if n.startswith("onions/")} == {
+            f"onions/{o.onion_id}" for o in e.onions}
+        for o in e.onions:
+            assert shapes[f"onions/{o.onion_id}"].class_id == int(o.blemished)
+            assert o.position[2] > 0 and o.box is None  # no render, no boxes
+        focus = [o.onion_id for o in e.onions if o.in_focus]
+        assert focus == ([] if e.onion is None else [e.onion])
+    # at first the line-up's last onion waits upstream, parked out of the world (z = -10)
+    assert len(events[0].onions) < 8 == len(events[-1].onions)
+
+
+def test_recording_the_start_changes_no_later_render(expert_pi):
+    # the view before the first action draws its noise from a stream of its own
+    runs = {}
+    for start in (True, False):
+        views, events = [], []
+        result = evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=5, move_steps=40,
+                                 difficulty="hard", render=True, classify="ground-truth",
+                                 on_step=events.append,
+                                 on_start=views.append if start else None)
+        runs[start] = (result, views, events)
+    (r_on, views, on), (r_off, none, off) = runs[True], runs[False]
+    assert r_on == r_off and none == [] and len(views) == 1
+    assert all(np.array_equal(a.color, b.color) and np.array_equal(a.depth, b.depth)
+               for a, b in zip(on, off, strict=True))
+    view = views[0]
+    assert view.time_s == 0.0 and view.color.shape == on[0].color.shape
+    np.testing.assert_allclose(view.q, on[0].q)  # the first claim moves no joint
+    assert any(o.box is not None for o in view.onions)  # rendered: the waiting onions boxed
+    with pytest.raises(TypeError, match="on_start must be callable"):
+        evaluate_policy(expert_pi, n_onions=1, n_blemished=0, classify="ground-truth",
+                        on_start=3)
