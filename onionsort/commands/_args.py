@@ -24,6 +24,15 @@ def add_models_argument(parser: argparse.ArgumentParser) -> None:
                              "models shipped with onionsort)")
 
 
+def add_connect_argument(parser: argparse.ArgumentParser, *,
+                         what: str = "its Rerun recordings") -> None:
+    """``--connect URL``: also stream the command's Rerun recordings to a viewer over gRPC."""
+    parser.add_argument("--connect", metavar="URL",
+                        help=f"also stream {what} to the Rerun viewer at URL, e.g. on another "
+                             "machine (rerun+http://HOST:9876/proxy; start it there with "
+                             "`rerun`)")
+
+
 def subcommand(subparsers, name: str, doc: str, help_: str) -> argparse.ArgumentParser:
     """A subparser whose description is the command module's docstring."""
     return subparsers.add_parser(name, help=help_, description=doc,

@@ -4,18 +4,23 @@ Records 12 sessions of a person sorting onions while a passer-by blocks the came
 them with the shipped models, calibrates the observation model on fresh held-out frames, learns
 the sorter's reward with MMAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions with each
 learned policy and prints the paper's Table 1 beside ours. ``--quick`` runs it small.
+``--resume`` continues an interrupted demo in its --out from the last finished stage (same
+results as an uninterrupted run); ``--connect URL`` streams the Rerun recordings to a viewer on
+another machine as well.
 
 Examples
 --------
     onionsort demo
     onionsort demo --quick --out runs/demo-quick
+    onionsort demo --quick --out runs/demo-quick --resume
+    onionsort demo --connect rerun+http://192.168.1.20:9876/proxy
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_models_argument, subcommand
+from onionsort.commands._args import add_connect_argument, add_models_argument, subcommand
 
 
 def register(subparsers) -> None:
@@ -33,6 +38,9 @@ def register(subparsers) -> None:
     parser.add_argument("--repeats", type=int, default=1,
                         help="repeat with seeds SEED..SEED+K-1 and report 95%% intervals (1)")
     add_models_argument(parser)
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the interrupted demo in --out: skip its finished stages")
+    add_connect_argument(parser, what="the recordings of record, learn and evaluate")
     parser.set_defaults(func=run)
 
 
@@ -42,7 +50,8 @@ def run(args) -> int:
 
     results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
                               models=args.models, sessions=args.sessions, repeats=args.repeats,
-                              difficulty=args.difficulty))
+                              difficulty=args.difficulty, connect=args.connect,
+                              resume=args.resume))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from onionsort.commands._args import add_models_argument, subcommand
+from onionsort.commands._args import add_connect_argument, add_models_argument, subcommand
 
 
 def register(subparsers) -> None:
@@ -38,6 +38,7 @@ def register(subparsers) -> None:
     parser.add_argument("--no-mcap", action="store_true",
                         help="skip the session MCAP of the run (evaluation.mcap)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_connect_argument(parser, what="the Sawyer's run (evaluation.rrd)")
     from robot.difficulty import DIFFICULTY_LEVELS
 
     parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
@@ -51,7 +52,8 @@ def run(args) -> int:
     result, out = evaluate(EvaluateConfig(
         run=args.run, onions=args.onions, blemished=args.blemished, seed=args.seed,
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
-        rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap))
+        rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap,
+        connect=args.connect))
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall")}))

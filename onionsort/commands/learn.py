@@ -3,19 +3,22 @@
 The learner sees only the perceived observations (``onionsort perceive``), never ground truth,
 through the observation model of ``onionsort calibrate``. Sessions perceived by other models, or
 in another depth mode, than the calibration measured are refused (``--allow-model-mismatch``).
-Writes ``model.json``, ``learning_curve.json``/``.png`` and ``learn.rrd`` into ``--out``.
+Writes ``model.json``, ``learning_curve.json``/``.png`` and ``learn.rrd`` into ``--out``;
+``--connect URL`` also streams the Rerun recording to a viewer on another machine.
 
 Examples
 --------
     onionsort learn runs/rec/*.mcap --method mmap-birl \\
         --observation-model runs/calibration/calibration.json --out runs/learn-mmap
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
+        --out runs/learn-mmap --connect rerun+http://192.168.1.20:9876/proxy
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import subcommand
+from onionsort.commands._args import add_connect_argument, subcommand
 
 
 def register(subparsers) -> None:
@@ -34,6 +37,7 @@ def register(subparsers) -> None:
     parser.add_argument("--allow-model-mismatch", action="store_true",
                         help="learn even if the sessions were perceived by other models (or "
                              "in another sensor mode) than the calibration measured")
+    add_connect_argument(parser, what="the learning run (learn.rrd)")
     parser.set_defaults(func=run)
 
 
@@ -43,7 +47,7 @@ def run(args) -> int:
     model = learn(LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
                               out=args.out, method=args.method, seed=args.seed,
                               allow_model_mismatch=args.allow_model_mismatch,
-                              overwrite=args.overwrite))
+                              overwrite=args.overwrite, connect=args.connect))
     print(f"{args.method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
           f"steps, {model['n_occluded']} occluded)")
     print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))

@@ -18,6 +18,19 @@ bootstrap (repeats, then onions within a repeat), so both the spread between lea
 and the finite line-up count. ``quick`` runs the pipeline small (4 sessions, 10 onions): the
 end-to-end smoke test.
 
+Every finished stage leaves a marker ``OUT/progress/STAGE.json`` (written atomically, after the
+stage's outputs), and ``OUT/progress/config.json`` records the settings the run was started
+with. The stages: ``heldout`` (the held-out frames), ``calibrate``, and per repeat ``k``
+``record-k``, ``perceive-k``, ``learn-k-METHOD`` and ``evaluate-k-METHOD``. ``resume``
+continues an interrupted demo in its folder: a stage with a marker is skipped (its outputs are
+complete), the others run again from their own seeds: an interrupted recording keeps its
+complete sessions (``record --resume``), perception takes the sessions not perceived yet, and a
+stage's half-written folder is replaced. ``results.json`` is built from the markers and the
+files on disk in both cases, so a resumed demo's is the uninterrupted one's, timings aside
+(``seconds`` and ``learn_seconds`` are the time the run that did the work took). ``connect``
+streams the Rerun recordings of the stages that run to a viewer on another machine, in
+addition to their ``.rrd`` files.
+
 Example::
 
     from onionsort.stages import DemoConfig, demo
@@ -26,8 +39,12 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
+import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -64,6 +81,8 @@ class DemoConfig:
     repeat gets its own folder ``repeat_K``. ``difficulty`` names a level of
     :data:`robot.difficulty.DIFFICULTY_LEVELS`: the recorded sessions, the held-out frames the
     calibration is measured on, and the robot's inspection at evaluation all face it.
+    ``connect`` is a Rerun viewer's gRPC URL (``rerun+http://HOST:9876/proxy``) that the
+    recordings also stream to; ``resume`` continues the interrupted demo in ``out``.
     """
 
     out: Path = Path("runs/demo")
@@ -73,6 +92,8 @@ class DemoConfig:
     sessions: int | None = None
     repeats: int = 1
     difficulty: str = "clean"
+    connect: str | None = None
+    resume: bool = False
 
     def __post_init__(self) -> None:
         if self.repeats < 1:
@@ -80,47 +101,68 @@ class DemoConfig:
         if self.sessions is not None and self.sessions < 1:
             raise ValueError(f"sessions must be >= 1; got {self.sessions}")
         check_difficulty(self.difficulty)
+        if self.connect is not None:
+            from recordings.rerun.common import check_viewer_url
+
+            check_viewer_url(self.connect)
 
 
 def demo(config: DemoConfig) -> dict:
-    """Run the whole job; write ``config.out/results.json`` and return its content."""
+    """Run the whole job (with ``config.resume``, the stages not finished yet); write
+    ``config.out/results.json`` and return its content."""
     import torch
     from tqdm import tqdm
+
+    from state_abstraction.calibration import load_calibration
 
     log_config("demo", config)
     torch.set_num_threads(2)
     start = time.perf_counter()
     out = config.out
-    _check_new_folder(out)
     size = dict(SIZES[config.quick])
     if config.sessions is not None:
         size["sessions"] = config.sessions
+    if config.connect is not None:
+        from recordings.rerun.common import reach_viewer
+
+        reach_viewer(config.connect)  # a wrong address fails now, not after the first stage
+    progress = _Progress(out, _settings(config, size), resume=config.resume)
+    if config.resume and (out / "results.json").is_file():
+        logger.info("%s holds a finished demo; nothing to resume", out)
+        return json.loads((out / "results.json").read_text())
+    progress.start()
     models = PerceptionModels.load(config.models)
     data = out / "heldout"
-    make_dataset(DatasetConfig(out=data, frames=size["heldout"], seed=config.seed + 1000,
-                               robot_onions=0, difficulty=config.difficulty))
-    calibration, metrics = calibrate(CalibrateConfig(data=data, split="all",
-                                                     out=out / "calibration",
-                                                     models=config.models), models)
+    progress.run("heldout", lambda: dataclasses.asdict(make_dataset(DatasetConfig(
+        out=data, frames=size["heldout"], seed=config.seed + 1000, robot_onions=0,
+        difficulty=config.difficulty))), clear=data)
+    calibration_path = out / "calibration" / "calibration.json"
+
+    def calibrate_stage() -> dict:
+        _, metrics = calibrate(CalibrateConfig(data=data, split="all", out=out / "calibration",
+                                               models=config.models), models)
+        return {"n_steps": metrics["n_steps"]}
+
+    measured = progress.run("calibrate", calibrate_stage, clear=out / "calibration")
+    calibration = load_calibration(calibration_path)
     logger.info("calibrated on %d held-out steps: state error rate %.3f, (state, action) "
-                "error rate %.3f", metrics["n_steps"], calibration.state_error_rate,
+                "error rate %.3f", measured["n_steps"], calibration.state_error_rate,
                 calibration.pair_error_rate)
     per_repeat: dict[str, list[dict]] = {m: [] for m in METHODS}
     with tqdm(total=config.repeats * (2 + len(METHODS)), desc="demo", unit="stage") as bar:
         for k in range(config.repeats):
             folder = out if config.repeats == 1 else out / f"repeat_{k}"
             seed = config.seed + k
-            paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
-                                        steps_per_session=size["steps"], occlusion=0.2,
-                                        seed=seed, rerun=folder / "sessions.rrd",
-                                        difficulty=config.difficulty))
+            recorded = progress.run(f"record-{k}", lambda folder=folder, seed=seed: _record(
+                folder, seed, size, config))
+            paths = [folder / "sessions" / name for name in recorded["sessions"]]
             bar.update()
-            perceive(PerceiveConfig(sessions=tuple(paths), models=config.models), models)
+            progress.run(f"perceive-{k}", lambda paths=paths: _perceive(paths, config, models))
             bar.update()
             for method in METHODS:
                 per_repeat[method].append(_learn_and_sort(
-                    method, paths, out / "calibration" / "calibration.json", folder / method,
-                    seed, size, config, models))
+                    progress, k, method, paths, calibration_path, folder / method, seed, size,
+                    config, models))
                 bar.update()
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
@@ -134,35 +176,139 @@ def demo(config: DemoConfig) -> dict:
     return results
 
 
+def _settings(config: DemoConfig, size: dict) -> dict:
+    """What a resumed demo must share with the run it continues."""
+    return {"seed": config.seed, "quick": config.quick,
+            "models": None if config.models is None else str(config.models),
+            "sessions": size["sessions"], "repeats": config.repeats,
+            "difficulty": config.difficulty}
+
+
+class _Progress:
+    """The finished stages of a demo, one marker file each under ``OUT/progress``.
+
+    Opening it checks the run folder: a new demo needs an empty (or new) one; a resumed demo
+    one whose ``progress/config.json`` holds the same settings.
+    """
+
+    def __init__(self, out: Path, settings: dict, *, resume: bool) -> None:
+        self.out = Path(out)
+        self.folder = self.out / "progress"
+        self.settings = settings
+        self.resume = resume
+        if resume and self.out.is_dir() and any(self.out.iterdir()):
+            self._check_settings()
+        else:
+            _check_new_folder(self.out)
+        check_output_folder(self.out)
+
+    def _check_settings(self) -> None:
+        path = self.folder / "config.json"
+        try:
+            started = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"cannot resume: --out {self.out} holds no demo progress ({path} "
+                             "is missing); choose a new --out") from None
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"cannot resume: {path} is not JSON ({exc})") from None
+        differ = [f"{k} {started.get(k)!r} there, {v!r} now" for k, v in self.settings.items()
+                  if started.get(k) != v]
+        if differ:
+            raise ValueError(f"cannot resume: --out {self.out} holds a demo started with other "
+                             f"settings ({'; '.join(differ)}); resume with the settings it was "
+                             "started with, or choose a new --out")
+
+    def start(self) -> None:
+        """Record the settings (a new demo), before any stage runs."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if not (self.folder / "config.json").exists():
+            write_json(self.folder / "config.json", self.settings)
+
+    def marker(self, stage: str) -> Path:
+        return self.folder / f"{stage}.json"
+
+    def run(self, stage: str, work: Callable[[], dict], clear: Path | None = None) -> dict:
+        """The result of ``stage``: read from its marker if it finished before, else ``work()``
+        (after removing ``clear``, the stage's half-written folder, when resuming), recorded
+        in a new marker. Both ways the result is what the marker holds."""
+        path = self.marker(stage)
+        if path.is_file():
+            logger.info("demo: %s finished before; skipped", stage)
+        else:
+            if self.resume and clear is not None and clear.exists():
+                logger.info("demo: %s was interrupted; its %s is written again", stage, clear)
+                shutil.rmtree(clear)
+            write_json(path, {"stage": stage, "result": work()})
+        return json.loads(path.read_text())["result"]
+
+
+def _record(folder: Path, seed: int, size: dict, config: DemoConfig) -> dict:
+    """Record a repeat's sessions into ``folder/sessions`` (with ``sessions.rrd``); with
+    ``config.resume``, keep the complete ones an interrupted demo recorded."""
+    paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
+                                steps_per_session=size["steps"], occlusion=0.2, seed=seed,
+                                rerun=folder / "sessions.rrd", difficulty=config.difficulty,
+                                connect=config.connect, resume=config.resume))
+    return {"sessions": [p.name for p in paths]}
+
+
+def _perceive(paths: list[Path], config: DemoConfig, models: PerceptionModels) -> dict:
+    """Perceive the sessions of ``paths`` that hold no perception topics yet (all of them,
+    unless an interrupted demo perceived some)."""
+    from recordings import open_session
+
+    todo = tuple(p for p in paths if open_session(p).perception_models is None)
+    if todo:
+        perceive(PerceiveConfig(sessions=todo, models=config.models), models)
+    return {"perceived": [p.name for p in todo]}
+
+
 def _check_new_folder(out: Path) -> None:
     """The demo writes a whole run folder: refuse one that holds anything (a finished demo, or
     one stopped half way), and make sure a new one can be written, before any work starts."""
     if out.is_dir():
         held = sorted(p.name for p in out.iterdir())
         if held:
-            what = ("a demo (results.json)" if "results.json" in held
-                    else "files of an earlier or interrupted run: " + ", ".join(held[:4])
-                    + (", ..." if len(held) > 4 else ""))
-            raise FileExistsError(f"--out {out} already holds {what}; choose a new --out "
-                                  "(or remove the folder to run the demo there again)")
+            if "results.json" in held:
+                raise FileExistsError(f"--out {out} already holds a demo (results.json); "
+                                      "choose a new --out (or remove the folder to run the "
+                                      "demo there again)")
+            raise FileExistsError(
+                f"--out {out} already holds files of an earlier or interrupted run: "
+                + ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
+                + "; pass --resume to continue it, or choose a new --out")
     check_output_folder(out)
 
 
-def _learn_and_sort(method: str, sessions, calibration: Path, run_dir: Path, seed: int,
-                    size: dict, config: DemoConfig, models: PerceptionModels) -> dict:
-    """Learn with one method, let the Sawyer sort with its policy; one repeat's result."""
-    t0 = time.perf_counter()
-    model = learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
-                              method=method, seed=seed))
-    learn_s = time.perf_counter() - t0
-    result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
-                                        blemished=size["blemished"], seed=seed,
-                                        models=config.models, difficulty=config.difficulty),
-                         models)
-    return {"seed": seed, "tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
-            "precision": result.precision, "recall": result.recall,
-            "learn_seconds": round(learn_s, 3), "theta": model["theta"], "ile": _ile(model),
-            "undecided": result.undecided}
+def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibration: Path,
+                    run_dir: Path, seed: int, size: dict, config: DemoConfig,
+                    models: PerceptionModels) -> dict:
+    """Learn with one method, let the Sawyer sort with its policy (two stages of repeat
+    ``k``); one repeat's result."""
+    def learn_stage() -> dict:
+        t0 = time.perf_counter()
+        learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
+                          method=method, seed=seed, overwrite=config.resume,
+                          connect=config.connect))
+        return {"learn_seconds": round(time.perf_counter() - t0, 3)}
+
+    def evaluate_stage() -> dict:
+        result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
+                                            blemished=size["blemished"], seed=seed,
+                                            models=config.models,
+                                            difficulty=config.difficulty,
+                                            connect=config.connect), models)
+        return {"tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
+                "precision": result.precision, "recall": result.recall,
+                "undecided": result.undecided}
+
+    learned = progress.run(f"learn-{k}-{method}", learn_stage)
+    scored = progress.run(f"evaluate-{k}-{method}", evaluate_stage)
+    model = json.loads((run_dir / "model.json").read_text())
+    return {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
+                                                     "recall")},
+            "learn_seconds": learned["learn_seconds"], "theta": model["theta"],
+            "ile": _ile(model), "undecided": scored["undecided"]}
 
 
 def _pooled(runs: list[dict], seed: int) -> dict:

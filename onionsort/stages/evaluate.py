@@ -63,6 +63,9 @@ class EvaluateConfig:
     difficulty : str
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
         today's station).
+    connect : str or None
+        Also stream the Rerun recording to a viewer at this gRPC URL
+        (``rerun+http://HOST:PORT/proxy``).
     """
 
     run: Path
@@ -74,9 +77,14 @@ class EvaluateConfig:
     rerun: bool = True
     difficulty: str = "clean"
     mcap: bool = True
+    connect: str | None = None
 
     def __post_init__(self) -> None:
         check_difficulty(self.difficulty)
+        if self.connect is not None:
+            from recordings.rerun.common import check_viewer_url
+
+            check_viewer_url(self.connect)
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:
@@ -159,6 +167,10 @@ def evaluate(config: EvaluateConfig, models=None):
     resolved = log_config("evaluate", config)
     actions, doc = load_policy(config.run)
     check_output_folder(config.run, "RUN_DIR")  # it takes evaluation.json: writable?
+    if config.connect is not None:
+        from recordings.rerun.common import reach_viewer
+
+        reach_viewer(config.connect)
 
     import torch
 
@@ -181,11 +193,14 @@ def evaluate(config: EvaluateConfig, models=None):
     partial = session.with_name(session.name + ".partial")
     try:
         with contextlib.ExitStack() as stack:
-            if config.rerun:
+            logged = config.rerun or config.connect is not None
+            if logged:
                 from recordings.rerun import EvaluationLogger
+                from recordings.rerun.common import rerun_targets
 
                 on_step.append(stack.enter_context(EvaluationLogger(
-                    Path(config.run) / "evaluation.rrd", detector=detector,
+                    rerun_targets(Path(config.run) / "evaluation.rrd" if config.rerun else None,
+                                  config.connect), detector=detector,
                     camera_K=intrinsics(CameraSpec()), robot=station_robot(),
                     camera_pose=camera_pose(CameraSpec()))).on_step)
             if config.mcap:
@@ -203,7 +218,7 @@ def evaluate(config: EvaluateConfig, models=None):
 
             result = evaluate_policy(
                 actions, n_onions=config.onions, n_blemished=config.blemished,
-                seed=config.seed, classify=classify, render=config.rerun or config.mcap,
+                seed=config.seed, classify=classify, render=logged or config.mcap,
                 difficulty=config.difficulty, on_step=each_step if on_step else None,
                 on_start=None if recorder is None else recorder.on_start)
         if recorder is not None:

@@ -7,7 +7,7 @@ mode as the sessions were perceived; ``allow_model_mismatch`` overrides the refu
 
 Writes into ``out``: ``model.json`` (method, learned reward weights with feature names, the
 greedy policy with state and action names, the inputs), ``learning_curve.json`` and ``.png``,
-and ``learn.rrd`` (Rerun).
+and ``learn.rrd`` (Rerun), which ``connect`` also streams to a viewer on another machine.
 
 Example::
 
@@ -62,6 +62,9 @@ class LearnConfig:
         Write ``learn.rrd``.
     overwrite : bool
         Replace an earlier run's ``model.json`` in ``out``.
+    connect : str or None
+        Also stream the Rerun recording to the viewer at this gRPC URL
+        (``rerun+http://HOST:9876/proxy``), in addition to ``learn.rrd``.
     """
 
     sessions: tuple[Path, ...]
@@ -72,6 +75,7 @@ class LearnConfig:
     allow_model_mismatch: bool = False
     rerun: bool = True
     overwrite: bool = False
+    connect: str | None = None
 
     def __post_init__(self) -> None:
         from irl.experiments import METHODS
@@ -83,6 +87,10 @@ class LearnConfig:
         missing = [str(p) for p in self.sessions if not Path(p).is_file()]
         if missing:
             raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+        if self.connect is not None:
+            from recordings.rerun.common import check_viewer_url
+
+            check_viewer_url(self.connect)
 
 
 def _check_provenance(session, calibration, calibration_path: Path) -> None:
@@ -127,6 +135,10 @@ def learn(config: LearnConfig) -> dict:
 
     log_config("learn", config)
     refuse_existing(config.out / MODEL_FILE, config.overwrite)
+    if config.connect is not None:
+        from recordings.rerun.common import reach_viewer
+
+        reach_viewer(config.connect)  # a wrong address fails now, not after the fit
     with output_folder(config.out) as out:  # checked before anything is read or fitted
         base = onion_sorting()
         calibration = load_calibration(config.calibration, task=base.task)
@@ -170,10 +182,12 @@ def learn(config: LearnConfig) -> dict:
         write_json(out / MODEL_FILE, model)
         learning_curve_figure(objective_curve(history)[1], config.method,
                               out / "learning_curve.png")
-        if config.rerun:
+        if config.rerun or config.connect is not None:
             from recordings.rerun import log_learning
+            from recordings.rerun.common import rerun_targets
 
-            log_learning(out / "learn.rrd", model, history)
+            log_learning(rerun_targets(out / "learn.rrd" if config.rerun else None,
+                                       config.connect), model, history)
     return model
 
 

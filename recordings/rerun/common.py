@@ -1,7 +1,16 @@
 """What every Rerun logger of onionsort shares: opening a stream, classes, cameras, series.
 
 A stream is opened once with its one blueprint (:func:`open_recording`) and closed with
-:func:`close_recording`. Onion classes are drawn from one annotation context built from
+:func:`close_recording`. It goes to one target or to several at once: an ``.rrd`` file, a
+spawned viewer, or a viewer on another machine reached over gRPC
+(``rerun+http://HOST:9876/proxy``). A command's ``--connect URL`` streams to the viewer *in
+addition to* the ``.rrd`` file it writes (:func:`rerun_targets`): the file stays the complete
+record, the viewer shows the run live. The URL is checked where the command's configuration
+is built (:func:`check_viewer_url`) and the viewer is reached before the work starts
+(:func:`reach_viewer`), so a wrong address fails at once, not after the run; a viewer lost on
+the way only costs the live view (a warning), never the file.
+
+Onion classes are drawn from one annotation context built from
 :data:`recordings.schema.CLASS_NAMES` and :data:`recordings.schema.CLASS_COLORS`, logged static
 at the root so that every box of every logger (``class_ids``) gets the same name and colour.
 A camera is a static pinhole at ``<root>/camera`` with its images under it::
@@ -17,6 +26,8 @@ series), their names logged static once with :func:`log_series_names`.
 from __future__ import annotations
 
 import logging
+import socket
+import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
 from enum import IntEnum
 from pathlib import Path
@@ -30,6 +41,7 @@ from recordings.schema import CLASS_COLORS, CLASS_NAMES
 
 __all__ = [
     "GRPC_SCHEMES",
+    "check_viewer_url",
     "class_annotations",
     "close_recording",
     "enum_labels",
@@ -39,19 +51,81 @@ __all__ = [
     "log_pinhole",
     "log_series_names",
     "open_recording",
+    "reach_viewer",
+    "rerun_targets",
     "send_series",
     "value_labels",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: ``.rrd`` files being written, by recording id: (temporary name, final name).
-_PENDING: dict[str, tuple[Path, Path]] = {}
+#: ``.rrd`` files being written, by recording id: [(temporary name, final name)], and the
+#: viewer URLs the stream goes to.
+_PENDING: dict[str, tuple[list[tuple[Path, Path]], list[str]]] = {}
 #: URL schemes of a viewer or server reached over gRPC (``rr.RecordingStream.connect_grpc``).
 GRPC_SCHEMES = ("rerun+http://", "rerun+https://", "rerun://")
 
+#: One target of a stream: an ``.rrd`` path, ``"spawn"`` or a gRPC URL.
+Target = str | Path
 
-def open_recording(application_id: str, target: str | Path,
+
+def check_viewer_url(url: str) -> str:
+    """``url`` if it is the gRPC URL of a Rerun viewer: ``rerun+http://HOST:PORT/proxy`` (also
+    ``rerun+https://`` and ``rerun://``), with an explicit port.
+
+    Raises
+    ------
+    ValueError
+        Naming what is wrong and the URL given.
+    """
+    def bad(why: str) -> ValueError:
+        return ValueError(f"connect must be the gRPC URL of a Rerun viewer, "
+                          f"rerun+http://HOST:PORT/proxy ({why}); got {url!r}")
+
+    if not isinstance(url, str) or not url.startswith(GRPC_SCHEMES):
+        raise bad(f"the scheme must be {', '.join(s[:-3] for s in GRPC_SCHEMES)}")
+    parts = urllib.parse.urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        raise bad("the port is not a number from 0 to 65535") from None
+    if not parts.hostname:
+        raise bad("no host")
+    if port is None or port == 0:
+        raise bad("no port")
+    if parts.path != "/proxy" or parts.query or parts.fragment:
+        raise bad("the path must be /proxy")
+    return url
+
+
+def reach_viewer(url: str, timeout: float = 5.0) -> None:
+    """Make sure something listens at the viewer URL ``url`` (a TCP connection to its host and
+    port), so that a run does not discover a wrong address only when it ends.
+
+    Raises
+    ------
+    ValueError
+        If ``url`` is no viewer URL (:func:`check_viewer_url`).
+    ConnectionError
+        If nothing answers there within ``timeout`` seconds.
+    """
+    parts = urllib.parse.urlsplit(check_viewer_url(url))
+    try:
+        with socket.create_connection((parts.hostname, parts.port), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise ConnectionError(f"no Rerun viewer answers at {url} ({exc.strerror or exc}); "
+                              "start one there (`rerun`) or give its address") from None
+
+
+def rerun_targets(file: Path | None, connect: str | None) -> Target | tuple[Target, ...] | None:
+    """The target of :func:`open_recording` for a stage that writes ``file`` (or None) and
+    streams to the viewer at ``connect`` (or None): one, both, or None for no recording."""
+    targets = tuple(t for t in (file, connect) if t is not None)
+    return None if not targets else targets[0] if len(targets) == 1 else targets
+
+
+def open_recording(application_id: str, target: Target | Sequence[Target],
                    blueprint: rrb.Blueprint | None = None) -> rr.RecordingStream:
     """A new recording stream sent to ``target`` with ``blueprint`` as its one layout.
 
@@ -59,12 +133,13 @@ def open_recording(application_id: str, target: str | Path,
     ----------
     application_id : str
         The application the recording belongs to (the viewer groups recordings by it).
-    target : path-like or str
+    target : path-like, str, or a sequence of them
         An ``.rrd`` file to write (its folder is created), ``"spawn"`` to start (or reach) a
         local viewer, or a gRPC URL (``rerun+http://host:port/proxy``; also ``rerun+https://``
-        and ``rerun://``) of a running viewer.
+        and ``rerun://``) of a running viewer; or several files and URLs (not ``"spawn"``), all
+        of which get the whole stream (:func:`rerun_targets`).
     blueprint : rerun.blueprint.Blueprint or None
-        The layout, sent once as the recording's default blueprint.
+        The layout, sent once as the recording's default blueprint (to every target).
 
     Returns
     -------
@@ -74,38 +149,77 @@ def open_recording(application_id: str, target: str | Path,
     Raises
     ------
     ValueError
-        If ``application_id`` is empty, or ``target`` is none of the above.
+        If ``application_id`` is empty, or a target is none of the above.
     """
     if not application_id:
         raise ValueError(f"application_id must be a non-empty string; got {application_id!r}")
+    targets = list(target) if isinstance(target, list | tuple) else [target]
+    if not targets:
+        raise ValueError("target must name at least one .rrd file, 'spawn' or gRPC URL; got "
+                         "none")
+    files: list[tuple[Path, Path]] = []
+    urls: list[str] = []
+    spawn = False
+    for each in targets:
+        text = str(each)
+        if isinstance(each, str) and text == "spawn":
+            spawn = True
+        elif isinstance(each, str) and text.startswith(GRPC_SCHEMES):
+            urls.append(check_viewer_url(text))
+        elif isinstance(each, str | Path) and Path(text).suffix == ".rrd":
+            path = Path(text)
+            # written under a temporary name, renamed by close_recording once complete: a
+            # process killed on the way leaves ``NAME.rrd.partial``, never a truncated NAME.rrd
+            files.append((path.with_name(path.name + ".partial"), path))
+        else:
+            raise ValueError(f"target must be an .rrd file, 'spawn' or a gRPC URL starting "
+                             f"with {' or '.join(GRPC_SCHEMES)}; got {each!r}")
+    if spawn and len(targets) > 1:
+        raise ValueError(f"'spawn' cannot be combined with other targets; got {targets!r}")
     rec = rr.RecordingStream(application_id)
-    text = str(target)
-    if isinstance(target, str) and text == "spawn":
+    if spawn:
         rec.spawn(default_blueprint=blueprint)
-    elif isinstance(target, str) and text.startswith(GRPC_SCHEMES):
-        rec.connect_grpc(text, default_blueprint=blueprint)
-    elif isinstance(target, str | Path) and Path(text).suffix == ".rrd":
-        path = Path(text)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        # written under a temporary name, renamed by close_recording once complete: a process
-        # killed on the way leaves ``NAME.rrd.partial``, never a truncated ``NAME.rrd``
-        partial = path.with_name(path.name + ".partial")
-        rec.save(partial, default_blueprint=blueprint)
-        _PENDING[rec.get_recording_id()] = (partial, path)
     else:
-        raise ValueError(f"target must be an .rrd file, 'spawn' or a gRPC URL starting with "
-                         f"{' or '.join(GRPC_SCHEMES)}; got {target!r}")
-    logger.debug("rerun recording %s (%s) -> %s", application_id, rec.get_recording_id(), text)
+        for _, path in files:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            sinks = [rr.FileSink(partial) for partial, _ in files] + [rr.GrpcSink(url)
+                                                                      for url in urls]
+            rec.set_sinks(*sinks, default_blueprint=blueprint)
+        except RuntimeError as exc:  # an endpoint the SDK refuses
+            raise ValueError(f"cannot open the Rerun targets {targets!r}: {exc}") from None
+    _PENDING[rec.get_recording_id()] = (files, urls)
+    logger.debug("rerun recording %s (%s) -> %s", application_id, rec.get_recording_id(),
+                 ", ".join(map(str, targets)))
     return rec
 
 
 def close_recording(rec: rr.RecordingStream) -> None:
-    """Flush everything logged to ``rec`` to its file or viewer and disconnect it; a file gets
-    its final name only now."""
-    rec.flush()
-    rec.disconnect()
-    partial, path = _PENDING.pop(rec.get_recording_id(), (None, None))
-    if partial is not None:
+    """Flush everything logged to ``rec`` to its files and viewers and disconnect it; a file
+    gets its final name only now.
+
+    A viewer that cannot be reached any more is a warning: the files are complete all the
+    same. Any other failure to flush leaves the files under their temporary names.
+
+    Raises
+    ------
+    OSError
+        If the stream could not be flushed to its files.
+    """
+    files, urls = _PENDING.pop(rec.get_recording_id(), ([], []))
+    try:
+        rec.flush()
+    except RuntimeError as exc:
+        lost = [url for url in urls if url in str(exc)]
+        rec.disconnect()
+        if not lost:
+            raise OSError(f"the Rerun recording {', '.join(str(p) for _, p in files)} could "
+                          f"not be written: {exc}") from None
+        logger.warning("the Rerun viewer at %s did not take the whole recording (%s); the "
+                       "files are complete", ", ".join(lost), exc)
+    else:
+        rec.disconnect()
+    for partial, path in files:
         partial.replace(path)
 
 
