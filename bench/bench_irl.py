@@ -1,25 +1,48 @@
 """Performance of the irl core, as ratios against baselines measured in the same run.
 
-    python bench/bench_irl.py            # all three benchmarks (about a minute on 2 cores)
-    python bench/bench_irl.py --quick    # smaller repeats
+    python bench/bench_irl.py            # everything (about 6 minutes on 2 loaded cores)
+    python bench/bench_irl.py --quick    # fewer repeats, S up to 40,000
 
-1. Fit time of MMAP-BIRL vs HiddenDataEM on onion sorting (10 batches of 12 demonstrations of
-   20 steps, 4 occluded each, 30% noise): the paper's "more than 10x faster".
-2. One MMAP-BIRL gradient evaluation vs occlusion rate 0..60%: should be flat.
-3. One gradient evaluation (MDP solve included, cold cache) vs number of states, 16..10,000,
-   with sparse transitions, T = 100 and 10 demonstrations.
+BLAS threads: scipy's L-BFGS-B makes tiny BLAS calls at every iteration, and on a loaded
+machine OpenBLAS's thread pool can make them cost more than a sorting gradient; run with
+``OPENBLAS_NUM_THREADS=1`` to see the fit without that (both figures are in the README).
+
+1. Sorting fit (12 demonstrations x 20 steps, 4 occluded each, 30% noise, 10 batches) and one
+   warm gradient: MMAP-BIRL against the frozen path of commit cfdfae2
+   (``bench/irl_baseline.py``: dense emission table, demonstrations re-packed at every
+   gradient) and against HiddenDataEM (the paper's "more than 10x faster").
+2. One MMAP-BIRL gradient vs occlusion 0..60% (sorting, 12 demonstrations x 100 steps): flat.
+3. Scaling in S on a grid world with sparse T, 10 demonstrations x 100 steps, 20% occluded,
+   peak memory from tracemalloc: (a) forward-backward against the frozen path, both with a
+   100-block state sensor (wrong 30% of the time, uniformly: the largest model the frozen path
+   can hold at S = 100,000, since its emission table is dense); at S = 100,000 this sensor's
+   messages span more than a float's range, so both run the exact log-space pass; (b) one
+   cold gradient (MDP solve included) and its forward-backward with a factored sensor (each
+   coordinate misread by one cell 15% of the time, actions exact; 400,000 observations at
+   S = 100,000, which the frozen path cannot build).
+4. Forward-backward at S = 10,000 (factored sensor) against its floor: the same sparse
+   products, forward and backward, done by scipy alone on arrays of the same shapes.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
+import sys
 import time
+import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
 import irl
-from irl.observation import state_observation_model
+from irl.inference import pack_demonstrations, posterior_stats
+from irl.solvers import OptimalQSolver, log_boltzmann_policy
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from irl_baseline import BaselineMMAPBIRL
+from irl_baseline import posterior_stats as baseline_posterior_stats
 
 
 def best_time(fn, repeats: int) -> float:
@@ -31,85 +54,188 @@ def best_time(fn, repeats: int) -> float:
     return min(times)
 
 
+# -- 1 ------------------------------------------------------------------------------------
+
 def bench_fit_sorting(repeats: int, n_batches: int = 10) -> None:
     dom = irl.domains.onion_sorting(noise=0.3)
     batches = [dom.sample(12, 20, occlusion=0.2, seed=b)[0] for b in range(n_batches)]
     n_occ = np.mean([d.n_occluded for demos in batches for d in demos])
-    # Each batch is timed on its own (best of `repeats`), so a burst of load on a shared machine
-    # spoils one timing, not the sum.
-    t_mmap = sum(best_time(lambda d=demos: irl.MMAPBIRL(
-        dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior, seed=0).fit(d), repeats)
-        for demos in batches)
-    t_em = sum(best_time(lambda d=demos: irl.HiddenDataEM(
-        dom.mdp, dom.observation_model).fit(d), repeats) for demos in batches)
-    print(f"[1] sorting fit, {n_batches} batches of 12 demos x 20 steps, {n_occ:.1f} occluded "
-          "each, 30% noise (mean time per batch)")
-    print(f"    MMAP-BIRL {t_mmap / n_batches:.3f} s   HiddenDataEM {t_em / n_batches:.3f} s   "
-          f"speed-up {t_em / t_mmap:.1f}x")
+    kw = {"beta": dom.beta, "prior": dom.prior, "seed": 0}
 
+    def fit_time(cls, **extra):
+        # Each batch is timed on its own (best of `repeats`), so a burst of load on a shared
+        # machine spoils one timing, not the sum.
+        return sum(best_time(lambda d=demos: cls(dom.mdp, dom.observation_model, **extra).fit(d),
+                             repeats) for demos in batches) / n_batches
+
+    t_new, t_old = fit_time(irl.MMAPBIRL, **kw), fit_time(BaselineMMAPBIRL, **kw)
+    t_em = fit_time(irl.HiddenDataEM)
+    same = [np.allclose(irl.MMAPBIRL(dom.mdp, dom.observation_model, **kw).fit(d).theta_,
+                        BaselineMMAPBIRL(dom.mdp, dom.observation_model, **kw).fit(d).theta_,
+                        atol=1e-8) for d in batches]
+
+    theta = dom.true_theta * 0.7
+    grads = {}
+    for cls in (irl.MMAPBIRL, BaselineMMAPBIRL):
+        est = cls(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
+        model = est._check_model()
+        data = est._prepare(model, batches[0])
+        grads[cls] = best_time(lambda e=est, m=model, x=data: e._likelihood_and_gradient(
+            m, theta, x), 50 * repeats)
+    g_new, g_old = grads[irl.MMAPBIRL], grads[BaselineMMAPBIRL]
+    print(f"[1] sorting fit, {n_batches} batches of 12 demos x 20 steps, {n_occ:.1f} occluded "
+          "each, 30% noise (mean per batch)")
+    print(f"    fit:      now {t_new * 1e3:7.1f} ms   frozen cfdfae2 {t_old * 1e3:7.1f} ms   "
+          f"speed-up {t_old / t_new:4.1f}x   (same theta_ in {sum(same)}/{n_batches})")
+    print(f"    gradient: now {g_new * 1e3:7.3f} ms   frozen cfdfae2 {g_old * 1e3:7.3f} ms   "
+          f"speed-up {g_old / g_new:4.1f}x")
+    print(f"    HiddenDataEM fit {t_em * 1e3:7.1f} ms: MMAP-BIRL is {t_em / t_new:4.1f}x faster")
+
+
+# -- 2 ------------------------------------------------------------------------------------
 
 def bench_gradient_vs_occlusion(repeats: int) -> None:
     dom = irl.domains.onion_sorting(noise=0.3)
     est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
     theta = dom.true_theta * 0.7
-    print("[2] one gradient evaluation vs occlusion (sorting, 12 demos x 100 steps)")
+    print("[2] one gradient vs occlusion (sorting, 12 demos x 100 steps)")
     base = None
     for occ in (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6):
         demos, _ = dom.sample(12, 100, occlusion=occ, seed=1)
-        t = best_time(lambda d=demos: est.log_posterior_gradient(theta, d), repeats)
+        t = best_time(lambda d=demos: est.log_posterior_gradient(theta, d), 10 * repeats)
         base = base or t
         print(f"    occlusion {occ:4.0%}: {t * 1e3:7.2f} ms   ratio to 0%: {t / base:.2f}")
 
 
-def grid_mdp(side: int, seed: int = 0) -> tuple[irl.TabularMDP, irl.ObservationModel]:
-    """A sparse noisy grid world of side x side cells, 4 features, region observations."""
+# -- 3 and 4 ------------------------------------------------------------------------------
+
+def grid_world(nx: int, ny: int, seed: int = 0):
+    """A sparse noisy grid of nx x ny cells (s = x * ny + y), 4 moves, 4 features; with a
+    factored sensor and a 10 x 10 block state sensor."""
     rng = np.random.default_rng(seed)
-    n = side * side
-    x, y = np.divmod(np.arange(n), side)
+    n = nx * ny
+    x, y = np.divmod(np.arange(n), ny)
     moves = [(0, 1), (1, 0), (0, -1), (-1, 0)]
     mats = []
     for a in range(4):
         rows, cols, vals = [], [], []
         for b, (dx, dy) in enumerate(moves):
-            nx, ny = np.clip(x + dx, 0, side - 1), np.clip(y + dy, 0, side - 1)
             rows.append(np.arange(n))
-            cols.append(nx * side + ny)
+            cols.append(np.clip(x + dx, 0, nx - 1) * ny + np.clip(y + dy, 0, ny - 1))
             vals.append(np.full(n, 0.9 if a == b else 0.1 / 3))
         mats.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
                                    np.concatenate(cols))), shape=(n, n)))
     phi = np.zeros((n, 4, 4))
     for k in range(4):
-        cells = rng.choice(n, size=max(1, n // 20), replace=False)
-        phi[cells, :, k] = 1.0
+        phi[rng.choice(n, size=max(1, n // 20), replace=False), :, k] = 1.0
     mdp = irl.TabularMDP(transitions=mats, features=phi, discount=0.99,
                          initial=np.full(n, 1.0 / n))
-    # The sensor reports the 4x4 block of cells the agent is in, wrong 30% of the time.
-    block = (x // 4) * ((side + 3) // 4) + (y // 4)
-    n_blocks = block.max() + 1
-    C = np.full((n, n_blocks), 0.3 / max(n_blocks - 1, 1))
-    C[np.arange(n), block] = 0.7 if n_blocks > 1 else 1.0
-    return mdp, state_observation_model(C, n_actions=4)
+    factored = irl.factored_observation_model([_neighbour_confusion(nx),
+                                               _neighbour_confusion(ny)], n_actions=4)
+    block = (x * 10 // nx) * 10 + (y * 10 // ny)
+    C = np.full((n, 100), 0.3 / 99)
+    C[np.arange(n), block] = 0.7
+    return mdp, factored, irl.state_observation_model(C, n_actions=4)
 
 
-def bench_gradient_vs_states(repeats: int) -> None:
-    print("[3] one gradient evaluation (cold MDP solve) vs states, sparse T, 10 demos x 100 steps")
-    base = None
-    for side in (4, 10, 32, 64, 100):
-        mdp, om = grid_mdp(side)
-        theta = np.array([1.0, -1.0, 0.5, -0.5])
-        pi = irl.solvers.boltzmann_policy(
-            irl.solvers.OptimalQSolver(mdp).q_values(theta), 1.0)
-        rng = np.random.default_rng(0)
-        trajs = [irl.demonstrations.sample_trajectory(mdp, pi, 100, rng) for _ in range(10)]
-        demos = [irl.demonstrations.observe(t, om, 0.2, rng) for t in trajs]
+def _neighbour_confusion(n: int, error: float = 0.15) -> np.ndarray:
+    C = np.eye(n) * (1.0 - error)
+    idx = np.arange(n)
+    C[idx[1:], idx[:-1]] += error / 2
+    C[idx[:-1], idx[1:]] += error / 2
+    C[0, 0] += error / 2
+    C[-1, -1] += error / 2
+    return C
 
-        def grad(mdp=mdp, om=om, demos=demos, theta=theta):
-            est = irl.MMAPBIRL(mdp, om, beta=1.0)  # fresh: no cached policy
-            est.log_posterior_gradient(theta, demos)
 
-        t = best_time(grad, repeats)
-        base = base or t
-        print(f"    S = {mdp.n_states:6d}: {t:7.3f} s   ratio to S = 16: {t / base:7.1f}")
+def grid_demos(mdp, oms, theta, n=10, length=100, occlusion=0.2, seed=0):
+    pi = np.exp(log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0))
+    rng = np.random.default_rng(seed)
+    trajs = [irl.demonstrations.sample_trajectory(mdp, pi, length, rng) for _ in range(n)]
+    return [[irl.demonstrations.observe(t, om, occlusion, np.random.default_rng(i))
+             for i, t in enumerate(trajs)] for om in oms]
+
+
+def cold_gradient(cls, mdp, om, demos, theta):
+    """A fresh estimator's gradient: MDP solve, packing and forward-backward."""
+    return cls(mdp, om, beta=1.0).log_posterior_gradient(theta, demos)
+
+
+def fb_time(mdp, om, demos, log_pi, repeats, baseline=False):
+    if baseline:
+        return best_time(lambda: baseline_posterior_stats(mdp, log_pi, demos, om), repeats)
+    packed = pack_demonstrations(demos, om)
+    return best_time(lambda: posterior_stats(mdp, log_pi, packed), repeats)
+
+
+def traced(fn):
+    """``(seconds, peak traced bytes)`` of one call, or ``(fn(), peak)`` when ``fn`` returns
+    its own timing (numpy reports its buffers to tracemalloc)."""
+    tracemalloc.start()
+    start = time.perf_counter()
+    out = fn()
+    seconds = time.perf_counter() - start
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return (out if isinstance(out, float) else seconds), peak
+
+
+def bench_scaling(quick: bool) -> None:
+    sizes = [(100, 100), (200, 200)] if quick else [(100, 100), (250, 400)]
+    theta = np.array([1.0, -1.0, 0.5, -0.5])
+    print("[3] scaling in S: sparse grid T, 10 demos x 100 steps, 20% occluded; one cold "
+          "gradient (MDP solve included), its forward-backward, peak traced memory")
+    rows = []
+    for nx, ny in sizes:
+        mdp, factored, blocks = grid_world(nx, ny)
+        demos_f, demos_b = grid_demos(mdp, (factored, blocks), theta)
+        log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
+        r = {"S": mdp.n_states}
+        r["fb_new"], r["peak_new"] = traced(
+            lambda m=mdp, o=blocks, d=demos_b, p=log_pi: fb_time(m, o, d, p, 1))
+        r["fb_old"], r["peak_old"] = traced(
+            lambda m=mdp, o=blocks, d=demos_b, p=log_pi: fb_time(m, o, d, p, 1, baseline=True))
+        del blocks.log_emissions  # the frozen path's dense table
+        r["grad_f"], r["peak_f"] = traced(
+            lambda m=mdp, o=factored, d=demos_f: cold_gradient(irl.MMAPBIRL, m, o, d, theta))
+        r["fb_f"] = fb_time(mdp, factored, demos_f, log_pi, 1)
+        rows.append(r)
+        mib = 2**20
+        print(f"    S = {r['S']:6d}, block sensor:    forward-backward {r['fb_new']:6.2f} s vs "
+              f"frozen {r['fb_old']:6.2f} s ({r['fb_old'] / r['fb_new']:4.1f}x), peak "
+              f"{r['peak_new'] / mib:6.0f} MiB vs {r['peak_old'] / mib:6.0f} MiB")
+        print(f"    S = {r['S']:6d}, factored sensor: gradient {r['grad_f']:6.2f} s, "
+              f"forward-backward {r['fb_f']:6.2f} s, peak {r['peak_f'] / mib:6.0f} MiB "
+              f"(the frozen path cannot build this model)")
+    first, last = rows[0], rows[-1]
+    print(f"    S x{last['S'] / first['S']:.0f} ({first['S']} -> {last['S']}), factored sensor: "
+          f"gradient x{last['grad_f'] / first['grad_f']:.1f}, forward-backward "
+          f"x{last['fb_f'] / first['fb_f']:.1f}; max RSS of this process "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
+
+
+def bench_floor(repeats: int) -> None:
+    mdp, factored, _ = grid_world(100, 100)
+    theta = np.array([1.0, -1.0, 0.5, -0.5])
+    (demos,) = grid_demos(mdp, (factored,), theta)
+    log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
+    t_fb = fb_time(mdp, factored, demos, log_pi, repeats)
+    P = mdp._flat  # the flat operator T[s * A + a, s'] forward-backward multiplies by
+    PT = P.T.tocsr()
+    N, L, S, A = len(demos), len(demos[0]), mdp.n_states, mdp.n_actions
+    alpha = np.random.default_rng(0).random((S * A, N))
+    g = np.random.default_rng(1).random((S, N))
+
+    def floor():
+        for _ in range(L - 1):
+            PT @ alpha
+        for _ in range(L - 1):
+            P @ g
+
+    t_floor = best_time(floor, repeats)
+    print(f"[4] forward-backward at S = {S}, {N} demos x {L} steps, factored sensor: "
+          f"{t_fb * 1e3:.0f} ms; the same {2 * (L - 1)} sparse products alone "
+          f"{t_floor * 1e3:.0f} ms; ratio {t_fb / t_floor:.1f}x")
 
 
 def main() -> None:
@@ -120,7 +246,8 @@ def main() -> None:
     repeats = 1 if args.quick else 3
     bench_fit_sorting(repeats)
     bench_gradient_vs_occlusion(repeats)
-    bench_gradient_vs_states(repeats)
+    bench_floor(repeats)
+    bench_scaling(args.quick)
 
 
 if __name__ == "__main__":

@@ -243,12 +243,11 @@ def observe(
     n_hidden = round(occlusion * T)
     hidden = np.zeros(T, bool)
     hidden[rng.choice(T, size=n_hidden, replace=False)] = True
-    probs = observation_model.probs
     obs: list[int | None] = []
     for t in range(T):
         if hidden[t]:
             obs.append(None)
         else:
-            p = probs[trajectory.states[t], trajectory.actions[t]]
+            p = observation_model.distribution(trajectory.states[t], trajectory.actions[t])
             obs.append(int(rng.choice(len(p), p=p)))
     return Demonstration(observations=obs)

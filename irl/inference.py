@@ -1,8 +1,12 @@
 """Exact inference over the hidden state-action sequence of observed demonstrations.
 
 Layouts: ``log_pi[s, a]`` or ``log_pi[t, s, a]``, packed observations ``obs[n, t]``
-(-1 = occluded), log emission tables ``log E[o, s, a] = log O(o | s, a)`` with a last row of
-zeros (for occluded steps), messages ``alpha[n, s, a]`` over a batch of n demonstrations.
+(-1 = occluded or padding), lengths ``lengths[n]``, log-likelihoods of the observations
+``log O(obs[n, t] | s, a)`` (0 at occluded steps) kept as ``factor[n, t, a, s] =
+exp(log O - shift[n, t])`` with ``shift[n, t] = max_{s, a} log O``, messages
+``alpha[n, a, s]`` over a batch of n demonstrations. The scaled pass keeps pairs action-major
+(``[a, s]``, states innermost), so that broadcasting a state vector over the few actions runs
+along the long axis; its results are returned as ``[n, s, a]`` like everything else.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
 ``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
@@ -11,12 +15,24 @@ emission ``O(o_t | s_t, a_t)`` (1 when step t is occluded). The forward-backward
 computes ``log P(o_1..T)`` and the posterior marginals ``P(s_t, a_t | o)`` exactly in
 ``O(T (nnz(T) + S A))`` per demonstration, independent of how many steps are occluded. The
 pair transition never materializes: the forward message is pushed through ``T`` and then
-multiplied by ``pi``.
+multiplied by ``pi``. The emissions come from the observation model one block of steps at a
+time (:meth:`irl.observation.ObservationModel.log_likelihoods`), so no dense ``O[s, a, o]`` is
+needed.
+
+Batching. All demonstrations of a batch go through one pass: at each step one sparse product
+``T`` times the dense block ``(N, S A)`` of their messages replaces N matrix-vector products.
+Demonstrations of different lengths share a batch padded to the longest of them; a padded step
+contributes nothing (its normalizer is left out of the likelihood, its posterior out of the
+occupancy, and the backward message restarts at 1 at each demonstration's last step), so the
+result is the same as one pass per demonstration. A time-indexed policy (steps to go) needs
+equal lengths per batch.
 
 Numerics. The policy and the emissions come in as log-probabilities, so a Boltzmann policy of
 any temperature is represented exactly (``log_softmax``, never ``exp`` then ``log``). Each step's
-local factor ``log pi + log O`` is shifted by its maximum over pairs before it is exponentiated
-(a whole chunk of steps at once) and multiplied into the predicted state distribution; messages
+observation log-likelihood is shifted by its maximum over pairs before it is exponentiated
+(a whole chunk of steps at once; for one fit the packed demonstrations keep the result, since
+the observations do not change with theta), and the local factor ``factor * pi`` is multiplied
+into the predicted state distribution; messages
 are renormalized at every step (Rabiner scaling) and ``shift + log(normalizer)`` summed, as in
 dynamax's filter. This scaled pass is exact to rounding as long as every positive shifted local
 factor and every positive predicted probability stays above ``e^-F``, about ``e^-340`` (``F``
@@ -36,18 +52,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from irl.demonstrations import Demonstration, pack_observations
+from irl.demonstrations import Demonstration, check_demonstrations
 from irl.mdp import TabularMDP
+from irl.observation.base import finite_min
 
 __all__ = [
+    "ObservationFactors",
+    "PackedDemonstrations",
     "PosteriorStats",
     "forward_backward",
     "group_by_length",
     "log_forward_backward",
+    "observation_factors",
+    "pack_demonstrations",
     "posterior_stats",
 ]
 
 METHODS = ("auto", "log")
+
+#: Steps of local factors (N * steps * S * A floats) exponentiated at once.
+_CHUNK_ELEMENTS = 1 << 19
+#: Largest ``N T S A`` whose observation log-likelihoods a packing keeps for reuse (32 MB).
+_CACHE_ELEMENTS = 1 << 22
+#: Padding allowed in a batch of ragged demonstrations, as a fraction of its real steps.
+_PAD_SLACK = 0.25
 
 
 @dataclass(frozen=True)
@@ -69,12 +97,143 @@ class PosteriorStats:
     initial: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class ObservationFactors:
+    """Observation likelihoods of a block of steps, shifted so that nothing under- or
+    overflows: ``O(obs[n, t] | s, a) = exp(shift[n, t]) * factor[n, t, s, a]``.
+
+    Attributes
+    ----------
+    factor : ndarray of shape (N, T, A, S)
+        Action-major; at most 1, with maximum 1 over the pairs of every step.
+    shift : ndarray of shape (N, T)
+        ``max_{s, a} log O(obs[n, t] | s, a)`` (0 at occluded steps).
+    min_log : float
+        ``log`` of the smallest positive factor.
+    possible : bool
+        False when some step's observation has probability 0 under every pair (then
+        ``factor`` and ``shift`` are None).
+    """
+
+    factor: np.ndarray | None
+    shift: np.ndarray | None
+    min_log: float
+    possible: bool
+
+    def steps(self, t0: int, t1: int) -> ObservationFactors:
+        """The factors of steps t0..t1-1 (views)."""
+        if not self.possible:
+            return self
+        return ObservationFactors(self.factor[:, t0:t1], self.shift[:, t0:t1], self.min_log,
+                                  True)
+
+
+def observation_factors(observation_model, obs: np.ndarray) -> ObservationFactors:
+    """:class:`ObservationFactors` of observations ``obs[n, t]`` (-1: occluded), from
+    :meth:`irl.observation.ObservationModel.scaled_likelihoods`."""
+    factor, shift, min_log = observation_model.scaled_likelihoods(obs, action_major=True)
+    if not np.all(np.isfinite(shift)):
+        return ObservationFactors(None, None, -np.inf, False)
+    return ObservationFactors(factor, shift, min_log, True)
+
+
+@dataclass(frozen=True, eq=False)
+class PackedDemonstrations:
+    """Demonstrations packed once for many forward-backward passes (e.g. one fit).
+
+    Attributes
+    ----------
+    observation_model : ObservationModel
+    batches : tuple of ndarray of int
+        Indices of the demonstrations run together.
+    obs : tuple of ndarray of int, each (n_b, T_b)
+        Their observations, padded with -1 to the batch's longest.
+    lengths : tuple of ndarray of int, each (n_b,)
+    factors : tuple of (ObservationFactors or None)
+        The shifted observation likelihoods of each batch, kept when the packing is small
+        enough (``_CACHE_ELEMENTS``); otherwise computed per chunk of steps at every pass.
+    n_demos : int
+    equal_lengths : bool
+        Whether every batch holds demonstrations of one length (for time-indexed policies).
+    """
+
+    observation_model: object
+    batches: tuple[np.ndarray, ...]
+    obs: tuple[np.ndarray, ...]
+    lengths: tuple[np.ndarray, ...]
+    factors: tuple[ObservationFactors | None, ...]
+    n_demos: int
+    equal_lengths: bool
+
+
 def group_by_length(demos: Sequence[Demonstration]) -> dict[int, np.ndarray]:
     """Indices of the demonstrations of each length, ``{T: indices}``, for batching."""
     groups: dict[int, list[int]] = {}
     for i, d in enumerate(demos):
         groups.setdefault(len(d), []).append(i)
     return {T: np.array(idx) for T, idx in sorted(groups.items())}
+
+
+def _padded_batches(lengths: np.ndarray, slack: float) -> list[np.ndarray]:
+    """Demonstrations by decreasing length, cut where padding would exceed ``slack`` of the
+    batch's real steps: one batch when lengths are alike, a few when they are not."""
+    order = np.argsort(-lengths, kind="stable")
+    batches: list[list[int]] = []
+    longest = real = 0
+    for i in order:
+        n = int(lengths[i])
+        if batches and (len(batches[-1]) + 1) * longest <= (1.0 + slack) * (real + n):
+            batches[-1].append(int(i))
+            real += n
+        else:
+            batches.append([int(i)])
+            longest = real = n
+    return [np.sort(np.array(b)) for b in batches]
+
+
+def pack_demonstrations(
+    demos: Sequence[Demonstration], observation_model, *, equal_lengths: bool = False,
+    cache: bool = True,
+) -> PackedDemonstrations:
+    """Validate and pack demonstrations into batches (see the module docstring).
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+    observation_model : ObservationModel
+    equal_lengths : bool
+        One batch per length (needed for time-indexed policies); otherwise ragged lengths share
+        padded batches.
+    cache : bool
+        Keep the observations' log-likelihoods when they fit in ``_CACHE_ELEMENTS`` floats.
+    """
+    demos = check_demonstrations(demos, observation_model.n_observations)
+    lengths = np.array([len(d) for d in demos])
+    if equal_lengths:
+        batches = list(group_by_length(demos).values())
+    else:
+        batches = _padded_batches(lengths, _PAD_SLACK)
+    obs, lens, factors = [], [], []
+    S, A = observation_model.n_states, observation_model.n_actions
+    budget = _CACHE_ELEMENTS if cache else 0
+    for idx in batches:
+        longest = int(lengths[idx].max())
+        packed = np.full((len(idx), longest), -1, dtype=np.int64)
+        for row, i in enumerate(idx):
+            packed[row, : lengths[i]] = demos[i].as_array()
+        obs.append(packed)
+        lens.append(lengths[idx])
+        size = packed.size * S * A
+        if size <= budget:
+            factors.append(observation_factors(observation_model, packed))
+            budget -= size
+        else:
+            factors.append(None)
+    return PackedDemonstrations(
+        observation_model=observation_model, batches=tuple(batches), obs=tuple(obs),
+        lengths=tuple(lens), factors=tuple(factors), n_demos=len(demos),
+        equal_lengths=equal_lengths,
+    )
 
 
 def _logsumexp(x: np.ndarray, axis) -> np.ndarray:
@@ -86,15 +245,23 @@ def _logsumexp(x: np.ndarray, axis) -> np.ndarray:
     return np.squeeze(out, axis=axis)
 
 
-def _local(log_policy, obs, log_emissions):
-    """``t -> log pi(a | s) + log O(o_t | s, a)``, shape (N, S, A), a fresh array per call."""
+class _Emissions:
+    """The observations of a batch, as the two passes read them."""
 
-    def local(t: int) -> np.ndarray:
-        e = log_emissions[obs[:, t]]  # contiguous rows: a copy of N blocks
-        e += log_policy if log_policy.ndim == 2 else log_policy[t]
-        return e
+    def __init__(self, observation_model, obs, factors: ObservationFactors | None) -> None:
+        self.observation_model = observation_model
+        self.obs = obs
+        self.factors = factors
 
-    return local
+    def steps(self, t0: int, t1: int) -> ObservationFactors:
+        """Shifted likelihoods of steps t0..t1-1 (kept, or computed now)."""
+        if self.factors is not None:
+            return self.factors.steps(t0, t1)
+        return observation_factors(self.observation_model, self.obs[:, t0:t1])
+
+    def log(self, t: int) -> np.ndarray:
+        """``log O(obs[:, t] | s, a)``, shape (N, S, A), a fresh array."""
+        return self.observation_model.log_likelihoods(self.obs[:, t])
 
 
 def _impossible(ids, obs, n: int, t: int) -> ValueError:
@@ -105,17 +272,46 @@ def _impossible(ids, obs, n: int, t: int) -> ValueError:
     )
 
 
+def _check_batch(mdp, log_policy, obs, observation_model, lengths, factors, method):
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    obs = np.asarray(obs)
+    if obs.ndim != 2 or obs.shape[1] < 1:
+        raise ValueError(f"obs must have shape (N, T) with T >= 1; got {obs.shape}")
+    n_demos, length = obs.shape
+    if lengths is None:
+        lengths = np.full(n_demos, length)
+    else:
+        lengths = np.asarray(lengths)
+        if lengths.shape != (n_demos,) or lengths.min() < 1 or lengths.max() > length:
+            raise ValueError(f"lengths must hold {n_demos} lengths in [1, {length}]; got "
+                             f"{lengths}")
+    if log_policy.ndim == 3 and (log_policy.shape[0] != length or lengths.min() < length):
+        raise ValueError(
+            f"a time-indexed log_policy needs demonstrations of its length "
+            f"{log_policy.shape[0]}; got lengths from {lengths.min()} to {length}"
+        )
+    S, A = mdp.n_states, mdp.n_actions
+    if factors is not None and factors.possible and factors.factor.shape != (
+            n_demos, length, A, S):
+        raise ValueError(f"factors must be of shape {(n_demos, length, A, S)}; got "
+                         f"{factors.factor.shape}")
+    return obs, lengths
+
+
 def forward_backward(
     mdp: TabularMDP,
     log_policy: np.ndarray,
     obs: np.ndarray,
-    log_emissions: np.ndarray,
+    observation_model,
     *,
+    lengths: np.ndarray | None = None,
+    factors: ObservationFactors | None = None,
     log_initial: np.ndarray | None = None,
     demo_ids: Sequence[int] | None = None,
     method: str = "auto",
 ) -> PosteriorStats:
-    """Forward-backward for a batch of equal-length demonstrations.
+    """Forward-backward for a batch of demonstrations in one pass.
 
     Parameters
     ----------
@@ -124,10 +320,15 @@ def forward_backward(
         ``log pi(a | s)``, stationary or per time step (e.g.
         :func:`irl.solvers.log_boltzmann_policy`).
     obs : ndarray of int, shape (N, T)
-        Observation indices; -1 marks an occluded step.
-    log_emissions : ndarray of shape (n_observations + 1, S, A)
-        ``log O(o | s, a)`` with a last row of zeros for occluded steps
-        (:attr:`irl.observation.ObservationModel.log_emissions`).
+        Observation indices; -1 marks an occluded (or padded) step.
+    observation_model : ObservationModel
+        Any implementation; only its ``log_likelihoods`` is called.
+    lengths : ndarray of int, shape (N,), optional
+        Each demonstration's length when the batch is padded (all T by default); the steps
+        after it must be -1.
+    factors : ObservationFactors, optional
+        ``observation_factors(observation_model, obs)``, when the caller keeps it between
+        passes.
     log_initial : ndarray of shape (S,), optional
         Log initial state distribution; ``mdp.log_initial`` by default.
     demo_ids : sequence of int, optional
@@ -144,22 +345,19 @@ def forward_backward(
 
     Notes
     -----
-    The emission table is observation-major, so gathering a step's emissions copies contiguous
-    blocks. Only the predicted state marginals ``(T, N, S)`` and the normalizers are stored;
-    the local factors are recomputed during the backward pass.
+    Only the predicted state marginals ``(T, N, S)`` and the normalizers are stored; the local
+    factors are recomputed during the backward pass unless the whole batch fits in one chunk.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    obs = np.asarray(obs)
+    obs, lengths = _check_batch(mdp, log_policy, obs, observation_model, lengths, factors,
+                                method)
     log_p0 = mdp.log_initial if log_initial is None else log_initial
     ids = np.arange(obs.shape[0]) if demo_ids is None else np.asarray(demo_ids)
+    emissions = _Emissions(observation_model, obs, factors)
     if method == "auto":
-        stats = _scaled_forward_backward(mdp, log_policy, obs, log_emissions, log_p0)
+        stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape, lengths, log_p0)
         if stats is not None:
             return stats
-    return log_forward_backward(
-        mdp, log_policy, obs, log_emissions, log_initial=log_p0, demo_ids=ids
-    )
+    return _log_pass(mdp, log_policy, emissions, obs, lengths, log_p0, ids)
 
 
 def _scaled_floor(mdp: TabularMDP) -> float:
@@ -177,91 +375,112 @@ def _chunks(length: int, per_step: int) -> list[tuple[int, int]]:
     return [(t0, min(t0 + size, length)) for t0 in range(0, length, size)]
 
 
-_CHUNK_ELEMENTS = 1 << 19
-
-
-def _shifted_local(log_policy, obs, log_emissions, t0: int, t1: int, floor: float):
-    """``exp(ll - max ll)`` of steps t0..t1-1, shape (N, t1 - t0, S, A), and the shifts
-    ``max_{s, a} ll`` (N, t1 - t0); ``None`` if a positive factor falls below ``e^floor``."""
-    ll = log_emissions[obs[:, t0:t1]]
-    ll += log_policy if log_policy.ndim == 2 else log_policy[t0:t1]
-    top = ll.max(axis=(2, 3))
-    if not np.all(np.isfinite(top)):
-        return None  # a step no pair can emit: the log-space pass names it
-    ll -= top[:, :, None, None]
-    low = ll < floor
-    if low.any() and np.isfinite(ll[low]).any():
-        return None
-    return np.exp(ll, out=ll), top
-
-
-def _scaled_forward_backward(mdp, log_policy, obs, log_emissions, log_p0):
+def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
     """The scaled pass; ``None`` when a message would leave its safe range (see module)."""
-    n_demos, length = obs.shape
+    n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
     F = _scaled_floor(mdp)
     if F < 20.0:
         return None
+    stationary = log_policy.ndim == 2
+    log_pi_min = finite_min(log_policy)
+    pi = np.ascontiguousarray(np.swapaxes(np.exp(log_policy), -1, -2))  # [.., a, s]
     chunks = _chunks(length, n_demos * S * A)
+    ragged = bool(lengths.min() < length)
+
+    def block(t0, t1):
+        """The chunk's shifted observation likelihoods, or None outside the safe range."""
+        blk = emissions.steps(t0, t1)
+        if not blk.possible:
+            return None  # a step no pair can emit: the log-space pass names it
+        if blk.min_log + log_pi_min < -F:
+            return None
+        return blk
 
     preds = np.empty((length, n_demos, S))
     shifts = np.empty((length, n_demos))
     norms = np.empty((length, n_demos))
     pred = np.repeat(np.exp(log_p0)[None, :], n_demos, axis=0)
+    kept = None
     with np.errstate(divide="ignore", invalid="ignore"):
         for t0, t1 in chunks:
-            out = _shifted_local(log_policy, obs, log_emissions, t0, t1, -F)
-            if out is None:
+            blk = block(t0, t1)
+            if blk is None:
                 return None
-            local, shifts[t0:t1] = out[0], out[1].T
+            shifts[t0:t1] = blk.shift.T
             for t in range(t0, t1):
-                alpha = local[:, t - t0] * pred[:, :, None]
-                c = alpha.sum(axis=(1, 2))
+                alpha = blk.factor[:, t - t0] * (pi if stationary else pi[t])
+                alpha *= pred[:, None, :]
+                c = np.add.reduce(alpha.reshape(n_demos, S * A), axis=1)
                 preds[t], norms[t] = pred, c
-                if t + 1 < length:
-                    alpha /= c[:, None, None]
-                    pred = mdp.push_forward(alpha)
+                if t + 1 < length:  # push, then normalize the (N, S) result: one pass less
+                    pred = mdp.push_forward_action_major(alpha)
+                    pred /= c[:, None]
+        if len(chunks) == 1:
+            kept = blk  # one chunk: the backward pass reuses it
     if not np.all(norms > 0.0):
         return None  # impossible somewhere: the log-space pass names the demonstration
-    if np.any((preds > 0.0) & (preds < np.exp(-F))):
-        return None
+    tiny = np.exp(-F)
+    step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
+    for t0 in range(0, length, step):  # in chunks: no (T, N, S) temporaries
+        p = preds[t0:t0 + step]
+        if np.any((p > 0.0) & (p < tiny)):
+            return None
 
     # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
     # divided by c_{t+1} (Rabiner scaling), so that alpha_t * beta_t is the posterior
     # marginal of step t. The local factors carry the forward pass's shifts, so alpha_t and
     # beta_t are scaled consistently. A state the forward pass cannot reach at step t gets
     # g = 0: no pair with forward mass leads there, and so every beta stays below about e^F.
-    occupancy = np.zeros((n_demos, S, A))
-    beta = np.ones((n_demos, S, A))
+    # Padded steps (t >= lengths[n]) add nothing, and beta restarts at 1 at each last step.
+    inv_norms = 1.0 / norms
+    scale = preds  # becomes pred_t / c_t in place (T, N, S): no second copy
+    scale *= inv_norms[:, :, None]
+    if ragged:
+        valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
+        scale *= valid[:, :, None]
+        last = lengths - 1
+    occupancy = np.zeros((n_demos, A, S))
+    beta = np.ones((n_demos, A, S))
     with np.errstate(over="ignore", invalid="ignore"):
         for t0, t1 in reversed(chunks):
-            local = _shifted_local(log_policy, obs, log_emissions, t0, t1, -np.inf)[0]
+            blk = kept if kept is not None else emissions.steps(t0, t1)
             for t in range(t1 - 1, t0 - 1, -1):
-                gamma_t = local[:, t - t0] * beta
+                if ragged:
+                    ends = last == t
+                    if ends.any():
+                        beta[ends] = 1.0
+                gamma_t = blk.factor[:, t - t0] * (pi if stationary else pi[t])
+                gamma_t *= beta
                 if t > 0:
-                    g = gamma_t.sum(axis=2)  # (N, S)
-                    g *= preds[t] > 0.0  # unreachable states send nothing back
-                gamma_t *= (preds[t] / norms[t][:, None])[:, :, None]
+                    g = np.add.reduce(gamma_t, axis=1)  # (N, S)
+                    # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a
+                    # real step; padded steps are zeroed and send nothing either)
+                    g *= scale[t] > 0.0
+                    g *= inv_norms[t][:, None]
+                gamma_t *= scale[t][:, None, :]
                 occupancy += gamma_t
                 if t > 0:
-                    beta = np.moveaxis(mdp.expect_next(g.T), 2, 0)
-                    beta /= norms[t][:, None, None]
-    initial = gamma_t.sum(axis=2)
+                    beta = mdp.expect_next_action_major(g)
+    initial = gamma_t.sum(axis=1)
     if not (np.all(np.isfinite(occupancy)) and np.all(np.isfinite(initial))):
         return None
-    return PosteriorStats(
-        log_likelihood=shifts.sum(axis=0) + np.log(norms).sum(axis=0),
-        occupancy=occupancy,
-        initial=initial,
-    )
+    per_step = shifts + np.log(norms)
+    if ragged:
+        per_step = np.where(valid, per_step, 0.0)
+    return PosteriorStats(log_likelihood=per_step.sum(axis=0),
+                          occupancy=np.ascontiguousarray(np.swapaxes(occupancy, 1, 2)),
+                          initial=initial)
 
 
 def log_forward_backward(
     mdp: TabularMDP,
     log_policy: np.ndarray,
     obs: np.ndarray,
-    log_emissions: np.ndarray,
+    observation_model,
     *,
+    lengths: np.ndarray | None = None,
+    factors: ObservationFactors | None = None,
     log_initial: np.ndarray | None = None,
     demo_ids: Sequence[int] | None = None,
 ) -> PosteriorStats:
@@ -271,22 +490,31 @@ def log_forward_backward(
     operator with ``logsumexp`` over its positive entries (:meth:`TabularMDP.log_push_forward`,
     :meth:`TabularMDP.log_expect_next`), ``O(T nnz(T))`` exponentials per demonstration.
     """
-    obs = np.asarray(obs)
+    obs, lengths = _check_batch(mdp, log_policy, obs, observation_model, lengths, factors,
+                                "log")
+    log_p0 = mdp.log_initial if log_initial is None else log_initial
+    ids = np.arange(obs.shape[0]) if demo_ids is None else np.asarray(demo_ids)
+    return _log_pass(mdp, log_policy, _Emissions(observation_model, obs, None), obs, lengths,
+                     log_p0, ids)
+
+
+def _log_pass(mdp, log_policy, emissions: _Emissions, obs, lengths, log_p0,
+              ids) -> PosteriorStats:
     n_demos, length = obs.shape
     S, A = mdp.n_states, mdp.n_actions
-    log_p0 = mdp.log_initial if log_initial is None else log_initial
-    ids = np.arange(n_demos) if demo_ids is None else np.asarray(demo_ids)
-    local = _local(log_policy, obs, log_emissions)
+    valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
 
     log_preds = np.empty((length, n_demos, S))
     log_norms = np.empty((length, n_demos))
     lp = np.repeat(log_p0[None, :], n_demos, axis=0)
     for t in range(length):
-        la = local(t)
+        la = emissions.log(t)
+        la += log_policy if log_policy.ndim == 2 else log_policy[t]
         la += lp[:, :, None]
         lc = _logsumexp(la, axis=(1, 2))
-        if not np.all(np.isfinite(lc)):
-            raise _impossible(ids, obs, int(np.flatnonzero(~np.isfinite(lc))[0]), t)
+        bad = ~np.isfinite(lc) & valid[t]
+        if bad.any():
+            raise _impossible(ids, obs, int(np.flatnonzero(bad)[0]), t)
         log_preds[t], log_norms[t] = lp, lc
         if t + 1 < length:
             la -= lc[:, None, None]
@@ -295,16 +523,20 @@ def log_forward_backward(
     occupancy = np.zeros((n_demos, S, A))
     log_beta = np.zeros((n_demos, S, A))
     for t in range(length - 1, -1, -1):
-        lg = local(t)
+        ends = lengths - 1 == t
+        log_beta[ends] = 0.0
+        lg = emissions.log(t)
+        lg += log_policy if log_policy.ndim == 2 else log_policy[t]
         lg += log_beta  # log(pi e_t beta_t)
         log_post = lg + (log_preds[t] - log_norms[t][:, None])[:, :, None]
         post = np.exp(log_post)
+        post[~valid[t]] = 0.0
         occupancy += post
         if t > 0:
             log_beta = mdp.log_expect_next(_logsumexp(lg, axis=2))
             log_beta -= log_norms[t][:, None, None]
     return PosteriorStats(
-        log_likelihood=log_norms.sum(axis=0),
+        log_likelihood=np.where(valid, log_norms, 0.0).sum(axis=0),
         occupancy=occupancy,
         initial=post.sum(axis=2),
     )
@@ -313,25 +545,39 @@ def log_forward_backward(
 def posterior_stats(
     mdp: TabularMDP,
     log_policy: np.ndarray | None,
-    demos: Sequence[Demonstration],
-    observation_model,
+    demos: Sequence[Demonstration] | PackedDemonstrations,
+    observation_model=None,
     *,
     log_policies_by_length=None,
     method: str = "auto",
 ) -> PosteriorStats:
-    """:func:`forward_backward` over demonstrations of any lengths, in length-batches.
+    """:func:`forward_backward` over demonstrations of any lengths, in batches.
 
     ``log_policy`` is a stationary ``log pi[s, a]``; alternatively ``log_policies_by_length(T)``
     returns a ``(T, S, A)`` log-policy for demonstrations of length T (finite-horizon models).
+    ``demos`` may be packed once beforehand (:func:`pack_demonstrations`, with
+    ``equal_lengths=True`` for time-indexed policies); then ``observation_model`` is the
+    packing's.
     """
-    log_emissions = observation_model.log_emissions
-    n = len(demos)
+    if isinstance(demos, PackedDemonstrations):
+        packed = demos
+        if log_policies_by_length is not None and not packed.equal_lengths:
+            raise ValueError("log_policies_by_length needs demos packed with "
+                             "equal_lengths=True; got a ragged packing")
+    else:
+        packed = pack_demonstrations(demos, observation_model,
+                                     equal_lengths=log_policies_by_length is not None,
+                                     cache=False)
+    om = packed.observation_model
+    n = packed.n_demos
     ll = np.empty(n)
     occ = np.empty((n, mdp.n_states, mdp.n_actions))
     init = np.empty((n, mdp.n_states))
-    for length, idx in group_by_length(demos).items():
-        packed = pack_observations([demos[i] for i in idx], observation_model.n_observations)
-        pol = log_policy if log_policies_by_length is None else log_policies_by_length(length)
-        stats = forward_backward(mdp, pol, packed, log_emissions, demo_ids=idx, method=method)
+    for idx, obs, lengths, factors in zip(packed.batches, packed.obs, packed.lengths,
+                                          packed.factors, strict=True):
+        pol = log_policy if log_policies_by_length is None else log_policies_by_length(
+            obs.shape[1])
+        stats = forward_backward(mdp, pol, obs, om, lengths=lengths, factors=factors,
+                                 demo_ids=idx, method=method)
         ll[idx], occ[idx], init[idx] = stats.log_likelihood, stats.occupancy, stats.initial
     return PosteriorStats(log_likelihood=ll, occupancy=occ, initial=init)

@@ -63,6 +63,7 @@ class TabularMDP:
         else:
             flat, n_states, n_actions = _flatten_dense(transitions)
         self._flat = flat
+        self._sparse = sp.issparse(flat)
         self.n_states = n_states
         self.n_actions = n_actions
 
@@ -91,7 +92,7 @@ class TabularMDP:
     @property
     def is_sparse(self) -> bool:
         """True when transitions are stored as a sparse matrix."""
-        return sp.issparse(self._flat)
+        return self._sparse
 
     def reward(self, theta: np.ndarray) -> np.ndarray:
         """Reward table ``R[s, a] = phi[s, a] . theta`` of shape (S, A)."""
@@ -126,11 +127,57 @@ class TabularMDP:
         return np.asarray(out).reshape((self.n_states, self.n_actions, *values.shape[1:]))
 
     def push_forward(self, mass: np.ndarray) -> np.ndarray:
-        """Next-state mass ``sum_{s, a} mass[..., s, a] T[s, a, s']``, shape (..., S)."""
+        """Next-state mass ``sum_{s, a} mass[..., s, a] T[s, a, s']``, shape (..., S).
+
+        A batch ``mass[n, s, a]`` goes through in one product with the block ``(N, S A)``.
+        """
         lead = mass.shape[:-2]
         flat_mass = mass.reshape(-1, self.n_states * self.n_actions)
-        out = (self._flat.T @ flat_mass.T).T
-        return np.asarray(out).reshape((*lead, self.n_states))
+        out = np.asarray(self._flat_T @ flat_mass.T).T if self._sparse else flat_mass @ self._flat
+        return out.reshape((*lead, self.n_states))
+
+    def expect_next_batch(self, values: np.ndarray) -> np.ndarray:
+        """``sum_s' T[s, a, s'] values[n, s']`` for a batch ``values[n, s']``, shape (N, S, A).
+
+        The batch-first form of :meth:`expect_next`: one product with the block ``(N, S)``.
+        """
+        out = np.asarray(self._flat @ values.T).T if self._sparse else values @ self._flat.T
+        return out.reshape(values.shape[0], self.n_states, self.n_actions)
+
+    def push_forward_action_major(self, mass: np.ndarray) -> np.ndarray:
+        """:meth:`push_forward` of a batch in action-major layout ``mass[n, a, s]``, shape (N, S).
+
+        Forward-backward keeps its messages action-major so that broadcasting a state vector
+        over the actions runs along the long axis.
+        """
+        flat = mass.reshape(mass.shape[0], -1)
+        if self._sparse:
+            return np.asarray(self._action_major_T @ flat.T).T
+        return flat @ self._action_major
+
+    def expect_next_action_major(self, values: np.ndarray) -> np.ndarray:
+        """:meth:`expect_next_batch` in action-major layout: ``out[n, a, s]``, shape (N, A, S)."""
+        if self._sparse:
+            out = np.asarray(self._action_major @ values.T).T
+        else:
+            out = values @ self._action_major.T
+        return out.reshape(values.shape[0], self.n_actions, self.n_states)
+
+    @cached_property
+    def _action_major(self):
+        """``P`` with rows reordered to ``a * S + s``."""
+        order = (np.arange(self.n_states)[None, :] * self.n_actions
+                 + np.arange(self.n_actions)[:, None]).ravel()
+        return self._flat[order]
+
+    @cached_property
+    def _action_major_T(self):
+        return self._action_major.T.tocsr()
+
+    @cached_property
+    def _flat_T(self):
+        """``P.T`` as CSR (a sparse MDP's forward products read it row by row)."""
+        return self._flat.T.tocsr()
 
     # -- the same kernels in log space (exact at any dynamic range; used where the scaled
     # linear-space messages of forward-backward would underflow) ---------------------------

@@ -56,6 +56,13 @@ class GaussianPrior:
         mu, sd = self._broadcast(theta.shape[0])
         return -(theta - mu) / sd**2
 
+    def _value_and_grad(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """``(log p(theta), d log p / dtheta)`` for a theta already checked (in a fit's loop)."""
+        mu, sd = self._broadcast(theta.shape[0])
+        z = (theta - mu) / sd
+        value = -0.5 * (z @ z) - np.log(sd).sum() - 0.5 * theta.shape[0] * np.log(2 * np.pi)
+        return float(value), -z / sd
+
     def sample(self, n_features: int, seed=None) -> np.ndarray:
         """One draw of theta, shape (n_features,)."""
         n_features = check_int(n_features, "n_features", low=1)

@@ -26,7 +26,7 @@ import numpy as np
 from irl._random import check_random_state
 from irl._validation import check_int, check_real, describe
 from irl.demonstrations import Demonstration
-from irl.inference import posterior_stats
+from irl.inference import pack_demonstrations, posterior_stats
 from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.mdp import TabularMDP
@@ -101,23 +101,29 @@ class _BayesianIRL(LearnerBase):
         prior._broadcast(self.mdp.n_features)
         return _Model(self.mdp, self.observation_model, beta, prior, OptimalQSolver(self.mdp))
 
-    def _check_call(self, theta, demos) -> tuple[_Model, np.ndarray, list[Demonstration]]:
+    def _check_call(self, theta, demos) -> tuple[_Model, np.ndarray, object]:
         model = self._check_model()
         demos = self._check_problem(demos)
-        return model, self.mdp.check_theta(theta), demos
+        return model, self.mdp.check_theta(theta), self._prepare(model, demos)
+
+    def _prepare(self, model: _Model, demos: list[Demonstration]):
+        """What ``_pair_stats`` needs of validated demonstrations, computed once per call
+        (once per fit, not once per optimizer step)."""
+        raise NotImplementedError
 
     @staticmethod
     def _log_policy(model: _Model, theta: np.ndarray) -> tuple[OptimalSolution, np.ndarray]:
         sol = model.solver.solve(theta)
         return sol, log_boltzmann_policy(sol.q_values(theta), model.beta)
 
-    def _pair_stats(self, model: _Model, log_pi, demos) -> tuple[float, np.ndarray]:
-        """``(log-likelihood, G[s, a])`` of the demonstrations under ``log pi``."""
+    def _pair_stats(self, model: _Model, log_pi, data) -> tuple[float, np.ndarray]:
+        """``(log-likelihood, G[s, a])`` under ``log pi`` of the demonstrations as
+        prepared by ``_prepare``."""
         raise NotImplementedError
 
-    def _likelihood_and_gradient(self, model: _Model, theta, demos) -> tuple[float, np.ndarray]:
+    def _likelihood_and_gradient(self, model: _Model, theta, data) -> tuple[float, np.ndarray]:
         sol, log_pi = self._log_policy(model, theta)
-        ll, G = self._pair_stats(model, log_pi, demos)
+        ll, G = self._pair_stats(model, log_pi, data)
         pi = np.exp(log_pi)
         expected_dQ = np.einsum("sa,sak->sk", pi, sol.dQ)
         grad = model.beta * (
@@ -128,28 +134,28 @@ class _BayesianIRL(LearnerBase):
     def log_likelihood(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:
         """Natural log of ``prod_demos P(o_1..T | theta)``; finite for any finite theta
         unless a demonstration is impossible under the model (a ``ValueError``)."""
-        model, theta, demos = self._check_call(theta, demos)
-        return float(self._pair_stats(model, self._log_policy(model, theta)[1], demos)[0])
+        model, theta, data = self._check_call(theta, demos)
+        return float(self._pair_stats(model, self._log_policy(model, theta)[1], data)[0])
 
     def log_likelihood_gradient(
         self, theta: np.ndarray, demos: Sequence[Demonstration]
     ) -> np.ndarray:
         """Gradient of :meth:`log_likelihood` in theta, shape (K,)."""
-        model, theta, demos = self._check_call(theta, demos)
-        return self._likelihood_and_gradient(model, theta, demos)[1]
+        model, theta, data = self._check_call(theta, demos)
+        return self._likelihood_and_gradient(model, theta, data)[1]
 
     def log_posterior(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:
         """``log p(theta) + log-likelihood`` (up to the evidence)."""
-        model, theta, demos = self._check_call(theta, demos)
-        ll = self._pair_stats(model, self._log_policy(model, theta)[1], demos)[0]
+        model, theta, data = self._check_call(theta, demos)
+        ll = self._pair_stats(model, self._log_policy(model, theta)[1], data)[0]
         return float(ll) + model.prior.log_prob(theta)
 
     def log_posterior_gradient(
         self, theta: np.ndarray, demos: Sequence[Demonstration]
     ) -> np.ndarray:
         """Gradient of :meth:`log_posterior`, shape (K,)."""
-        model, theta, demos = self._check_call(theta, demos)
-        grad = self._likelihood_and_gradient(model, theta, demos)[1]
+        model, theta, data = self._check_call(theta, demos)
+        grad = self._likelihood_and_gradient(model, theta, data)[1]
         return grad + model.prior.grad_log_prob(theta)
 
     # -- fitting --------------------------------------------------------------------------
@@ -185,15 +191,16 @@ class _BayesianIRL(LearnerBase):
         """
         model = self._check_model()
         search = self._check_search()
-        demos = self._check_problem(demos)
+        data = self._prepare(model, self._check_problem(demos))
         prior, K = model.prior, self.mdp.n_features
         first = (np.broadcast_to(prior.mean, (K,)).astype(float)
                  if search["init"] is None else search["init"])
         starts = [first] + [prior.sample(K, search["rng"]) for _ in range(search["n_restarts"] - 1)]
 
-        def objective(theta):
-            ll, grad = self._likelihood_and_gradient(model, theta, demos)
-            return ll + prior.log_prob(theta), grad + prior.grad_log_prob(theta)
+        def objective(theta):  # theta comes from the optimizer: no checks in the loop
+            ll, grad = self._likelihood_and_gradient(model, theta, data)
+            value, prior_grad = prior._value_and_grad(theta)
+            return ll + value, grad + prior_grad
 
         if self.optimizer == "lbfgs":
             res = maximize_lbfgs(objective, starts, max_iter=search["max_iter"],
@@ -273,8 +280,11 @@ class MMAPBIRL(_BayesianIRL):
         The prior used: ``prior``, or the standard normal when it is None.
     """
 
-    def _pair_stats(self, model, log_pi, demos):
-        stats = posterior_stats(model.mdp, log_pi, demos, model.observation_model)
+    def _prepare(self, model, demos):
+        return pack_demonstrations(demos, model.observation_model)
+
+    def _pair_stats(self, model, log_pi, packed):
+        stats = posterior_stats(model.mdp, log_pi, packed)
         return float(stats.log_likelihood.sum()), stats.occupancy.sum(axis=0)
 
 
@@ -287,8 +297,10 @@ class MAPBIRL(_BayesianIRL):
     the theta-independent ``log p0 + sum log T``). Parameters are those of :class:`MMAPBIRL`.
     """
 
-    def _pair_stats(self, model, log_pi, demos):
-        G = face_value_counts(demos, model.observation_model)
+    def _prepare(self, model, demos):
+        return face_value_counts(demos, model.observation_model)
+
+    def _pair_stats(self, model, log_pi, G):
         seen = G > 0
         return float((G[seen] * log_pi[seen]).sum()), G
 

@@ -30,7 +30,7 @@ from scipy.special import logsumexp
 from irl._validation import check_int, check_real
 from irl.demonstrations import Demonstration
 from irl.exceptions import ConvergenceWarning
-from irl.inference import posterior_stats
+from irl.inference import PackedDemonstrations, pack_demonstrations, posterior_stats
 from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_lbfgs
 from irl.mdp import TabularMDP
@@ -290,13 +290,16 @@ class HiddenDataEM(_MCEBase):
         """Posterior statistics of the demonstrations under the soft policy of ``theta``."""
         demos = self._check_problem(demos)
         theta = self.mdp.check_theta(theta)
-        return self._e_step(theta, demos)
+        return self._e_step(theta, self._pack(demos))
 
-    def _e_step(self, theta, demos):
-        log_pi, _ = soft_backward(self.mdp, self.mdp.features @ theta, max(len(d) for d in demos))
+    def _pack(self, demos) -> PackedDemonstrations:
+        return pack_demonstrations(demos, self.observation_model, equal_lengths=True)
+
+    def _e_step(self, theta, packed: PackedDemonstrations):
+        horizon = max(obs.shape[1] for obs in packed.obs)
+        log_pi, _ = soft_backward(self.mdp, self.mdp.features @ theta, horizon)
         return posterior_stats(
-            self.mdp, None, demos, self.observation_model,
-            log_policies_by_length=lambda T: log_pi[:T][::-1],
+            self.mdp, None, packed, log_policies_by_length=lambda T: log_pi[:T][::-1],
         )
 
     def fit(self, demos: Sequence[Demonstration]):
@@ -306,12 +309,13 @@ class HiddenDataEM(_MCEBase):
         m_max_iter = check_int(self.m_step_max_iter, "m_step_max_iter", low=1)
         m_tol = check_real(self.m_step_tol, "m_step_tol", low=0.0)
         demos = self._check_problem(demos)
+        packed = self._pack(demos)
         theta = self._theta0(params["init"])
         history: list[dict] = []
         converged = False
         delta = np.inf
         for it in range(params["max_iter"]):
-            stats = self._e_step(theta, demos)
+            stats = self._e_step(theta, packed)
             groups: Groups = {}
             for i, d in enumerate(demos):
                 D0, fbar = groups.setdefault(

@@ -25,8 +25,46 @@ def random_mdp(rng, n_states=3, n_actions=2, n_features=2, sparse=False) -> irl.
     return irl.TabularMDP(transitions=T, features=phi, discount=0.9, initial=p0)
 
 
-def random_observation_model(rng, n_states, n_actions, n_obs=4) -> ObservationModel:
-    return ObservationModel(rng.dirichlet(np.ones(n_obs), size=(n_states, n_actions)))
+#: Every implementation of irl.ObservationModel; exactness tests run for each.
+OM_KINDS = ("dense", "factored", "sparse", "state", "state-sparse")
+
+
+def random_observation_model(rng, n_states, n_actions, n_obs=4, kind="dense") -> ObservationModel:
+    """A random observation model of the given implementation.
+
+    ``factored`` has pair observations (``n_obs`` is ignored: S * A of them) through one or two
+    state factors; ``sparse`` has structural zeros (every row and column keeps its largest
+    entry, so no observation is impossible under every pair); ``state``/``state-sparse`` observe
+    the state only, through a dense or a ``scipy.sparse`` confusion.
+    """
+    import scipy.sparse as sp
+
+    from irl.observation import (
+        FactoredObservationModel,
+        SparseObservationModel,
+        StateObservationModel,
+    )
+
+    if kind == "dense":
+        return ObservationModel(rng.dirichlet(np.ones(n_obs), size=(n_states, n_actions)))
+    if kind == "factored":
+        sizes = (2, n_states // 2) if n_states > 2 and n_states % 2 == 0 else (n_states,)
+        return FactoredObservationModel(
+            [rng.dirichlet(np.ones(n), size=n) for n in sizes],
+            rng.dirichlet(np.ones(n_actions), size=n_actions),
+        )
+    if kind == "sparse":
+        M = rng.dirichlet(np.ones(n_obs), size=n_states * n_actions)
+        row_max, col_max = M.max(axis=1, keepdims=True), M.max(axis=0)
+        keep = (M >= 0.2) | (row_max <= M) | (col_max <= M)
+        M = np.where(keep, M, 0.0)
+        M /= M.sum(axis=1, keepdims=True)
+        return SparseObservationModel(sp.csr_matrix(M), n_actions)
+    if kind in ("state", "state-sparse"):
+        C = rng.dirichlet(np.ones(n_obs), size=n_states)
+        return StateObservationModel(sp.csr_matrix(C) if kind == "state-sparse" else C,
+                                     n_actions)
+    raise ValueError(f"kind must be one of {OM_KINDS}; got {kind!r}")
 
 
 def random_demo(rng, length, n_obs, p_occluded=0.4) -> irl.Demonstration:

@@ -4,6 +4,7 @@ import pytest
 import irl
 from irl.inference import forward_backward, posterior_stats
 from tests.irl.conftest import (
+    OM_KINDS,
     brute_force,
     random_demo,
     random_mdp,
@@ -11,13 +12,14 @@ from tests.irl.conftest import (
 )
 
 
+@pytest.mark.parametrize("kind", OM_KINDS)
 @pytest.mark.parametrize("method", ["auto", "log"])
 @pytest.mark.parametrize("sparse", [False, True])
 @pytest.mark.parametrize("seed", range(6))
-def test_forward_backward_equals_enumeration(seed, sparse, method):
+def test_forward_backward_equals_enumeration(seed, sparse, method, kind):
     rng = np.random.default_rng(seed)
     mdp = random_mdp(rng, sparse=sparse)
-    om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
+    om = random_observation_model(rng, mdp.n_states, mdp.n_actions, kind=kind)
     pi = rng.dirichlet(np.ones(mdp.n_actions), size=mdp.n_states)
     demos = [random_demo(rng, length, om.n_observations) for length in (1, 3, 4, 4)]
     stats = posterior_stats(mdp, np.log(pi), demos, om, method=method)
@@ -29,22 +31,24 @@ def test_forward_backward_equals_enumeration(seed, sparse, method):
         np.testing.assert_allclose(stats.initial[i], marg[0].sum(axis=1), atol=1e-10)
 
 
+@pytest.mark.parametrize("kind", OM_KINDS)
 @pytest.mark.parametrize("method", ["auto", "log"])
-def test_time_varying_policy_equals_enumeration(rng, method):
+def test_time_varying_policy_equals_enumeration(rng, method, kind):
     mdp = random_mdp(rng)
-    om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
+    om = random_observation_model(rng, mdp.n_states, mdp.n_actions, kind=kind)
     demo = random_demo(rng, 4, om.n_observations)
     pis = rng.dirichlet(np.ones(mdp.n_actions), size=(4, mdp.n_states))
     packed = demo.as_array()[None]
-    stats = forward_backward(mdp, np.log(pis), packed, om.log_emissions, method=method)
+    stats = forward_backward(mdp, np.log(pis), packed, om, method=method)
     ll, marg = brute_force(mdp, pis, om, demo)
     assert stats.log_likelihood[0] == pytest.approx(ll, rel=1e-10)
     np.testing.assert_allclose(stats.occupancy[0], marg.sum(axis=0), atol=1e-10)
 
 
-def test_all_occluded_demo_has_likelihood_one(rng):
+@pytest.mark.parametrize("kind", OM_KINDS)
+def test_all_occluded_demo_has_likelihood_one(rng, kind):
     mdp = random_mdp(rng)
-    om = random_observation_model(rng, mdp.n_states, mdp.n_actions)
+    om = random_observation_model(rng, mdp.n_states, mdp.n_actions, kind=kind)
     pi = rng.dirichlet(np.ones(mdp.n_actions), size=mdp.n_states)
     stats = posterior_stats(mdp, np.log(pi), [irl.Demonstration(observations=[None] * 5)], om)
     assert stats.log_likelihood[0] == pytest.approx(0.0, abs=1e-12)
@@ -88,7 +92,8 @@ def test_ten_thousand_noisy_occluded_steps_agree_on_both_passes():
 
 def _count_operator_calls(mdp, monkeypatch) -> dict[str, int]:
     """Count the transition-operator products forward-backward makes on ``mdp``."""
-    calls = {"push_forward": 0, "expect_next": 0, "log_push_forward": 0, "log_expect_next": 0}
+    calls = {"push_forward_action_major": 0, "expect_next_action_major": 0,
+             "log_push_forward": 0, "log_expect_next": 0}
     for name in calls:
         method = getattr(mdp, name)
 
@@ -110,8 +115,8 @@ def test_cost_is_independent_of_occlusion(occlusion, monkeypatch):
     log_pi = np.log(dom.expert_policy())
     calls = _count_operator_calls(dom.mdp, monkeypatch)
     stats = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
-    assert calls == {"push_forward": 199, "expect_next": 199, "log_push_forward": 0,
-                     "log_expect_next": 0}
+    assert calls == {"push_forward_action_major": 199, "expect_next_action_major": 199,
+                     "log_push_forward": 0, "log_expect_next": 0}
     if occlusion == 1.0:
         assert stats.log_likelihood == pytest.approx(0.0, abs=1e-9)
 

@@ -11,7 +11,13 @@ import irl
 from irl.inference import posterior_stats
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.solvers import OptimalQSolver
-from tests.irl.conftest import brute_force_log, random_demo, random_mdp, random_observation_model
+from tests.irl.conftest import (
+    OM_KINDS,
+    brute_force_log,
+    random_demo,
+    random_mdp,
+    random_observation_model,
+)
 
 SCALES = (1.0, 300.0, 1e4)
 
@@ -53,15 +59,16 @@ def test_every_likelihood_is_finite_up_to_1e4_times_the_true_weights(domain, sca
     assert values[2] == pytest.approx(log_pi[pairs[:, 0], pairs[:, 1]].sum(), rel=1e-12)
 
 
+@pytest.mark.parametrize("kind", OM_KINDS)
 @pytest.mark.parametrize("structural_zeros", [False, True])
 @pytest.mark.parametrize("scale", SCALES)
 @pytest.mark.parametrize("seed", range(4))
 def test_mmap_likelihood_and_posterior_at_extreme_weights_equal_log_space_enumeration(
-    seed, scale, structural_zeros
+    seed, scale, structural_zeros, kind
 ):
     rng = np.random.default_rng(300 + seed)
     mdp = (sparse_random_mdp if structural_zeros else random_mdp)(rng, 3, 2, 2)
-    om = random_observation_model(rng, 3, 2, n_obs=4)
+    om = random_observation_model(rng, 3, 2, n_obs=4, kind=kind)
     demos = [random_demo(rng, 4, 4), random_demo(rng, 3, 4)]
     theta = scale * rng.normal(size=2)
     log_pi = log_softmax(OptimalQSolver(mdp).q_values(theta), axis=1)

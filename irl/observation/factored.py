@@ -1,0 +1,164 @@
+"""Pair observations through independent per-factor confusion matrices, never a dense O.
+
+Layout: the state is ``s = ravel_multi_index((f_1, ..., f_F), sizes)`` (row-major); each factor
+is observed through ``C_f[true, observed]``, the action through ``C_A[a, a']``, and the
+observation is the pair ``o = s' * A + a'``, so
+
+    O[s, a, s' * A + a'] = C_A[a, a'] * prod_f C_f[s_f, s'_f]
+
+(the Kronecker product of the factors' confusions, what perception calibration measures). The
+likelihood of one observation over all ``S A`` pairs is a sum of ``F + 1`` broadcast columns in
+log space: ``O(S A)`` work and memory per observation, against ``O(S^2 A^2)`` for the dense array.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cached_property, reduce
+
+import numpy as np
+
+from irl._validation import as_float_array, check_int, check_probability_rows, describe
+from irl.observation.base import ObservationModel, check_names, safe_log
+
+__all__ = ["FactoredObservationModel"]
+
+
+def _square_confusion(c, name: str) -> np.ndarray:
+    c = as_float_array(c, name)
+    if c.ndim != 2 or c.shape[0] != c.shape[1] or c.shape[0] < 1:
+        raise ValueError(f"{name} must be square; got {c.shape}")
+    check_probability_rows(c, name)
+    return c
+
+
+class FactoredObservationModel(ObservationModel):
+    """``O[s, a, s' * A + a'] = C_A[a, a'] prod_f C_f[s_f, s'_f]`` from its factors.
+
+    Parameters
+    ----------
+    factor_confusions : sequence of ndarray, each of shape (n_f, n_f)
+        ``C_f[true, observed]`` of each state factor, in the order of the state's row-major
+        encoding; ``S = prod_f n_f``.
+    action_confusion : ndarray of shape (A, A), optional
+        ``C_A[a, a']``; the identity (actions observed exactly) when omitted, in which case
+        ``n_actions`` is required.
+    n_actions : int, optional
+    observation_names : sequence of str, optional
+
+    Notes
+    -----
+    ``nominal[o]`` is the pair ``divmod(o, A)`` the observation reports.
+    """
+
+    def __init__(
+        self,
+        factor_confusions: Sequence[np.ndarray],
+        action_confusion: np.ndarray | None = None,
+        *,
+        n_actions: int | None = None,
+        observation_names: Sequence[str] | None = None,
+    ) -> None:
+        if isinstance(factor_confusions, (str, bytes, np.ndarray)) or not isinstance(
+            factor_confusions, Sequence
+        ):
+            raise TypeError(
+                "factor_confusions must be a sequence of square matrices; got "
+                f"{describe(factor_confusions)}"
+            )
+        mats = [_square_confusion(c, f"factor_confusions[{i}]")
+                for i, c in enumerate(factor_confusions)]
+        if not mats:
+            raise ValueError("factor_confusions must hold at least one matrix; got none")
+        if action_confusion is None:
+            if n_actions is None:
+                raise ValueError("give action_confusion or n_actions; got neither")
+            action = np.eye(check_int(n_actions, "n_actions", low=1))
+        else:
+            action = _square_confusion(action_confusion, "action_confusion")
+            if n_actions is not None and check_int(n_actions, "n_actions", low=1) != len(action):
+                raise ValueError(f"n_actions must equal action_confusion's {len(action)}; got "
+                                 f"{n_actions}")
+        self.factor_confusions = mats
+        self.action_confusion = action
+        self.sizes = tuple(len(c) for c in mats)
+        self.n_states = int(np.prod(self.sizes))
+        self.n_actions = len(action)
+        self.n_observations = self.n_states * self.n_actions
+        self.observation_names = check_names(observation_names, self.n_observations)
+        self._log_factors = [safe_log(c) for c in mats]
+        self._log_action = safe_log(action)
+
+    @cached_property
+    def nominal(self) -> np.ndarray:
+        return np.stack(np.divmod(np.arange(self.n_observations), self.n_actions), axis=1)
+
+    def _log_likelihoods(self, obs: np.ndarray) -> np.ndarray:
+        m = obs.size
+        seen_state, seen_action = np.divmod(obs, self.n_actions)
+        parts = np.unravel_index(seen_state, self.sizes)
+        total = np.zeros((m, *self.sizes))
+        n_f = len(self.sizes)
+        for f, (log_c, part) in enumerate(zip(self._log_factors, parts, strict=True)):
+            shape = [m] + [1] * n_f
+            shape[1 + f] = self.sizes[f]
+            total += log_c[:, part].T.reshape(shape)
+        out = np.empty((m, self.n_states, self.n_actions))
+        np.add(total.reshape(m, self.n_states, 1),
+               self._log_action[:, seen_action].T[:, None, :], out=out)
+        return out
+
+    def scaled_likelihoods(self, obs, *, action_major: bool = False
+                           ) -> tuple[np.ndarray, np.ndarray, float]:
+        """As :meth:`ObservationModel.scaled_likelihoods`, from the factors' columns: each is
+        divided by its maximum, so the shift is the sum of their log-maxima and the factor
+        their outer product (one pass over the ``S A`` pairs per observation)."""
+        obs = np.asarray(obs)
+        flat = obs.reshape(-1)
+        m = flat.size
+        occluded = flat < 0
+        seen_state, seen_action = np.divmod(np.where(occluded, 0, flat), self.n_actions)
+        parts = np.unravel_index(seen_state, self.sizes)
+        columns = [c[:, part].T for c, part in zip(self.factor_confusions, parts, strict=True)]
+        columns.append(self.action_confusion[:, seen_action].T)
+        shift = np.zeros(m)
+        low = np.zeros(m)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for col in columns:  # (m, n_f), a fresh array
+                col[occluded] = 1.0
+                top = col.max(axis=1)
+                col /= top[:, None]
+                shift += np.log(top)
+                low += np.log(np.where(col > 0, col, np.inf).min(axis=1))
+        possible = np.isfinite(shift)
+        min_log = float(low[possible].min()) if possible.any() else 0.0
+        product = columns[0]
+        for col in columns[1:-1]:
+            product = (product[:, :, None] * col[:, None, :]).reshape(m, -1)
+        if action_major:  # the long axis innermost: a fast broadcast
+            factor = columns[-1][:, :, None] * product[:, None, :]
+            tail = (self.n_actions, self.n_states)
+        else:
+            factor = product[:, :, None] * columns[-1][:, None, :]
+            tail = (self.n_states, self.n_actions)
+        return factor.reshape((*obs.shape, *tail)), shift.reshape(obs.shape), min_log
+
+    def distribution(self, state: int, action: int) -> np.ndarray:
+        parts = np.unravel_index(state, self.sizes)
+        rows = [c[p] for c, p in zip(self.factor_confusions, parts, strict=True)]
+        return reduce(np.kron, [*rows, self.action_confusion[action]])
+
+    @cached_property
+    def state_confusion(self) -> np.ndarray:
+        """The dense ``C_S = C_1 kron ... kron C_F``, shape (S, S); for small models."""
+        return reduce(np.kron, self.factor_confusions)
+
+    @cached_property
+    def probs(self) -> np.ndarray:
+        S, A = self.n_states, self.n_actions
+        return np.einsum("st,ab->satb", self.state_confusion,
+                         self.action_confusion).reshape(S, A, S * A)
+
+    def _correct(self) -> np.ndarray:
+        diag = reduce(np.kron, [np.diagonal(c) for c in self.factor_confusions])
+        return np.outer(diag, np.diagonal(self.action_confusion))
