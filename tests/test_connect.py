@@ -101,6 +101,7 @@ def rows(path) -> dict[str, int]:
     return out
 
 
+@pytest.mark.slow  # timing-sensitive under load, as below: see the note there
 def test_a_stream_goes_whole_to_the_file_and_to_the_viewer(viewer, tmp_path):
     path = tmp_path / "out.rrd"
     rec = open_recording("onionsort_test", rerun_targets(path, viewer.url))
