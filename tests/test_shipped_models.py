@@ -1,0 +1,43 @@
+"""The shipped perception models against the floors the README states, on frames rendered fresh
+for this test (a seed no model, threshold or calibration was chosen on)."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+#: the seed of the frames rendered here; used for nothing else
+FRESH_SEED = 4242
+
+#: README row label (before "(floor ...)") -> how to read the metric from eval-perception
+METRICS = {
+    "detector mAP@0.5": lambda r: r["map50"],
+    "onion location, unoccluded steps": lambda r: r["accuracy"]["onion"],
+    "end-effector location": lambda r: r["accuracy"]["end_effector"],
+    "inspection call (the detector's good/blemished call on each inspected onion)":
+        lambda r: r["inspection_call"]["all"]["accuracy"],
+    "occluded steps: recall": lambda r: r["occlusion_recall"],
+}
+
+
+def readme_floors() -> dict[str, float]:
+    text = (ROOT / "README.md").read_text()
+    return {label.strip(): float(floor)
+            for label, floor in re.findall(r"^\| ([^|\n]*?)\(floor ([0-9.]+)\)", text, re.M)}
+
+
+def test_the_readme_states_a_floor_for_every_checked_metric():
+    assert set(readme_floors()) == set(METRICS)
+
+
+@pytest.mark.slow
+def test_the_shipped_models_meet_the_readme_floors_on_fresh_frames(tmp_path):
+    from onionsort.stages import DatasetConfig, PerceptionEvalConfig, eval_perception, make_dataset
+
+    data = tmp_path / "fresh"
+    make_dataset(DatasetConfig(out=data, frames=600, robot_onions=30, seed=FRESH_SEED))
+    result = eval_perception(PerceptionEvalConfig(data=data, split="all"))
+    below = {label: (round(METRICS[label](result), 3), floor)
+             for label, floor in readme_floors().items() if METRICS[label](result) < floor}
+    assert not below, f"below the README's floors (measured, floor): {below}"
