@@ -71,7 +71,15 @@ def test_experiment_sweeps_demonstrations_lengths_and_learner_beta(tmp_path):
     assert summary["config"]["trajectories"] == [1, 2]
     assert summary["bootstrap"]["confidence"] == 0.95
     assert len(summary["points"]) == 2 * 2 * 2 * 2
+    key = ("method", "trajectories", "length", "learner")
     for p in summary["points"]:
+        mine = [r for r in rows if all(str(p[k]) == r[k] for k in key)]
+        assert len(mine) == 2  # the batches of this point
+        # the summary is the mean of its own rows, with an interval around it
+        assert p["exact_policy_rate"] == pytest.approx(
+            sum(int(r["exact_policy"]) for r in mine) / len(mine))
+        assert p["normalized_ile_mean"] == pytest.approx(
+            sum(float(r["normalized_ile"]) for r in mine) / len(mine))
         assert p["normalized_ile_ci_low"] <= p["normalized_ile_mean"] <= p["normalized_ile_ci_high"]
         rate = p["exact_policy_rate"]
         assert 0 <= p["exact_policy_ci_low"] <= rate <= p["exact_policy_ci_high"] <= 1
