@@ -52,6 +52,9 @@ def run(args) -> int:
     mode = "RGB-D" if r["depth"] else "colour only"
     print(f"state classifier ({mode}), unoccluded steps: " + ", ".join(
         f"{k} {v:.3f}" for k, v in r["accuracy"].items()))
+    if r["prediction_after_first_inspection"] is not None:
+        print(f"  prediction from each session's first inspection on: "
+              f"{r['prediction_after_first_inspection']:.3f}")
     print(f"occluded steps: recall {r['occlusion_recall']:.3f}, precision "
           f"{r['occlusion_precision']:.3f} ({r['n_steps']} steps)")
     return 0

@@ -109,11 +109,14 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
 
     true = {k: [] for k in FACTORS}
     pred = {k: [] for k in FACTORS}
-    truly_occluded, called_occluded = [], []
+    truly_occluded, called_occluded, inspected_before = [], [], []
     for steps in read_steps(root, split, models.frames_per_step):
         perceived = models.perceive([(s.colors, s.depths if depth else None,
                                       s.inspection if inspection else None) for s in steps])
+        seen_inspection = False
         for step, seen in zip(steps, perceived, strict=True):
+            seen_inspection |= seen.inspected is not None
+            inspected_before.append(seen_inspection)
             truly_occluded.append(bool(step.record["occluded"]))
             called_occluded.append(seen.occluded)
             for k in FACTORS:
@@ -129,6 +132,11 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
     metrics = {
         "accuracy": {k: float(np.mean(np.array(true[k])[visible] == np.array(pred[k])[visible]))
                      for k in FACTORS},
+        # the prediction factor from the session's first inspection on: before it, the sorter
+        # may hold an onion inspected before the recording began, which no sensor shows
+        "prediction_after_first_inspection": _mean_or_none(
+            np.array(true["prediction"]) == np.array(pred["prediction"]),
+            visible & np.array(inspected_before)),
         "occlusion_recall": float(called[occ].mean()) if occ.any() else 1.0,
         "occlusion_precision": float(occ[called].mean()) if called.any() else 1.0,
         "n_steps": len(occ),
@@ -138,6 +146,10 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
     }
     return (replace(calibration, models=models.describe(), depth=depth, inspection=inspection),
             metrics)
+
+
+def _mean_or_none(values: np.ndarray, where: np.ndarray) -> float | None:
+    return float(values[where].mean()) if where.any() else None
 
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
@@ -246,6 +258,7 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
     return {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
             "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
             "occlusion_precision": metrics["occlusion_precision"],
+            "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],
             "inspection_call": maps.pop("inspection_call", {}), "map_by_view": maps,
             "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth,
             "inspection": config.inspection}

@@ -113,6 +113,7 @@ def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys)
     result = json.loads(capsys.readouterr().out)
     assert {"map50", "map50_95", "accuracy", "occlusion_recall"} <= set(result)
     assert set(result["accuracy"]) == {"onion", "end_effector", "prediction", "action"}
+    assert "prediction_after_first_inspection" in result
 
 
 def test_missing_models_name_the_training_command(tmp_path):
