@@ -54,6 +54,7 @@ from recordings.rerun.common import (
 from recordings.rerun.world import WorldLogger, scene_items, world_view
 from recordings.schema import CLASS_NAMES
 from recordings.world import Pose, Robot
+from recordings.writer import SortingDecision
 
 __all__ = [
     "EVALUATE_ROOT",
@@ -75,9 +76,10 @@ _N_JOINTS = 7
 _PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED = "prediction", "bad"
 
 
-class EvaluationEvent(Protocol):
+class EvaluationEvent(SortingDecision, Protocol):
     """What the logger reads of one action of an evaluation
-    (``robot.evaluation.EvaluationStep`` satisfies it).
+    (``robot.evaluation.EvaluationStep`` satisfies it): a
+    :class:`recordings.writer.SortingDecision` and the cameras and joints.
 
     ``state``, ``action`` and ``next_state`` are flat indices of the logger's task; ``onion`` is
     the line-up index of the onion in focus, ``blemished`` its true class, ``perceived`` the
@@ -88,34 +90,6 @@ class EvaluationEvent(Protocol):
     (h, w, 3) uint8 RGB on inspecting actions; ``q`` (7,) the Sawyer's joint positions.
     """
 
-    @property
-    def step(self) -> int: ...
-    @property
-    def state(self) -> int: ...
-    @property
-    def action(self) -> int: ...
-    @property
-    def next_state(self) -> int: ...
-    @property
-    def onion(self) -> int | None: ...
-    @property
-    def blemished(self) -> bool | None: ...
-    @property
-    def perceived(self) -> int | None: ...
-    @property
-    def fate(self) -> str | None: ...
-    @property
-    def tp(self) -> int: ...
-    @property
-    def fp(self) -> int: ...
-    @property
-    def tn(self) -> int: ...
-    @property
-    def fn(self) -> int: ...
-    @property
-    def precision(self) -> float: ...
-    @property
-    def recall(self) -> float: ...
     @property
     def color(self) -> np.ndarray | None: ...
     @property
