@@ -270,7 +270,7 @@ def _commands(base: Path, work: Path) -> dict[str, dict]:
             "inputs": [work / "out" / "model.json", DEFAULT_MODELS]},
         "train state-classifier": {
             "argv": _cli("train", "state-classifier", "--data", base / "data", "--out",
-                         work / "out", "--epochs", 3, "--batch-size", 8),
+                         work / "out", "--epochs", 6, "--batch-size", 8),
             "inputs": [base / "data"]},
         "train detector": {
             "argv": _cli("train", "detector", "--data", base / "data", "--out", work / "out",
