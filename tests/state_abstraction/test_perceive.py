@@ -177,3 +177,26 @@ def test_inspection_calls_count_misses_and_no_call_as_wrong():
     assert calls["robot"] == {"n": 3, "accuracy": 1 / 3, "missed_blemished": 0,
                               "false_blemished": 1}
     assert calls["all"]["n"] == 5 and calls["all"]["accuracy"] == 2 / 5
+
+
+def test_prediction_after_first_inspection_leaves_out_the_steps_before_it(monkeypatch):
+    from types import SimpleNamespace as NS
+
+    import recordings.dataset
+    from onionsort.stages.calibrate import measure_perception
+
+    # one session: the first two steps precede any inspection and are wrong, the rest are right
+    truth = [1, 1, 0, 0, 0]
+    seen_pred = [2, 2, 0, 0, 1]
+    inspected = [None, None, 0, None, None]
+    steps = [NS(colors=None, depths=None, inspection=None,
+                record={"occluded": False, "onion": 0, "end_effector": 0, "prediction": t,
+                        "action": 0}) for t in truth]
+    perceived = [NS(occluded=False, onion=0, end_effector=0, prediction=p, action=0,
+                    inspected=i) for p, i in zip(seen_pred, inspected, strict=True)]
+    monkeypatch.setattr(recordings.dataset, "read_steps", lambda *a, **k: [steps])
+    models = NS(frames_per_step=3, perceive=lambda _: perceived,
+                describe=lambda: {"folder": "fake"})
+    _, metrics = measure_perception(models, "unused", "all")
+    assert metrics["accuracy"]["prediction"] == 2 / 5
+    assert metrics["prediction_after_first_inspection"] == 2 / 3
