@@ -1,6 +1,10 @@
 """The forward-backward and MMAP-BIRL gradient path of irl as of commit cfdfae2, frozen as the
 baseline of bench/bench_irl.py (not part of the library; do not import it elsewhere).
 
+The planning kernels (``OptimalQSolver`` and its helpers, unchanged from cfdfae2 to e77f9cd)
+and the gradient's assembly are frozen here too, so that later work on the library's solver
+speeds up the library, not its baseline; only the optimizer loop is shared.
+
 It takes the dense emission table ``log E[o, s, a]`` (``observation_model.log_emissions``), packs
 the demonstrations at every call and runs one pass per group of equal lengths. Only the names it
 shares with the library changed; the kernels are the ones of that commit (the flat-operator
@@ -9,15 +13,26 @@ products are inlined as they were).
 
 from __future__ import annotations
 
+import logging
+import warnings
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.special import log_softmax
 
 from irl.demonstrations import Demonstration, pack_observations
+from irl.exceptions import ConvergenceWarning
 from irl.learners.birl import MMAPBIRL
 from irl.mdp import TabularMDP
 from irl.priors import GaussianPrior
+
+logger = logging.getLogger(__name__)
+
+_TIE_TOL = 1e-10
 
 __all__ = ["BaselineMMAPBIRL", "posterior_stats"]
 
@@ -332,6 +347,162 @@ class _CheckedPrior(GaussianPrior):
         return self.log_prob(theta), self.grad_log_prob(theta)
 
 
+# -- the planning kernels of e77f9cd (irl/solvers.py), frozen --------------------------
+
+@dataclass(frozen=True)
+class OptimalSolution:
+    """The optimal policy of one reward and the derivatives of ``Q*`` in theta.
+
+    Attributes
+    ----------
+    policy : ndarray of shape (S,)
+        A deterministic optimal (greedy) policy.
+    dQ : ndarray of shape (S, A, K)
+        ``dQ*(s, a) / dtheta``; ``Q* = dQ @ theta`` inside this policy's optimality region.
+    """
+
+    policy: np.ndarray
+    dQ: np.ndarray
+
+    def q_values(self, theta: np.ndarray) -> np.ndarray:
+        """``Q*[s, a]`` for a theta in this policy's optimality region."""
+        return self.dQ @ theta
+
+
+def greedy_policy(Q: np.ndarray) -> np.ndarray:
+    """``argmax_a Q[s, a]`` (lowest action index on ties), shape (S,)."""
+    return np.argmax(Q, axis=1)
+
+
+def boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
+    """``pi[s, a] = softmax_a(beta * Q[s, a])``."""
+    return np.exp(log_boltzmann_policy(Q, beta))
+
+
+def log_boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
+    """``log pi[s, a]`` of the Boltzmann policy, computed stably."""
+    return log_softmax(beta * Q, axis=1)
+
+
+def _solve_policy_system(mdp: TabularMDP, policy: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve ``(I - gamma P_pi) X = rhs`` for a deterministic policy; rhs has shape (S, m)."""
+    P = mdp.policy_transitions(policy)
+    n = mdp.n_states
+    if sp.issparse(P):
+        A = (sp.identity(n, format="csc") - mdp.discount * P.tocsc()).tocsc()
+        lu = spla.splu(A)
+        return lu.solve(np.ascontiguousarray(rhs))
+    return np.linalg.solve(np.eye(n) - mdp.discount * P, rhs)
+
+
+def solve_policy_derivatives(mdp: TabularMDP, policy: np.ndarray) -> np.ndarray:
+    """``dQ^pi[s, a, k]``: the Q-function of ``pi`` per unit of each feature weight.
+
+    Solves ``dV = (I - gamma P_pi)^{-1} phi_pi`` (one factorization, K right-hand sides) and
+    returns ``dQ = phi + gamma T dV``. For an optimal ``pi`` this is ``dQ*/dtheta``.
+    """
+    phi_pi = mdp.features[np.arange(mdp.n_states), policy]  # (S, K)
+    dV = _solve_policy_system(mdp, policy, phi_pi)
+    return mdp.features + mdp.discount * mdp.expect_next(dV)
+
+
+def policy_values(mdp: TabularMDP, reward: np.ndarray, policy: np.ndarray) -> np.ndarray:
+    """Exact values ``V^pi[s]`` of a deterministic policy under reward ``R[s, a]``."""
+    r_pi = reward[np.arange(mdp.n_states), policy]
+    return _solve_policy_system(mdp, policy, r_pi[:, None])[:, 0]
+
+
+class OptimalQSolver:
+    """Optimal Q-functions and ``dQ*/dtheta`` for one MDP, cached per greedy policy.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    max_iter : int
+        Maximum policy-iteration sweeps per solve.
+    cache_size : int
+        How many greedy policies (and their ``dQ``) to keep.
+    warm_start_sweeps : int
+        Value-iteration sweeps (one sparse product each) that pick the first policy of a solve
+        with an empty cache; they save policy-iteration sweeps (one factorization each) on
+        large MDPs.
+
+    Attributes
+    ----------
+    n_solves_ : int
+        Policy-iteration runs so far (cache misses).
+    n_reuses_ : int
+        Solves answered from a cached optimality region.
+    """
+
+    def __init__(
+        self, mdp: TabularMDP, *, max_iter: int = 200, cache_size: int = 64,
+        warm_start_sweeps: int = 200,
+    ) -> None:
+        self.mdp = mdp
+        self.max_iter = max_iter
+        self.warm_start_sweeps = warm_start_sweeps
+        self.cache_size = cache_size
+        self._cache: OrderedDict[bytes, OptimalSolution] = OrderedDict()
+        self.n_solves_ = 0
+        self.n_reuses_ = 0
+
+    def solve(self, theta: np.ndarray) -> OptimalSolution:
+        """The optimal policy and ``dQ*`` for reward ``phi . theta``."""
+        theta = self.mdp.check_theta(theta)
+        for key, sol in reversed(self._cache.items()):
+            if self._in_region(sol, theta):
+                self._cache.move_to_end(key)
+                self.n_reuses_ += 1
+                return sol
+        start = next(reversed(self._cache.values())).policy if self._cache else None
+        sol = self._policy_iteration(theta, start)
+        self.n_solves_ += 1
+        self._cache[sol.policy.tobytes()] = sol
+        if len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return sol
+
+    def q_values(self, theta: np.ndarray) -> np.ndarray:
+        """``Q*[s, a]`` for reward ``phi . theta``."""
+        theta = self.mdp.check_theta(theta)
+        return self.solve(theta).q_values(theta)
+
+    @staticmethod
+    def _in_region(sol: OptimalSolution, theta: np.ndarray) -> bool:
+        Q = sol.q_values(theta)
+        chosen = Q[np.arange(Q.shape[0]), sol.policy]
+        tol = _TIE_TOL * (1.0 + np.abs(Q).max())
+        return bool(np.all(chosen >= Q.max(axis=1) - tol))
+
+    def _policy_iteration(self, theta: np.ndarray, policy: np.ndarray | None) -> OptimalSolution:
+        mdp = self.mdp
+        reward = mdp.reward(theta)
+        if policy is None:
+            V = np.zeros(mdp.n_states)
+            Q = reward
+            for _ in range(self.warm_start_sweeps):
+                V = Q.max(axis=1)
+                Q = reward + mdp.discount * mdp.expect_next(V)
+            policy = greedy_policy(Q)
+        rows = np.arange(mdp.n_states)
+        for _ in range(self.max_iter):
+            dQ = solve_policy_derivatives(mdp, policy)
+            Q = dQ @ theta
+            best = greedy_policy(Q)
+            tol = _TIE_TOL * (1.0 + np.abs(Q).max())
+            improve = Q[rows, best] > Q[rows, policy] + tol
+            if not improve.any():
+                return OptimalSolution(policy=policy.copy(), dQ=dQ)
+            policy = np.where(improve, best, policy)
+        warnings.warn(
+            f"policy iteration did not converge in max_iter={self.max_iter} sweeps",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+        return OptimalSolution(policy=policy.copy(), dQ=solve_policy_derivatives(mdp, policy))
+
+
 class BaselineMMAPBIRL(MMAPBIRL):
     """MMAP-BIRL on the frozen path: demonstrations re-packed and emissions re-gathered from
     the dense table at every gradient, and the checked prior."""
@@ -339,7 +510,23 @@ class BaselineMMAPBIRL(MMAPBIRL):
     def _check_model(self):
         model = super()._check_model()
         prior = _CheckedPrior(model.prior.mean, model.prior.std)
-        return type(model)(model.mdp, model.observation_model, model.beta, prior, model.solver)
+        return type(model)(model.mdp, model.observation_model, model.beta, prior,
+                           OptimalQSolver(model.mdp))
+
+    @staticmethod
+    def _log_policy(model, theta):
+        sol = model.solver.solve(theta)
+        return sol, log_softmax(model.beta * sol.q_values(theta), axis=1)
+
+    def _likelihood_and_gradient(self, model, theta, data):
+        sol, log_pi = self._log_policy(model, theta)
+        ll, G = self._pair_stats(model, log_pi, data)
+        pi = np.exp(log_pi)
+        expected_dQ = np.einsum("sa,sak->sk", pi, sol.dQ)
+        grad = model.beta * (
+            np.einsum("sa,sak->k", G, sol.dQ) - np.einsum("s,sk->k", G.sum(axis=1), expected_dQ)
+        )
+        return ll, grad
 
     def _prepare(self, model, demos):
         return demos

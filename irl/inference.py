@@ -47,19 +47,23 @@ either path.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from irl._validation import describe
 from irl.demonstrations import Demonstration, check_demonstrations
 from irl.mdp import TabularMDP
 from irl.observation.base import finite_min
 
 __all__ = [
+    "BACKENDS",
     "ObservationFactors",
     "PackedDemonstrations",
     "PosteriorStats",
+    "check_backend",
     "forward_backward",
     "group_by_length",
     "log_forward_backward",
@@ -69,11 +73,18 @@ __all__ = [
 ]
 
 METHODS = ("auto", "log")
+#: Kernels of the scaled pass: numpy and scipy (the default and the reference), or the
+#: compiled loop of :mod:`irl._numba` (``pip install onionsort[fast]``).
+BACKENDS = ("numpy", "numba")
 
 #: Steps of local factors (N * steps * S * A floats) exponentiated at once.
 _CHUNK_ELEMENTS = 1 << 19
 #: Largest ``N T S A`` whose observation log-likelihoods a packing keeps for reuse (32 MB).
 _CACHE_ELEMENTS = 1 << 22
+#: Largest batch (``N T S A``) whose local factors the numba backend takes at once (256 MB).
+_NUMBA_ELEMENTS = 1 << 25
+#: Largest scratch array (floats) a thread keeps between passes (8 MB).
+_WORKSPACE_ELEMENTS = 1 << 20
 #: Padding allowed in a batch of ragged demonstrations, as a fraction of its real steps.
 _PAD_SLACK = 0.25
 
@@ -236,6 +247,30 @@ def pack_demonstrations(
     )
 
 
+class _Workspace(threading.local):
+    """Scratch arrays of the scaled pass, kept between calls in one thread.
+
+    A fit runs forward-backward on the same shapes a few dozen times; a fresh array of a few
+    hundred kilobytes comes from the operating system as untouched pages, and faulting them in
+    costs more than the arithmetic on them. Arrays above ``_WORKSPACE_ELEMENTS`` are not kept.
+    """
+
+    def __init__(self) -> None:
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """An uninitialized float array of ``shape``, reused when the last one fits."""
+        a = self.arrays.get(name)
+        if a is None or a.shape != shape:
+            a = np.empty(shape)
+            if a.size <= _WORKSPACE_ELEMENTS:
+                self.arrays[name] = a
+        return a
+
+
+_workspace = _Workspace()
+
+
 def _logsumexp(x: np.ndarray, axis) -> np.ndarray:
     """``log sum exp`` over ``axis``; ``-inf`` where every term is ``-inf`` (no warnings)."""
     top = np.max(x, axis=axis, keepdims=True)
@@ -270,6 +305,22 @@ def _impossible(ids, obs, n: int, t: int) -> ValueError:
         "model given the steps before it (its probability is zero); check the observation "
         "model and the demonstration"
     )
+
+
+def check_backend(backend) -> str:
+    """``backend`` if it is one of :data:`BACKENDS` and can run here; else a ValueError
+    (TypeError) that names it."""
+    if not isinstance(backend, str):
+        raise TypeError(f"backend must be one of {BACKENDS}; got {describe(backend)}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}; got {backend!r}")
+    if backend == "numba":
+        from irl import _numba
+
+        if not _numba.available():
+            raise ValueError("backend 'numba' needs numba, which is not installed: "
+                             "pip install 'onionsort[fast]' (or pip install numba)")
+    return backend
 
 
 def _check_batch(mdp, log_policy, obs, observation_model, lengths, factors, method):
@@ -310,6 +361,7 @@ def forward_backward(
     log_initial: np.ndarray | None = None,
     demo_ids: Sequence[int] | None = None,
     method: str = "auto",
+    backend: str = "numpy",
 ) -> PosteriorStats:
     """Forward-backward for a batch of demonstrations in one pass.
 
@@ -336,6 +388,11 @@ def forward_backward(
     method : {"auto", "log"}
         ``"auto"``: the scaled pass, handing over to the log-space pass when its range check
         fails (see the module docstring); ``"log"``: the log-space pass only.
+    backend : {"numpy", "numba"}
+        Kernels of the scaled pass (see :data:`BACKENDS`); equal to rounding. ``"numba"`` runs
+        a stationary policy's batch whose local factors fit in memory
+        (``_NUMBA_ELEMENTS``) through one compiled loop and hands anything else, and any
+        batch its range check refuses, to the numpy passes.
 
     Raises
     ------
@@ -354,10 +411,38 @@ def forward_backward(
     ids = np.arange(obs.shape[0]) if demo_ids is None else np.asarray(demo_ids)
     emissions = _Emissions(observation_model, obs, factors)
     if method == "auto":
+        if check_backend(backend) == "numba":
+            stats = _numba_pass(mdp, log_policy, emissions, obs.shape, lengths, log_p0)
+            if stats is not None:
+                return stats
         stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape, lengths, log_p0)
         if stats is not None:
             return stats
     return _log_pass(mdp, log_policy, emissions, obs, lengths, log_p0, ids)
+
+
+def _numba_pass(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
+    """The scaled pass as one compiled loop (:mod:`irl._numba`); ``None`` when it does not
+    apply (a time-indexed policy, factors too large to hold) or its range check fails."""
+    from irl import _numba
+
+    n_demos, length = shape
+    S, A = mdp.n_states, mdp.n_actions
+    F = _scaled_floor(mdp)
+    if log_policy.ndim != 2 or F < 20.0 or n_demos * length * S * A > _NUMBA_ELEMENTS:
+        return None
+    blk = emissions.steps(0, length)
+    if not blk.possible or blk.min_log + finite_min(log_policy) < -F:
+        return None
+    csr = mdp._action_major_csr
+    pi = np.ascontiguousarray(np.exp(log_policy).T)
+    ok, ll, occupancy, initial = _numba.scaled_forward_backward(
+        csr.indptr, csr.indices, csr.data, pi, np.ascontiguousarray(blk.factor),
+        np.ascontiguousarray(blk.shift, dtype=float), np.asarray(lengths, dtype=np.int64),
+        np.exp(log_p0), float(F))
+    if not ok:
+        return None
+    return PosteriorStats(log_likelihood=ll, occupancy=occupancy, initial=initial)
 
 
 def _scaled_floor(mdp: TabularMDP) -> float:
@@ -376,55 +461,67 @@ def _chunks(length: int, per_step: int) -> list[tuple[int, int]]:
 
 
 def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
-    """The scaled pass; ``None`` when a message would leave its safe range (see module)."""
+    """The scaled pass; ``None`` when a message would leave its safe range (see module).
+
+    Each chunk of steps gets its local factors ``E[n, t, a, s] = factor * pi`` in one
+    vectorized product; a step of the forward pass is then four array operations
+    (``alpha = E_t pred_t``, its sum, the push through ``T`` and the division), a step of the
+    backward pass four more, and the posteriors of a whole chunk are formed at once.
+    """
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
     F = _scaled_floor(mdp)
     if F < 20.0:
         return None
-    stationary = log_policy.ndim == 2
     log_pi_min = finite_min(log_policy)
-    pi = np.ascontiguousarray(np.swapaxes(np.exp(log_policy), -1, -2))  # [.., a, s]
+    pi = np.ascontiguousarray(np.exp(np.swapaxes(log_policy, -1, -2)))  # [.., a, s]
+    stationary = log_policy.ndim == 2
     chunks = _chunks(length, n_demos * S * A)
     ragged = bool(lengths.min() < length)
 
-    def block(t0, t1):
-        """The chunk's shifted observation likelihoods, or None outside the safe range."""
+    def local(t0, t1):
+        """``(E, shift)`` of steps t0..t1-1, or None outside the safe range."""
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
         if blk.min_log + log_pi_min < -F:
             return None
-        return blk
+        policy = pi if stationary else pi[t0:t1]
+        if emissions.factors is None:  # a fresh block: multiply in place
+            E = np.multiply(blk.factor, policy, out=blk.factor)
+        else:
+            E = np.multiply(blk.factor, policy, out=ws.get("E", blk.factor.shape))
+        return E, blk.shift
 
-    preds = np.empty((length, n_demos, S))
-    shifts = np.empty((length, n_demos))
-    norms = np.empty((length, n_demos))
-    pred = np.repeat(np.exp(log_p0)[None, :], n_demos, axis=0)
+    ws = _workspace
+    preds = ws.get("preds", (length, n_demos, S))
+    shifts = ws.get("shifts", (length, n_demos))
+    norms = ws.get("norms", (length, n_demos))
+    preds[0] = np.exp(log_p0)
+    alpha = ws.get("alpha", (n_demos, A * S))
     kept = None
     with np.errstate(divide="ignore", invalid="ignore"):
         for t0, t1 in chunks:
-            blk = block(t0, t1)
-            if blk is None:
+            got = local(t0, t1)
+            if got is None:
                 return None
-            shifts[t0:t1] = blk.shift.T
+            E, shifts[t0:t1] = got[0], got[1].T
             for t in range(t0, t1):
-                alpha = blk.factor[:, t - t0] * (pi if stationary else pi[t])
-                alpha *= pred[:, None, :]
-                c = np.add.reduce(alpha.reshape(n_demos, S * A), axis=1)
-                preds[t], norms[t] = pred, c
+                np.multiply(E[:, t - t0], preds[t][:, None, :],
+                            out=alpha.reshape(n_demos, A, S))
+                np.add.reduce(alpha, axis=1, out=norms[t])
                 if t + 1 < length:  # push, then normalize the (N, S) result: one pass less
-                    pred = mdp.push_forward_action_major(alpha)
-                    pred /= c[:, None]
+                    mdp.push_forward_action_major(alpha, out=preds[t + 1])
+                    preds[t + 1] /= norms[t][:, None]
         if len(chunks) == 1:
-            kept = blk  # one chunk: the backward pass reuses it
+            kept = E  # one chunk: the backward pass reuses it
     if not np.all(norms > 0.0):
         return None  # impossible somewhere: the log-space pass names the demonstration
     tiny = np.exp(-F)
     step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
     for t0 in range(0, length, step):  # in chunks: no (T, N, S) temporaries
         p = preds[t0:t0 + step]
-        if np.any((p > 0.0) & (p < tiny)):
+        if np.min(p, where=p > 0.0, initial=np.inf) < tiny:
             return None
 
     # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
@@ -433,7 +530,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     # beta_t are scaled consistently. A state the forward pass cannot reach at step t gets
     # g = 0: no pair with forward mass leads there, and so every beta stays below about e^F.
     # Padded steps (t >= lengths[n]) add nothing, and beta restarts at 1 at each last step.
-    inv_norms = 1.0 / norms
+    inv_norms = np.divide(1.0, norms, out=ws.get("inv_norms", norms.shape))
     scale = preds  # becomes pred_t / c_t in place (T, N, S): no second copy
     scale *= inv_norms[:, :, None]
     if ragged:
@@ -441,28 +538,31 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         scale *= valid[:, :, None]
         last = lengths - 1
     occupancy = np.zeros((n_demos, A, S))
-    beta = np.ones((n_demos, A, S))
+    beta = ws.get("beta", (n_demos, A, S))
+    beta.fill(1.0)
+    g = ws.get("g", (n_demos, S))
     with np.errstate(over="ignore", invalid="ignore"):
         for t0, t1 in reversed(chunks):
-            blk = kept if kept is not None else emissions.steps(t0, t1)
+            E = kept if kept is not None else local(t0, t1)[0]
+            # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real
+            # step; padded steps are zeroed and send nothing either)
+            sends = ws.get("sends", (t1 - t0, n_demos, S))
+            np.multiply(scale[t0:t1] > 0.0, inv_norms[t0:t1, :, None], out=sends)
+            gamma = ws.get("gamma", E.shape)  # (N, L, A, S): pi e_t beta_t of the chunk's steps
             for t in range(t1 - 1, t0 - 1, -1):
                 if ragged:
                     ends = last == t
                     if ends.any():
                         beta[ends] = 1.0
-                gamma_t = blk.factor[:, t - t0] * (pi if stationary else pi[t])
-                gamma_t *= beta
+                gamma_t = gamma[:, t - t0]
+                np.multiply(E[:, t - t0], beta, out=gamma_t)
                 if t > 0:
-                    g = np.add.reduce(gamma_t, axis=1)  # (N, S)
-                    # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a
-                    # real step; padded steps are zeroed and send nothing either)
-                    g *= scale[t] > 0.0
-                    g *= inv_norms[t][:, None]
-                gamma_t *= scale[t][:, None, :]
-                occupancy += gamma_t
-                if t > 0:
-                    beta = mdp.expect_next_action_major(g)
-    initial = gamma_t.sum(axis=1)
+                    np.add.reduce(gamma_t, axis=1, out=g)
+                    g *= sends[t - t0]
+                    mdp.expect_next_action_major(g, out=beta)
+            gamma *= np.swapaxes(scale[t0:t1], 0, 1)[:, :, None, :]
+            occupancy += np.add.reduce(gamma, axis=1)
+    initial = gamma[:, 0].sum(axis=1)
     if not (np.all(np.isfinite(occupancy)) and np.all(np.isfinite(initial))):
         return None
     per_step = shifts + np.log(norms)
@@ -550,6 +650,7 @@ def posterior_stats(
     *,
     log_policies_by_length=None,
     method: str = "auto",
+    backend: str = "numpy",
 ) -> PosteriorStats:
     """:func:`forward_backward` over demonstrations of any lengths, in batches.
 
@@ -578,6 +679,6 @@ def posterior_stats(
         pol = log_policy if log_policies_by_length is None else log_policies_by_length(
             obs.shape[1])
         stats = forward_backward(mdp, pol, obs, om, lengths=lengths, factors=factors,
-                                 demo_ids=idx, method=method)
+                                 demo_ids=idx, method=method, backend=backend)
         ll[idx], occ[idx], init[idx] = stats.log_likelihood, stats.occupancy, stats.initial
     return PosteriorStats(log_likelihood=ll, occupancy=occ, initial=init)

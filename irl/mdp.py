@@ -21,6 +21,14 @@ from irl._validation import as_float_array, check_probability_rows, check_real, 
 
 __all__ = ["TabularMDP"]
 
+try:  # scipy's own CSR kernel (see _csr_times_rows); absent in some future scipy, then `@`
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:  # pragma: no cover - depends on the scipy build
+    _csr_matvecs = None
+
+#: Density below which a dense MDP's forward-backward products use a CSR copy of ``T``.
+_SPARSE_PRODUCTS = 0.05
+
 
 class TabularMDP:
     """A finite MDP whose reward is linear in features: ``R(s, a) = phi[s, a] . theta``.
@@ -144,24 +152,56 @@ class TabularMDP:
         out = np.asarray(self._flat @ values.T).T if self._sparse else values @ self._flat.T
         return out.reshape(values.shape[0], self.n_states, self.n_actions)
 
-    def push_forward_action_major(self, mass: np.ndarray) -> np.ndarray:
-        """:meth:`push_forward` of a batch in action-major layout ``mass[n, a, s]``, shape (N, S).
+    def push_forward_action_major(self, mass: np.ndarray, out: np.ndarray | None = None
+                                  ) -> np.ndarray:
+        """:meth:`push_forward` of a batch in action-major layout ``mass[n, a, s]`` (or its
+        flat view ``(N, A S)``), shape (N, S); written into ``out`` (C-contiguous) if given.
 
         Forward-backward keeps its messages action-major so that broadcasting a state vector
         over the actions runs along the long axis.
         """
         flat = mass.reshape(mass.shape[0], -1)
-        if self._sparse:
-            return np.asarray(self._action_major_T @ flat.T).T
-        return flat @ self._action_major
+        if not self._products_sparse:
+            return np.dot(flat, self._action_major, out=out)
+        result = _csr_times_rows(self._action_major_T, flat).T
+        if out is None:
+            return np.ascontiguousarray(result)
+        out[...] = result
+        return out
 
-    def expect_next_action_major(self, values: np.ndarray) -> np.ndarray:
-        """:meth:`expect_next_batch` in action-major layout: ``out[n, a, s]``, shape (N, A, S)."""
-        if self._sparse:
-            out = np.asarray(self._action_major @ values.T).T
+    def expect_next_action_major(self, values: np.ndarray, out: np.ndarray | None = None
+                                 ) -> np.ndarray:
+        """:meth:`expect_next_batch` in action-major layout: ``out[n, a, s]``, shape (N, A, S);
+        written into ``out`` (C-contiguous) if given."""
+        n = values.shape[0]
+        if not self._products_sparse:
+            flat = None if out is None else out.reshape(n, -1)
+            result = np.dot(values, self._action_major_dense_T, out=flat)
         else:
-            out = values @ self._action_major.T
-        return out.reshape(values.shape[0], self.n_actions, self.n_states)
+            result = _csr_times_rows(self._action_major_csr, values).T
+            if out is not None:
+                out.reshape(n, -1)[...] = result
+                return out
+        return result.reshape(n, self.n_actions, self.n_states)
+
+    @cached_property
+    def _products_sparse(self) -> bool:
+        """Whether the action-major products go through CSR: a sparse MDP, or a dense one
+        whose transitions are mostly zeros (a nearly deterministic task, where a dense product
+        would spend its time on zeros)."""
+        return self._sparse or np.count_nonzero(self._flat) <= _SPARSE_PRODUCTS * self._flat.size
+
+    @cached_property
+    def _action_major_csr(self):
+        """``P`` with rows ``a * S + s`` as CSR, whatever the storage."""
+        csr = sp.csr_matrix(self._action_major, dtype=float)
+        csr.eliminate_zeros()
+        return csr
+
+    @cached_property
+    def _action_major_dense_T(self) -> np.ndarray:
+        """``P.T`` of a dense MDP, action-major columns, C-contiguous (for ``np.dot(out=)``)."""
+        return np.ascontiguousarray(self._action_major.T)
 
     @cached_property
     def _action_major(self):
@@ -172,7 +212,7 @@ class TabularMDP:
 
     @cached_property
     def _action_major_T(self):
-        return self._action_major.T.tocsr()
+        return self._action_major_csr.T.tocsr()
 
     @cached_property
     def _flat_T(self):
@@ -326,3 +366,20 @@ def _names(names, n: int, argname: str, prefix: str) -> list[str]:
     if len(names) != n:
         raise ValueError(f"{argname} must have {n} entries; got {len(names)}")
     return names
+
+
+def _csr_times_rows(csr: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
+    """``csr @ rows.T`` for a batch ``rows[n, :]``, shape (csr.shape[0], N), C-contiguous.
+
+    Forward-backward makes two such products per step with a few demonstrations; at the
+    sizes of the paper's tasks scipy's dispatch around its kernel costs several times the
+    kernel itself, so the kernel (``csr_matvecs``, ``Y += A X`` for a row-major block ``X``)
+    is called directly where this scipy has it, and ``@`` is the fallback.
+    """
+    block = np.ascontiguousarray(rows.T, dtype=float)
+    if _csr_matvecs is None:
+        return np.asarray(csr @ block)
+    out = np.zeros((csr.shape[0], block.shape[1]))
+    _csr_matvecs(csr.shape[0], csr.shape[1], block.shape[1], csr.indptr, csr.indices,
+                 csr.data, block.ravel(), out.ravel())
+    return out

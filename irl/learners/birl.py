@@ -26,7 +26,7 @@ import numpy as np
 from irl._random import check_random_state
 from irl._validation import check_int, check_real, describe
 from irl.demonstrations import Demonstration
-from irl.inference import pack_demonstrations, posterior_stats
+from irl.inference import check_backend, pack_demonstrations, posterior_stats
 from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.mdp import TabularMDP
@@ -124,11 +124,10 @@ class _BayesianIRL(LearnerBase):
     def _likelihood_and_gradient(self, model: _Model, theta, data) -> tuple[float, np.ndarray]:
         sol, log_pi = self._log_policy(model, theta)
         ll, G = self._pair_stats(model, log_pi, data)
-        pi = np.exp(log_pi)
-        expected_dQ = np.einsum("sa,sak->sk", pi, sol.dQ)
-        grad = model.beta * (
-            np.einsum("sa,sak->k", G, sol.dQ) - np.einsum("s,sk->k", G.sum(axis=1), expected_dQ)
-        )
+        # sum_{s,a} (G(s, a) - pi(a | s) sum_a' G(s, a')) dQ(s, a): one product
+        weights = G - np.exp(log_pi) * G.sum(axis=1, keepdims=True)
+        S, A, K = sol.dQ.shape
+        grad = model.beta * (weights.reshape(S * A) @ sol.dQ.reshape(S * A, K))
         return ll, grad
 
     def log_likelihood(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:
@@ -260,10 +259,14 @@ class MMAPBIRL(_BayesianIRL):
         First start instead of the prior mean.
     seed : int or Generator, optional
         Seeds the restarts.
+    backend : {"numpy", "numba"}
+        Kernels of forward-backward (:data:`irl.inference.BACKENDS`): numpy and scipy, the
+        default and the reference, or one compiled loop per batch (``pip install
+        'onionsort[fast]'``); equal to rounding.
 
     Every parameter is stored as given and checked by ``fit`` (and by the ``log_*`` methods,
-    which need ``mdp``, ``observation_model``, ``beta`` and ``prior``); change them with
-    ``set_params`` or by assignment.
+    which need ``mdp``, ``observation_model``, ``beta``, ``prior`` and ``backend``); change
+    them with ``set_params`` or by assignment.
 
     Attributes
     ----------
@@ -280,11 +283,36 @@ class MMAPBIRL(_BayesianIRL):
         The prior used: ``prior``, or the standard normal when it is None.
     """
 
-    def _prepare(self, model, demos):
-        return pack_demonstrations(demos, model.observation_model)
+    def __init__(
+        self,
+        mdp: TabularMDP,
+        observation_model: ObservationModel,
+        *,
+        beta: float = 1.0,
+        prior: GaussianPrior | None = None,
+        optimizer: str = "lbfgs",
+        n_restarts: int = 1,
+        max_iter: int = 200,
+        tol: float = 1e-6,
+        step_size: float = 0.01,
+        decay: float = 0.95,
+        epsilon: float = 0.01,
+        init: np.ndarray | None = None,
+        seed: int | np.random.Generator | None = None,
+        backend: str = "numpy",
+    ) -> None:
+        super().__init__(mdp, observation_model, beta=beta, prior=prior, optimizer=optimizer,
+                         n_restarts=n_restarts, max_iter=max_iter, tol=tol,
+                         step_size=step_size, decay=decay, epsilon=epsilon, init=init,
+                         seed=seed)
+        self.backend = backend
 
-    def _pair_stats(self, model, log_pi, packed):
-        stats = posterior_stats(model.mdp, log_pi, packed)
+    def _prepare(self, model, demos):
+        return pack_demonstrations(demos, model.observation_model), check_backend(self.backend)
+
+    def _pair_stats(self, model, log_pi, data):
+        packed, backend = data
+        stats = posterior_stats(model.mdp, log_pi, packed, backend=backend)
         return float(stats.log_likelihood.sum()), stats.occupancy.sum(axis=0)
 
 

@@ -97,9 +97,9 @@ def _count_operator_calls(mdp, monkeypatch) -> dict[str, int]:
     for name in calls:
         method = getattr(mdp, name)
 
-        def counted(*args, _name=name, _method=method):
+        def counted(*args, _name=name, _method=method, **kwargs):
             calls[_name] += 1
-            return _method(*args)
+            return _method(*args, **kwargs)
 
         monkeypatch.setattr(mdp, name, counted)
     return calls
