@@ -50,6 +50,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -130,6 +131,12 @@ class ObservationFactors:
     shift: np.ndarray | None
     min_log: float
     possible: bool
+
+    @cached_property
+    def columns(self) -> np.ndarray:
+        """``factor`` with the demonstrations innermost, ``[t, a, s, n]`` (the scaled pass's
+        layout), formed on first use and kept."""
+        return np.ascontiguousarray(np.moveaxis(self.factor, 0, -1))
 
     def steps(self, t0: int, t1: int) -> ObservationFactors:
         """The factors of steps t0..t1-1 (views)."""
@@ -293,6 +300,12 @@ class _Emissions:
         if self.factors is not None:
             return self.factors.steps(t0, t1)
         return observation_factors(self.observation_model, self.obs[:, t0:t1])
+
+    def separable(self, t0: int, t1: int):
+        """``(state, action, shift, min_log)`` of steps t0..t1-1 when the model's likelihoods
+        factor into a state and an action part
+        (:meth:`irl.observation.ObservationModel.separable_likelihoods`), else None."""
+        return self.observation_model.separable_likelihoods(self.obs[:, t0:t1])
 
     def log(self, t: int) -> np.ndarray:
         """``log O(obs[:, t] | s, a)``, shape (N, S, A), a fresh array."""
@@ -463,10 +476,16 @@ def _chunks(length: int, per_step: int) -> list[tuple[int, int]]:
 def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
     """The scaled pass; ``None`` when a message would leave its safe range (see module).
 
-    Each chunk of steps gets its local factors ``E[n, t, a, s] = factor * pi`` in one
-    vectorized product; a step of the forward pass is then four array operations
-    (``alpha = E_t pred_t``, its sum, the push through ``T`` and the division), a step of the
-    backward pass four more, and the posteriors of a whole chunk are formed at once.
+    Layout: the batch's messages are held in columns, demonstrations innermost (``pred[s, n]``,
+    ``alpha[a, s, n]``), so that the two sparse products of a step read and write their blocks
+    in place and a state array broadcasts over the actions as whole ``(S, N)`` slabs. Each chunk
+    of steps gets its local factors ``E[t, a, s, n] = factor * pi`` in one vectorized product;
+    a step of the forward pass is then four array operations (``alpha = E_t pred_t``, its sum,
+    the push through ``T``, the division), a step of the backward pass four more, and the
+    posteriors of a whole chunk are formed at once. When the observations are computed chunk
+    by chunk (too many to keep) and the model's likelihoods are a state part times an action
+    part (:meth:`~irl.observation.ObservationModel.separable_likelihoods`), ``E`` is never
+    formed: ``alpha_t = pi (e_t pred_t) e'_t``.
     """
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
@@ -474,31 +493,62 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     if F < 20.0:
         return None
     log_pi_min = finite_min(log_policy)
-    pi = np.ascontiguousarray(np.exp(np.swapaxes(log_policy, -1, -2)))  # [.., a, s]
+    pi = np.exp(np.swapaxes(log_policy, -1, -2))  # [.., a, s]
     stationary = log_policy.ndim == 2
     chunks = _chunks(length, n_demos * S * A)
     ragged = bool(lengths.min() < length)
+    ws = _workspace
+    separable = (emissions.factors is None and len(chunks) > 1
+                 and emissions.separable(0, 1) is not None)
+    if stationary:
+        pi_columns = ws.get("pi", (A, S, n_demos))
+        pi_columns[...] = pi[:, :, None]
+    u = ws.get("u", (S, n_demos)) if separable else None
 
     def local(t0, t1):
-        """``(E, shift)`` of steps t0..t1-1, or None outside the safe range."""
+        """The chunk's local factors, ``(E[t, a, s, n], shift[n, t])``, or
+        ``((state[t, s, n], action[t, a, n]), shift)`` when separable; None outside the safe
+        range."""
+        if separable:
+            state, action, shift, min_log = emissions.separable(t0, t1)
+            if not np.all(np.isfinite(shift)) or min_log + log_pi_min < -F:
+                return None
+            return (np.moveaxis(state, 0, -1).copy(), np.moveaxis(action, 0, -1).copy()), shift
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
         if blk.min_log + log_pi_min < -F:
             return None
-        policy = pi if stationary else pi[t0:t1]
-        if emissions.factors is None:  # a fresh block: multiply in place
-            E = np.multiply(blk.factor, policy, out=blk.factor)
+        E = ws.get("E", (t1 - t0, A, S, n_demos))
+        if stationary and emissions.factors is not None:  # kept in columns for every pass
+            np.multiply(emissions.factors.columns[t0:t1], pi_columns, out=E)
         else:
-            E = np.multiply(blk.factor, policy, out=ws.get("E", blk.factor.shape))
+            policy = pi if stationary else pi[t0:t1]
+            np.multiply(np.moveaxis(blk.factor, 0, -1), policy[..., None], out=E)
         return E, blk.shift
 
-    ws = _workspace
-    preds = ws.get("preds", (length, n_demos, S))
+    def times_local(E, i, t, vec, out):
+        """``out[a, s, n] = E_t[a, s, n] vec`` for step t (i within its chunk), ``vec`` of
+        shape (S, N) or (A, S, N)."""
+        if not separable:
+            np.multiply(E[i], vec, out=out)
+            return
+        state, action = E
+        policy = pi_columns if stationary else pi[t][:, :, None]
+        if vec.ndim == 2:  # pi (e_t pred): the state part joins the (S, N) vector
+            np.multiply(policy, np.multiply(state[i], vec, out=u), out=out)
+        else:  # the state part is applied by the caller, on the (S, N) sum
+            np.multiply(vec, policy, out=out)
+        out *= action[i][:, None, :]
+
+    preds = ws.get("preds", (length, S, n_demos))
     shifts = ws.get("shifts", (length, n_demos))
     norms = ws.get("norms", (length, n_demos))
-    preds[0] = np.exp(log_p0)
-    alpha = ws.get("alpha", (n_demos, A * S))
+    preds[0] = np.exp(log_p0)[:, None]
+    alpha = ws.get("alpha", (A, S, n_demos))
+    alpha_flat = alpha.reshape(A * S, n_demos)
+    ones = np.ones(A * S)
+    push, expect = mdp.column_products(n_demos)
     kept = None
     with np.errstate(divide="ignore", invalid="ignore"):
         for t0, t1 in chunks:
@@ -507,19 +557,18 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 return None
             E, shifts[t0:t1] = got[0], got[1].T
             for t in range(t0, t1):
-                np.multiply(E[:, t - t0], preds[t][:, None, :],
-                            out=alpha.reshape(n_demos, A, S))
-                np.add.reduce(alpha, axis=1, out=norms[t])
-                if t + 1 < length:  # push, then normalize the (N, S) result: one pass less
-                    mdp.push_forward_action_major(alpha, out=preds[t + 1])
-                    preds[t + 1] /= norms[t][:, None]
+                times_local(E, t - t0, t, preds[t], alpha)
+                np.dot(ones, alpha_flat, out=norms[t])
+                if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
+                    push(alpha, preds[t + 1])
+                    preds[t + 1] /= norms[t]
         if len(chunks) == 1:
             kept = E  # one chunk: the backward pass reuses it
     if not np.all(norms > 0.0):
         return None  # impossible somewhere: the log-space pass names the demonstration
     tiny = np.exp(-F)
     step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
-    for t0 in range(0, length, step):  # in chunks: no (T, N, S) temporaries
+    for t0 in range(0, length, step):  # in chunks: no (T, S, N) temporaries
         p = preds[t0:t0 + step]
         if np.min(p, where=p > 0.0, initial=np.inf) < tiny:
             return None
@@ -531,45 +580,49 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     # g = 0: no pair with forward mass leads there, and so every beta stays below about e^F.
     # Padded steps (t >= lengths[n]) add nothing, and beta restarts at 1 at each last step.
     inv_norms = np.divide(1.0, norms, out=ws.get("inv_norms", norms.shape))
-    scale = preds  # becomes pred_t / c_t in place (T, N, S): no second copy
-    scale *= inv_norms[:, :, None]
+    scale = preds  # becomes pred_t / c_t in place (T, S, N): no second copy
+    scale *= inv_norms[:, None, :]
     if ragged:
         valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
-        scale *= valid[:, :, None]
+        scale *= valid[:, None, :]
         last = lengths - 1
-    occupancy = np.zeros((n_demos, A, S))
-    beta = ws.get("beta", (n_demos, A, S))
+    occupancy = np.zeros((A, S, n_demos))
+    beta = ws.get("beta", (A, S, n_demos))
     beta.fill(1.0)
-    g = ws.get("g", (n_demos, S))
+    g = ws.get("g", (S, n_demos))
     with np.errstate(over="ignore", invalid="ignore"):
         for t0, t1 in reversed(chunks):
             E = kept if kept is not None else local(t0, t1)[0]
             # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real
             # step; padded steps are zeroed and send nothing either)
-            sends = ws.get("sends", (t1 - t0, n_demos, S))
-            np.multiply(scale[t0:t1] > 0.0, inv_norms[t0:t1, :, None], out=sends)
-            gamma = ws.get("gamma", E.shape)  # (N, L, A, S): pi e_t beta_t of the chunk's steps
+            sends = ws.get("sends", (t1 - t0, S, n_demos))
+            np.multiply(scale[t0:t1] > 0.0, inv_norms[t0:t1, None, :], out=sends)
+            weights = scale[t0:t1]  # (L, S, N): the posterior is gamma times this
+            if separable:
+                sends *= E[0]
+                weights = weights * E[0]
+            gamma = ws.get("gamma", (t1 - t0, A, S, n_demos))  # pi e_t beta_t of the chunk
             for t in range(t1 - 1, t0 - 1, -1):
                 if ragged:
                     ends = last == t
                     if ends.any():
-                        beta[ends] = 1.0
-                gamma_t = gamma[:, t - t0]
-                np.multiply(E[:, t - t0], beta, out=gamma_t)
+                        beta[:, :, ends] = 1.0
+                gamma_t = gamma[t - t0]
+                times_local(E, t - t0, t, beta, gamma_t)
                 if t > 0:
-                    np.add.reduce(gamma_t, axis=1, out=g)
+                    np.add.reduce(gamma_t, axis=0, out=g)
                     g *= sends[t - t0]
-                    mdp.expect_next_action_major(g, out=beta)
-            gamma *= np.swapaxes(scale[t0:t1], 0, 1)[:, :, None, :]
-            occupancy += np.add.reduce(gamma, axis=1)
-    initial = gamma[:, 0].sum(axis=1)
+                    expect(g, beta)
+            gamma *= weights[:, None]
+            occupancy += gamma[0] if t1 - t0 == 1 else np.add.reduce(gamma, axis=0)
+    initial = np.ascontiguousarray(gamma[0].sum(axis=0).T)
     if not (np.all(np.isfinite(occupancy)) and np.all(np.isfinite(initial))):
         return None
     per_step = shifts + np.log(norms)
     if ragged:
         per_step = np.where(valid, per_step, 0.0)
     return PosteriorStats(log_likelihood=per_step.sum(axis=0),
-                          occupancy=np.ascontiguousarray(np.swapaxes(occupancy, 1, 2)),
+                          occupancy=np.ascontiguousarray(occupancy.transpose(2, 1, 0)),
                           initial=initial)
 
 

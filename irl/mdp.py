@@ -21,7 +21,7 @@ from irl._validation import as_float_array, check_probability_rows, check_real, 
 
 __all__ = ["TabularMDP"]
 
-try:  # scipy's own CSR kernel (see _csr_times_rows); absent in some future scipy, then `@`
+try:  # scipy's own CSR kernel (see _csr_times); absent in some future scipy, then `@`
     from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
 except ImportError:  # pragma: no cover - depends on the scipy build
     _csr_matvecs = None
@@ -152,41 +152,57 @@ class TabularMDP:
         out = np.asarray(self._flat @ values.T).T if self._sparse else values @ self._flat.T
         return out.reshape(values.shape[0], self.n_states, self.n_actions)
 
-    def push_forward_action_major(self, mass: np.ndarray, out: np.ndarray | None = None
-                                  ) -> np.ndarray:
-        """:meth:`push_forward` of a batch in action-major layout ``mass[n, a, s]`` (or its
-        flat view ``(N, A S)``), shape (N, S); written into ``out`` (C-contiguous) if given.
+    def push_forward_columns(self, mass: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Next-state mass of a batch held in columns: ``out[s', n] = sum_{a, s} mass[a, s, n]
+        T[s, a, s']`` for ``mass`` of shape (A, S, N) or (A S, N) and ``out`` (S, N), both
+        C-contiguous.
 
-        Forward-backward keeps its messages action-major so that broadcasting a state vector
-        over the actions runs along the long axis.
+        Forward-backward keeps a batch's messages with the demonstrations innermost, so that
+        every product reads and writes its block in place (no transposed copies) and
+        broadcasting a state array over the actions runs over whole ``(S, N)`` slabs.
         """
-        flat = mass.reshape(mass.shape[0], -1)
+        flat = mass.reshape(-1, mass.shape[-1])
         if not self._products_sparse:
-            return np.dot(flat, self._action_major, out=out)
-        result = _csr_times_rows(self._action_major_T, flat).T
-        if out is None:
-            return np.ascontiguousarray(result)
-        out[...] = result
+            return np.dot(self._action_major_dense_T, flat, out=out)
+        return _csr_times(self._action_major_T, flat, out)
+
+    def expect_next_columns(self, values: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``out[a, s, n] = sum_s' T[s, a, s'] values[s', n]`` for ``values`` of shape (S, N)
+        and ``out`` of shape (A, S, N) or (A S, N), both C-contiguous (see
+        :meth:`push_forward_columns`)."""
+        flat = out.reshape(-1, out.shape[-1])
+        if not self._products_sparse:
+            np.dot(self._action_major, values, out=flat)
+        else:
+            _csr_times(self._action_major_csr, values, flat)
         return out
 
-    def expect_next_action_major(self, values: np.ndarray, out: np.ndarray | None = None
-                                 ) -> np.ndarray:
-        """:meth:`expect_next_batch` in action-major layout: ``out[n, a, s]``, shape (N, A, S);
-        written into ``out`` (C-contiguous) if given."""
-        n = values.shape[0]
-        if not self._products_sparse:
-            flat = None if out is None else out.reshape(n, -1)
-            result = np.dot(values, self._action_major_dense_T, out=flat)
-        else:
-            result = _csr_times_rows(self._action_major_csr, values).T
-            if out is not None:
-                out.reshape(n, -1)[...] = result
-                return out
-        return result.reshape(n, self.n_actions, self.n_states)
+    def column_products(self, n: int):
+        """``(push, expect)``: :meth:`push_forward_columns` and :meth:`expect_next_columns` for
+        a batch of n columns, as two functions of flat C-contiguous arrays (``push(mass (A S,
+        n), out (S, n))``, ``expect(values (S, n), out (A S, n))``) with every lookup done once,
+        for a loop that calls them at every step."""
+        if not self._products_sparse or _csr_matvecs is None:
+            return (lambda mass, out: self.push_forward_columns(mass, out),
+                    lambda values, out: self.expect_next_columns(values, out))
+        fwd, bwd = self._action_major_T, self._action_major_csr
+        n_pairs, n_states = bwd.shape
+        f_args = (n_states, n_pairs, n, fwd.indptr, fwd.indices, fwd.data)
+        b_args = (n_pairs, n_states, n, bwd.indptr, bwd.indices, bwd.data)
+
+        def push(mass, out):
+            out.fill(0.0)
+            _csr_matvecs(*f_args, mass.reshape(-1), out.reshape(-1))
+
+        def expect(values, out):
+            out.fill(0.0)
+            _csr_matvecs(*b_args, values.reshape(-1), out.reshape(-1))
+
+        return push, expect
 
     @cached_property
     def _products_sparse(self) -> bool:
-        """Whether the action-major products go through CSR: a sparse MDP, or a dense one
+        """Whether forward-backward's products go through CSR: a sparse MDP, or a dense one
         whose transitions are mostly zeros (a nearly deterministic task, where a dense product
         would spend its time on zeros)."""
         return self._sparse or np.count_nonzero(self._flat) <= _SPARSE_PRODUCTS * self._flat.size
@@ -368,18 +384,18 @@ def _names(names, n: int, argname: str, prefix: str) -> list[str]:
     return names
 
 
-def _csr_times_rows(csr: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
-    """``csr @ rows.T`` for a batch ``rows[n, :]``, shape (csr.shape[0], N), C-contiguous.
+def _csr_times(csr: sp.csr_matrix, block: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out[...] = csr @ block`` for a C-contiguous block ``(n_col, N)`` and out ``(n_row, N)``.
 
     Forward-backward makes two such products per step with a few demonstrations; at the
     sizes of the paper's tasks scipy's dispatch around its kernel costs several times the
-    kernel itself, so the kernel (``csr_matvecs``, ``Y += A X`` for a row-major block ``X``)
-    is called directly where this scipy has it, and ``@`` is the fallback.
+    kernel itself, so the kernel (``csr_matvecs``, ``Y += A X`` for row-major blocks) is called
+    directly where this scipy has it, and ``@`` is the fallback.
     """
-    block = np.ascontiguousarray(rows.T, dtype=float)
-    if _csr_matvecs is None:
-        return np.asarray(csr @ block)
-    out = np.zeros((csr.shape[0], block.shape[1]))
+    if _csr_matvecs is None or not (block.flags.c_contiguous and out.flags.c_contiguous):
+        out[...] = csr @ block
+        return out
+    out.fill(0.0)
     _csr_matvecs(csr.shape[0], csr.shape[1], block.shape[1], csr.indptr, csr.indices,
                  csr.data, block.ravel(), out.ravel())
     return out

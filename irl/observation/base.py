@@ -89,6 +89,15 @@ class ObservationModel(abc.ABC):
                 out[seen] = self._log_likelihoods(flat[seen])
         return out.reshape((*obs.shape, self.n_states, self.n_actions))
 
+    def separable_likelihoods(self, obs):
+        """``O(obs[...] | s, a) = exp(shift[...]) * state[..., s] * action[..., a]`` for a model
+        whose likelihoods factor into a state part and an action part (None otherwise, the
+        default): ``(state, action, shift, min_log)`` as in :meth:`scaled_likelihoods`, each
+        part at most 1 with maximum 1 (ones where occluded). Forward-backward then never forms
+        the ``S A`` factor of a step when the observations are too many to keep.
+        """
+        return None
+
     def scaled_likelihoods(self, obs, *, action_major: bool = False
                            ) -> tuple[np.ndarray, np.ndarray, float]:
         """``O(obs[...] | s, a) = exp(shift[...]) * factor[..., s, a]``, scaled so that nothing

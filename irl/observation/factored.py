@@ -108,11 +108,10 @@ class FactoredObservationModel(ObservationModel):
                self._log_action[:, seen_action].T[:, None, :], out=out)
         return out
 
-    def scaled_likelihoods(self, obs, *, action_major: bool = False
-                           ) -> tuple[np.ndarray, np.ndarray, float]:
-        """As :meth:`ObservationModel.scaled_likelihoods`, from the factors' columns: each is
-        divided by its maximum, so the shift is the sum of their log-maxima and the factor
-        their outer product (one pass over the ``S A`` pairs per observation)."""
+    def separable_likelihoods(self, obs):
+        """As :meth:`ObservationModel.separable_likelihoods`: the state part is the product of
+        the factors' columns, the action part the action confusion's column, each divided by
+        its maximum (the shift is the sum of their log-maxima)."""
         obs = np.asarray(obs)
         flat = obs.reshape(-1)
         m = flat.size
@@ -132,16 +131,23 @@ class FactoredObservationModel(ObservationModel):
                 low += np.log(np.where(col > 0, col, np.inf).min(axis=1))
         possible = np.isfinite(shift)
         min_log = float(low[possible].min()) if possible.any() else 0.0
-        product = columns[0]
+        state = columns[0]
         for col in columns[1:-1]:
-            product = (product[:, :, None] * col[:, None, :]).reshape(m, -1)
+            state = (state[:, :, None] * col[:, None, :]).reshape(m, -1)
+        return (state.reshape((*obs.shape, self.n_states)),
+                columns[-1].reshape((*obs.shape, self.n_actions)), shift.reshape(obs.shape),
+                min_log)
+
+    def scaled_likelihoods(self, obs, *, action_major: bool = False
+                           ) -> tuple[np.ndarray, np.ndarray, float]:
+        """As :meth:`ObservationModel.scaled_likelihoods`: the outer product of
+        :meth:`separable_likelihoods` (one pass over the ``S A`` pairs per observation)."""
+        state, action, shift, min_log = self.separable_likelihoods(obs)
         if action_major:  # the long axis innermost: a fast broadcast
-            factor = columns[-1][:, :, None] * product[:, None, :]
-            tail = (self.n_actions, self.n_states)
+            factor = action[..., :, None] * state[..., None, :]
         else:
-            factor = product[:, :, None] * columns[-1][:, None, :]
-            tail = (self.n_states, self.n_actions)
-        return factor.reshape((*obs.shape, *tail)), shift.reshape(obs.shape), min_log
+            factor = state[..., :, None] * action[..., None, :]
+        return factor, shift, min_log
 
     def distribution(self, state: int, action: int) -> np.ndarray:
         parts = np.unravel_index(state, self.sizes)

@@ -155,12 +155,12 @@ class StateObservationModel(ObservationModel):
         out[...] = self._log_state(obs)[:, :, None]
         return out
 
-    def scaled_likelihoods(self, obs, *, action_major: bool = False
-                           ) -> tuple[np.ndarray, np.ndarray, float]:
-        """As :meth:`ObservationModel.scaled_likelihoods`: each column ``C[:, o]`` divided by
-        its maximum, repeated over the actions."""
+    def separable_likelihoods(self, obs):
+        """As :meth:`ObservationModel.separable_likelihoods`: the state part is the column
+        ``C[:, o]`` divided by its maximum, the action part ones (dense C; None for a sparse
+        one, whose columns the generic path gathers)."""
         if self._csc is not None:
-            return super().scaled_likelihoods(obs, action_major=action_major)
+            return None
         obs = np.asarray(obs)
         flat = obs.reshape(-1)
         seen = np.flatnonzero(flat >= 0)
@@ -178,15 +178,21 @@ class StateObservationModel(ObservationModel):
             possible = top > 0
             if possible.any():
                 min_log = float(low[possible].min())
-        if action_major:
-            tail = (self.n_actions, self.n_states)
-            factor = np.empty((flat.size, *tail))
-            factor[...] = cols[:, None, :]
-        else:
-            tail = (self.n_states, self.n_actions)
-            factor = np.empty((flat.size, *tail))
-            factor[...] = cols[:, :, None]
-        return factor.reshape((*obs.shape, *tail)), shift.reshape(obs.shape), min_log
+        return (cols.reshape((*obs.shape, self.n_states)),
+                np.ones((*obs.shape, self.n_actions)), shift.reshape(obs.shape), min_log)
+
+    def scaled_likelihoods(self, obs, *, action_major: bool = False
+                           ) -> tuple[np.ndarray, np.ndarray, float]:
+        """As :meth:`ObservationModel.scaled_likelihoods`: each column ``C[:, o]`` divided by
+        its maximum, repeated over the actions."""
+        if self._csc is not None:
+            return super().scaled_likelihoods(obs, action_major=action_major)
+        cols, _, shift, min_log = self.separable_likelihoods(obs)
+        tail = (self.n_actions, self.n_states) if action_major else (self.n_states,
+                                                                      self.n_actions)
+        factor = np.empty((*cols.shape[:-1], *tail))
+        factor[...] = cols[..., None, :] if action_major else cols[..., :, None]
+        return factor, shift, min_log
 
     def distribution(self, state: int, action: int) -> np.ndarray:
         if self._csc is not None:

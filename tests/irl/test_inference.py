@@ -92,16 +92,21 @@ def test_ten_thousand_noisy_occluded_steps_agree_on_both_passes():
 
 def _count_operator_calls(mdp, monkeypatch) -> dict[str, int]:
     """Count the transition-operator products forward-backward makes on ``mdp``."""
-    calls = {"push_forward_action_major": 0, "expect_next_action_major": 0,
+    calls = {"push_forward_columns": 0, "expect_next_columns": 0,
              "log_push_forward": 0, "log_expect_next": 0}
-    for name in calls:
-        method = getattr(mdp, name)
 
-        def counted(*args, _name=name, _method=method, **kwargs):
-            calls[_name] += 1
-            return _method(*args, **kwargs)
+    def counting(name, kernel):
+        def counted(*args, **kwargs):
+            calls[name] += 1
+            return kernel(*args, **kwargs)
+        return counted
 
-        monkeypatch.setattr(mdp, name, counted)
+    for name in ("log_push_forward", "log_expect_next"):
+        monkeypatch.setattr(mdp, name, counting(name, getattr(mdp, name)))
+    products = mdp.column_products
+    monkeypatch.setattr(mdp, "column_products", lambda n: tuple(
+        counting(name, kernel) for name, kernel in zip(
+            ("push_forward_columns", "expect_next_columns"), products(n), strict=True)))
     return calls
 
 
@@ -115,7 +120,7 @@ def test_cost_is_independent_of_occlusion(occlusion, monkeypatch):
     log_pi = np.log(dom.expert_policy())
     calls = _count_operator_calls(dom.mdp, monkeypatch)
     stats = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
-    assert calls == {"push_forward_action_major": 199, "expect_next_action_major": 199,
+    assert calls == {"push_forward_columns": 199, "expect_next_columns": 199,
                      "log_push_forward": 0, "log_expect_next": 0}
     if occlusion == 1.0:
         assert stats.log_likelihood == pytest.approx(0.0, abs=1e-9)
@@ -162,3 +167,73 @@ def test_log_space_kernels_equal_the_linear_ones(sparse, rng):
     # shifting every input by c shifts every output by c: nothing under- or overflows
     np.testing.assert_allclose(mdp.log_push_forward(log_mass - 5000.0),
                                mdp.log_push_forward(log_mass) - 5000.0, rtol=1e-13)
+
+
+@pytest.mark.parametrize("kind", OM_KINDS)
+@pytest.mark.parametrize("sparse", [False, True])
+def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatch):
+    """Observations computed one step at a time (what a batch too large to keep gets), with a
+    state-times-action model's factors never formed, give the kept whole-batch pass and the
+    log-space pass to 1e-12, ragged and time-indexed batches included."""
+    mdp = random_mdp(rng, 6, 3, sparse=sparse)
+    om = random_observation_model(rng, 6, 3, n_obs=5, kind=kind)
+    pi = rng.dirichlet(np.ones(3), size=6)
+    demos = [random_demo(rng, n, om.n_observations) for n in (7, 6, 7, 5)]
+    kept = posterior_stats(mdp, np.log(pi), demos, om)
+    exact = posterior_stats(mdp, np.log(pi), demos, om, method="log")
+    pis = rng.dirichlet(np.ones(3), size=(7, 6))
+    obs = np.array([d.as_array() for d in demos if len(d) == 7])
+    timed = forward_backward(mdp, np.log(pis), obs, om)
+    separable = []
+    original = om.separable_likelihoods
+
+    def counted(o):
+        parts = original(o)
+        separable.append(parts is not None)
+        return parts
+
+    monkeypatch.setattr(om, "separable_likelihoods", counted)
+    monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
+    chunked = posterior_stats(mdp, np.log(pi), demos, om)
+    chunked_timed = forward_backward(mdp, np.log(pis), obs, om)
+    assert any(separable) == (kind in ("factored", "state"))
+    for a in (kept, exact):
+        np.testing.assert_allclose(chunked.log_likelihood, a.log_likelihood, rtol=1e-12)
+        np.testing.assert_allclose(chunked.occupancy, a.occupancy, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(chunked.initial, a.initial, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(chunked_timed.log_likelihood, timed.log_likelihood, rtol=1e-12)
+    np.testing.assert_allclose(chunked_timed.occupancy, timed.occupancy, rtol=1e-12,
+                               atol=1e-14)
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_column_kernels_equal_the_batch_ones(sparse, rng):
+    """The products forward-backward makes on blocks held demonstrations-innermost equal
+    push_forward and expect_next_batch, whether T is dense, sparse, or dense and mostly zero
+    (multiplied through a CSR copy)."""
+    T = rng.dirichlet(np.ones(5), size=(5, 3))
+    T[T < 0.15] = 0.0
+    T /= T.sum(axis=2, keepdims=True)
+    if sparse:
+        import scipy.sparse as sps
+
+        transitions = [sps.csr_matrix(T[:, a, :]) for a in range(3)]
+    else:
+        transitions = T
+    mdp = irl.TabularMDP(transitions=transitions, features=np.zeros((5, 3, 1)), discount=0.5,
+                         initial=np.full(5, 0.2))
+    mass = rng.random((4, 5, 3))  # [n, s, a]
+    values = rng.random((4, 5))  # [n, s']
+    columns = np.ascontiguousarray(mass.transpose(2, 1, 0))  # [a, s, n]
+    pushed = mdp.push_forward_columns(columns, out=np.empty((5, 4)))
+    np.testing.assert_allclose(pushed.T, mdp.push_forward(mass), rtol=1e-14)
+    expected = mdp.expect_next_batch(values)  # [n, s, a]
+    got = mdp.expect_next_columns(np.ascontiguousarray(values.T), out=np.empty((3, 5, 4)))
+    np.testing.assert_allclose(got.transpose(2, 1, 0), expected, rtol=1e-14)
+    push, expect = mdp.column_products(4)  # the loop's bound form
+    out = np.full((5, 4), np.nan)
+    push(columns.reshape(15, 4), out)
+    np.testing.assert_allclose(out, pushed, rtol=1e-14)
+    out = np.full((15, 4), np.nan)
+    expect(np.ascontiguousarray(values.T), out)
+    np.testing.assert_allclose(out.reshape(3, 5, 4), got, rtol=1e-14)
