@@ -1,11 +1,16 @@
 """Performance of the irl core, as ratios against baselines measured in the same run.
 
-    python bench/bench_irl.py            # everything (about 6 minutes on 2 loaded cores)
+    python bench/bench_irl.py            # everything (about 6 minutes on 2 cores)
     python bench/bench_irl.py --quick    # fewer repeats, S up to 40,000
 
-BLAS threads: scipy's L-BFGS-B makes tiny BLAS calls at every iteration, and on a loaded
-machine OpenBLAS's thread pool can make them cost more than a sorting gradient; run with
-``OPENBLAS_NUM_THREADS=1`` to see the fit without that (both figures are in the README).
+BLAS threads: the bench runs OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``, set before
+numpy loads, unless the variable is already set), the library and its baseline alike: at these
+sizes a BLAS thread pool only adds synchronization (scipy's L-BFGS-B makes tiny BLAS calls at
+every iteration), and on a shared machine it makes timings swing.
+
+Backends: the numpy/scipy path is the default and the reference; where numba is installed
+(``pip install 'onionsort[fast]'``) the bench also times ``backend="numba"`` (compiled once,
+before timing).
 
 1. Sorting fit (12 demonstrations x 20 steps, 4 occluded each, 30% noise, 10 batches) and one
    warm gradient: MMAP-BIRL against the frozen path of commit cfdfae2
@@ -27,22 +32,28 @@ machine OpenBLAS's thread pool can make them cost more than a sorting gradient; 
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import sys
 import time
 import tracemalloc
 from pathlib import Path
 
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads; see the docstring
+
 import numpy as np
 import scipy.sparse as sp
 
 import irl
+from irl import _numba
 from irl.inference import pack_demonstrations, posterior_stats
 from irl.solvers import OptimalQSolver, log_boltzmann_policy
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from irl_baseline import BaselineMMAPBIRL
 from irl_baseline import posterior_stats as baseline_posterior_stats
+
+NUMBA = _numba.available()
 
 
 def best_time(fn, repeats: int) -> float:
@@ -70,6 +81,9 @@ def bench_fit_sorting(repeats: int, n_batches: int = 10) -> None:
 
     t_new, t_old = fit_time(irl.MMAPBIRL, **kw), fit_time(BaselineMMAPBIRL, **kw)
     t_em = fit_time(irl.HiddenDataEM)
+    if NUMBA:
+        irl.MMAPBIRL(dom.mdp, dom.observation_model, backend="numba", **kw).fit(batches[0])
+        t_numba = fit_time(irl.MMAPBIRL, backend="numba", **kw)
     same = [np.allclose(irl.MMAPBIRL(dom.mdp, dom.observation_model, **kw).fit(d).theta_,
                         BaselineMMAPBIRL(dom.mdp, dom.observation_model, **kw).fit(d).theta_,
                         atol=1e-8) for d in batches]
@@ -89,6 +103,9 @@ def bench_fit_sorting(repeats: int, n_batches: int = 10) -> None:
           f"speed-up {t_old / t_new:4.1f}x   (same theta_ in {sum(same)}/{n_batches})")
     print(f"    gradient: now {g_new * 1e3:7.3f} ms   frozen cfdfae2 {g_old * 1e3:7.3f} ms   "
           f"speed-up {g_old / g_new:4.1f}x")
+    if NUMBA:
+        print(f"    fit, numba backend: {t_numba * 1e3:7.1f} ms   speed-up over frozen "
+              f"{t_old / t_numba:4.1f}x")
     print(f"    HiddenDataEM fit {t_em * 1e3:7.1f} ms: MMAP-BIRL is {t_em / t_new:4.1f}x faster")
 
 
@@ -161,11 +178,13 @@ def cold_gradient(cls, mdp, om, demos, theta):
     return cls(mdp, om, beta=1.0).log_posterior_gradient(theta, demos)
 
 
-def fb_time(mdp, om, demos, log_pi, repeats, baseline=False):
+def fb_time(mdp, om, demos, log_pi, repeats, baseline=False, backend="numpy"):
     if baseline:
         return best_time(lambda: baseline_posterior_stats(mdp, log_pi, demos, om), repeats)
     packed = pack_demonstrations(demos, om)
-    return best_time(lambda: posterior_stats(mdp, log_pi, packed), repeats)
+    if backend != "numpy":
+        posterior_stats(mdp, log_pi, packed, backend=backend)  # compile before timing
+    return best_time(lambda: posterior_stats(mdp, log_pi, packed, backend=backend), repeats)
 
 
 def traced(fn):
@@ -220,6 +239,8 @@ def bench_floor(repeats: int) -> None:
     (demos,) = grid_demos(mdp, (factored,), theta)
     log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
     t_fb = fb_time(mdp, factored, demos, log_pi, repeats)
+    if NUMBA:
+        t_numba = fb_time(mdp, factored, demos, log_pi, repeats, backend="numba")
     P = mdp._flat  # the flat operator T[s * A + a, s'] forward-backward multiplies by
     PT = P.T.tocsr()
     N, L, S, A = len(demos), len(demos[0]), mdp.n_states, mdp.n_actions
@@ -236,6 +257,9 @@ def bench_floor(repeats: int) -> None:
     print(f"[4] forward-backward at S = {S}, {N} demos x {L} steps, factored sensor: "
           f"{t_fb * 1e3:.0f} ms; the same {2 * (L - 1)} sparse products alone "
           f"{t_floor * 1e3:.0f} ms; ratio {t_fb / t_floor:.1f}x")
+    if NUMBA:
+        print(f"    numba backend: {t_numba * 1e3:.0f} ms; ratio to the products "
+              f"{t_numba / t_floor:.1f}x")
 
 
 def main() -> None:

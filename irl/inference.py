@@ -529,10 +529,8 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
 
     def times_local(E, i, t, vec, out):
         """``out[a, s, n] = E_t[a, s, n] vec`` for step t (i within its chunk), ``vec`` of
-        shape (S, N) or (A, S, N)."""
-        if not separable:
-            np.multiply(E[i], vec, out=out)
-            return
+        shape (S, N) or (A, S, N), when the factors are separable (else the loops multiply
+        by ``E[i]`` themselves)."""
         state, action = E
         policy = pi_columns if stationary else pi[t][:, :, None]
         if vec.ndim == 2:  # pi (e_t pred): the state part joins the (S, N) vector
@@ -557,7 +555,10 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 return None
             E, shifts[t0:t1] = got[0], got[1].T
             for t in range(t0, t1):
-                times_local(E, t - t0, t, preds[t], alpha)
+                if separable:
+                    times_local(E, t - t0, t, preds[t], alpha)
+                else:
+                    np.multiply(E[t - t0], preds[t], out=alpha)
                 np.dot(ones, alpha_flat, out=norms[t])
                 if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
                     push(alpha, preds[t + 1])
@@ -608,7 +609,10 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                     if ends.any():
                         beta[:, :, ends] = 1.0
                 gamma_t = gamma[t - t0]
-                times_local(E, t - t0, t, beta, gamma_t)
+                if separable:
+                    times_local(E, t - t0, t, beta, gamma_t)
+                else:
+                    np.multiply(E[t - t0], beta, out=gamma_t)
                 if t > 0:
                     np.add.reduce(gamma_t, axis=0, out=g)
                     g *= sends[t - t0]

@@ -237,3 +237,18 @@ def test_column_kernels_equal_the_batch_ones(sparse, rng):
     out = np.full((15, 4), np.nan)
     expect(np.ascontiguousarray(values.T), out)
     np.testing.assert_allclose(out.reshape(3, 5, 4), got, rtol=1e-14)
+
+
+def test_backend_is_checked_by_name(monkeypatch):
+    dom = irl.domains.onion_sorting(noise=0.3)
+    demos, _ = dom.sample(2, 5, seed=0)
+    log_pi = np.log(dom.expert_policy())
+    with pytest.raises(ValueError, match=r"backend must be one of \('numpy', 'numba'\); got 'gpu'"):
+        posterior_stats(dom.mdp, log_pi, demos, dom.observation_model, backend="gpu")
+    with pytest.raises(TypeError, match="backend must be one of"):
+        irl.MMAPBIRL(dom.mdp, dom.observation_model, backend=None).fit(demos)
+    from irl import _numba
+
+    monkeypatch.setattr(_numba, "available", lambda: False)
+    with pytest.raises(ValueError, match=r"needs numba, which is not installed: pip install"):
+        irl.MMAPBIRL(dom.mdp, dom.observation_model, backend="numba").fit(demos)
