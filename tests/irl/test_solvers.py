@@ -3,7 +3,7 @@ import pytest
 import scipy.sparse as sp
 
 import irl
-from irl.solvers import OptimalQSolver, policy_values
+from irl.solvers import OptimalQSolver, _PolicySystem, policy_values, solve_policy_derivatives
 from tests.irl.conftest import random_mdp
 
 
@@ -63,3 +63,124 @@ def test_sparse_and_dense_give_the_same_solution():
     pol = OptimalQSolver(dense).solve(theta).policy
     np.testing.assert_allclose(policy_values(sparse, sparse.reward(theta), pol),
                                policy_values(dense, dense.reward(theta), pol), atol=1e-10)
+
+
+def _grid(nx, ny, seed=0, discount=0.99):
+    """A noisy nx x ny grid, 4 moves, sparse features: a long horizon, as in the bench."""
+    rng = np.random.default_rng(seed)
+    n = nx * ny
+    x, y = np.divmod(np.arange(n), ny)
+    moves = [(0, 1), (1, 0), (0, -1), (-1, 0)]
+    mats = []
+    for a in range(4):
+        rows, cols, vals = [], [], []
+        for b, (dx, dy) in enumerate(moves):
+            rows.append(np.arange(n))
+            cols.append(np.clip(x + dx, 0, nx - 1) * ny + np.clip(y + dy, 0, ny - 1))
+            vals.append(np.full(n, 0.9 if a == b else 0.1 / 3))
+        mats.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                   np.concatenate(cols))), shape=(n, n)))
+    phi = np.zeros((n, 4, 4))
+    for k in range(4):
+        phi[rng.choice(n, size=max(1, n // 20), replace=False), :, k] = 1.0
+    return irl.TabularMDP(transitions=mats, features=phi, discount=discount,
+                          initial=np.full(n, 1.0 / n))
+
+
+def _howard(mdp, theta):
+    """Plain policy iteration from the reward's greedy policy, dense solves: the reference."""
+    n, rows = mdp.n_states, np.arange(mdp.n_states)
+    T = np.stack([mdp.next_state_distribution(s, a) for s in range(n)
+                  for a in range(mdp.n_actions)]).reshape(n, mdp.n_actions, n)
+    R = mdp.reward(theta)
+    policy = np.argmax(R, axis=1)
+    while True:
+        dV = np.linalg.solve(np.eye(n) - mdp.discount * T[rows, policy],
+                             mdp.features[rows, policy])
+        dQ = mdp.features + mdp.discount * np.einsum("sat,tk->sak", T, dV)
+        Q = dQ @ theta
+        best = np.argmax(Q, axis=1)
+        improve = Q[rows, best] > Q[rows, policy] + 1e-10 * (1 + np.abs(Q).max())
+        if not improve.any():
+            return policy, dQ
+        policy = np.where(improve, best, policy)
+
+
+SCHEDULES = [
+    {},
+    {"improvement_sweeps": 0},
+    {"warm_start_sweeps": 0},
+    {"warm_start_sweeps": 200, "sweep_patience": None, "improvement_sweeps": 0},
+    {"sweep_patience": 1, "improvement_sweeps": 5},
+]
+
+
+@pytest.mark.parametrize("kw", SCHEDULES)
+def test_every_sweep_schedule_gives_the_optimal_policy_and_its_exact_derivatives(kw):
+    mdp = _grid(12, 9)
+    for theta in ([1.0, -1.0, 0.5, -0.5], [0.3, 2.0, -1.0, 0.1]):
+        theta = np.array(theta)
+        policy, dQ = _howard(mdp, theta)
+        sol = OptimalQSolver(mdp, **kw).solve(theta)
+        np.testing.assert_array_equal(sol.policy, policy)
+        scale = np.abs(dQ).max()
+        np.testing.assert_allclose(sol.dQ, dQ, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(sol.dQ, solve_policy_derivatives(mdp, sol.policy),
+                                   rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("sparse", [False, True])
+def test_sweep_schedules_agree_on_random_mdps(seed, sparse):
+    rng = np.random.default_rng(seed)
+    mdp = random_mdp(rng, n_states=int(rng.integers(2, 60)), n_actions=int(rng.integers(1, 5)),
+                     n_features=3, sparse=sparse)
+    theta = rng.normal(size=3)
+    policy, dQ = _howard(mdp, theta)
+    for kw in SCHEDULES:
+        sol = OptimalQSolver(mdp, **kw).solve(theta)
+        np.testing.assert_array_equal(sol.policy, policy)
+        np.testing.assert_allclose(sol.dQ, dQ, rtol=0, atol=1e-10 * np.abs(dQ).max())
+
+
+def test_ties_go_to_the_lowest_action():
+    mdp = _grid(6, 5)
+    for kw in SCHEDULES:
+        sol = OptimalQSolver(mdp, **kw).solve(np.zeros(4))  # every action ties everywhere
+        np.testing.assert_array_equal(sol.policy, 0)
+
+
+def test_a_repeated_sparsity_pattern_reuses_the_ordering_exactly():
+    """Every policy of the grid has the same P_pi pattern: the second factorization permutes
+    by the first one's ordering; both solve as a dense solve does, as do action-dependent
+    patterns (no reuse)."""
+    rng = np.random.default_rng(3)
+    for mdp in (_grid(7, 8), random_mdp(rng, n_states=30, n_actions=3, sparse=True)):
+        system = _PolicySystem(mdp)
+        rhs = rng.normal(size=(mdp.n_states, 2))
+        for _ in range(4):
+            policy = rng.integers(mdp.n_actions, size=mdp.n_states)
+            P = mdp.policy_transitions(policy).toarray()
+            expected = np.linalg.solve(np.eye(mdp.n_states) - mdp.discount * P, rhs)
+            np.testing.assert_allclose(system.factor(policy)(rhs), expected, rtol=1e-12,
+                                       atol=1e-12 * np.abs(expected).max())
+        assert system._order is not None
+
+
+def test_sweeps_after_an_evaluation_save_factorizations_on_a_long_horizon_grid(monkeypatch):
+    mdp = _grid(40, 30)
+    theta = np.array([1.0, -1.0, 0.5, -0.5])
+    calls = []
+    factor = _PolicySystem.factor
+    monkeypatch.setattr(_PolicySystem, "factor",
+                        lambda self, policy: calls.append(1) or factor(self, policy))
+    counts, policies = [], []
+    for kw in ({}, {"improvement_sweeps": 0}):
+        calls.clear()
+        sol = OptimalQSolver(mdp, **kw).solve(theta)
+        np.testing.assert_allclose(sol.dQ, solve_policy_derivatives(mdp, sol.policy),
+                                   rtol=0, atol=1e-10 * np.abs(sol.dQ).max())
+        counts.append(len(calls) - 1)  # solve_policy_derivatives factors once more
+        policies.append(sol.policy)
+    np.testing.assert_array_equal(*policies)
+    assert counts[0] < counts[1], counts  # 3 and 5 evaluations when written
