@@ -15,7 +15,8 @@ before timing).
 1. Sorting fit (12 demonstrations x 20 steps, 4 occluded each, 30% noise, 10 batches) and one
    warm gradient: MMAP-BIRL against the frozen path of commit cfdfae2
    (``bench/irl_baseline.py``: dense emission table, demonstrations re-packed at every
-   gradient) and against HiddenDataEM (the paper's "more than 10x faster").
+   gradient, the planning kernels and gradient assembly of that time) and against
+   HiddenDataEM (the paper's "more than 10x faster").
 2. One MMAP-BIRL gradient vs occlusion 0..60% (sorting, 12 demonstrations x 100 steps): flat.
 3. Scaling in S on a grid world with sparse T, 10 demonstrations x 100 steps, 20% occluded,
    peak memory from tracemalloc: (a) forward-backward against the frozen path, both with a
@@ -24,7 +25,8 @@ before timing).
    messages span more than a float's range, so both run the exact log-space pass; (b) one
    cold gradient (MDP solve included) and its forward-backward with a factored sensor (each
    coordinate misread by one cell 15% of the time, actions exact; 400,000 observations at
-   S = 100,000, which the frozen path cannot build).
+   S = 100,000, which the frozen path cannot build), and the products floor of 4 at the same
+   size, which shows what linear scaling means on this machine's memory hierarchy.
 4. Forward-backward at S = 10,000 (factored sensor) against its floor: the same sparse
    products, forward and backward, done by scipy alone on arrays of the same shapes.
 """
@@ -173,9 +175,9 @@ def grid_demos(mdp, oms, theta, n=10, length=100, occlusion=0.2, seed=0):
              for i, t in enumerate(trajs)] for om in oms]
 
 
-def cold_gradient(cls, mdp, om, demos, theta):
+def cold_gradient(cls, mdp, om, demos, theta, **kw):
     """A fresh estimator's gradient: MDP solve, packing and forward-backward."""
-    return cls(mdp, om, beta=1.0).log_posterior_gradient(theta, demos)
+    return cls(mdp, om, beta=1.0, **kw).log_posterior_gradient(theta, demos)
 
 
 def fb_time(mdp, om, demos, log_pi, repeats, baseline=False, backend="numpy"):
@@ -199,12 +201,31 @@ def traced(fn):
     return (out if isinstance(out, float) else seconds), peak
 
 
+def products_floor(mdp, n_demos: int, length: int, repeats: int) -> float:
+    """The arithmetic floor of forward-backward: the same sparse products, forward and
+    backward, done by scipy alone on blocks of the same shapes."""
+    P = mdp._flat  # the flat operator T[s * A + a, s'] forward-backward multiplies by
+    PT = P.T.tocsr()
+    alpha = np.random.default_rng(0).random((mdp.n_states * mdp.n_actions, n_demos))
+    g = np.random.default_rng(1).random((mdp.n_states, n_demos))
+
+    def floor():
+        for _ in range(length - 1):
+            PT @ alpha
+        for _ in range(length - 1):
+            P @ g
+
+    return best_time(floor, repeats)
+
+
 def bench_scaling(quick: bool) -> None:
     sizes = [(100, 100), (200, 200)] if quick else [(100, 100), (250, 400)]
     theta = np.array([1.0, -1.0, 0.5, -0.5])
     print("[3] scaling in S: sparse grid T, 10 demos x 100 steps, 20% occluded; one cold "
-          "gradient (MDP solve included), its forward-backward, peak traced memory")
+          "gradient (MDP solve included), its forward-backward, peak traced memory, and the "
+          "products floor of [4] at each size")
     rows = []
+    mib = 2**20
     for nx, ny in sizes:
         mdp, factored, blocks = grid_world(nx, ny)
         demos_f, demos_b = grid_demos(mdp, (factored, blocks), theta)
@@ -218,18 +239,29 @@ def bench_scaling(quick: bool) -> None:
         r["grad_f"], r["peak_f"] = traced(
             lambda m=mdp, o=factored, d=demos_f: cold_gradient(irl.MMAPBIRL, m, o, d, theta))
         r["fb_f"] = fb_time(mdp, factored, demos_f, log_pi, 1)
-        rows.append(r)
-        mib = 2**20
+        r["floor"] = products_floor(mdp, len(demos_f), len(demos_f[0]), 1)
         print(f"    S = {r['S']:6d}, block sensor:    forward-backward {r['fb_new']:6.2f} s vs "
               f"frozen {r['fb_old']:6.2f} s ({r['fb_old'] / r['fb_new']:4.1f}x), peak "
               f"{r['peak_new'] / mib:6.0f} MiB vs {r['peak_old'] / mib:6.0f} MiB")
         print(f"    S = {r['S']:6d}, factored sensor: gradient {r['grad_f']:6.2f} s, "
               f"forward-backward {r['fb_f']:6.2f} s, peak {r['peak_f'] / mib:6.0f} MiB "
-              f"(the frozen path cannot build this model)")
+              f"(the frozen path cannot build this model); products alone {r['floor']:6.2f} s")
+        if NUMBA:
+            r["grad_n"], r["peak_n"] = traced(lambda m=mdp, o=factored, d=demos_f: cold_gradient(
+                irl.MMAPBIRL, m, o, d, theta, backend="numba"))
+            r["fb_n"] = fb_time(mdp, factored, demos_f, log_pi, 1, backend="numba")
+            print(f"    S = {r['S']:6d}, factored sensor, numba backend: gradient "
+                  f"{r['grad_n']:6.2f} s, forward-backward {r['fb_n']:6.2f} s, peak "
+                  f"{r['peak_n'] / mib:6.0f} MiB")
+        rows.append(r)
     first, last = rows[0], rows[-1]
+    grow = {k: last[k] / first[k] for k in first if k in ("grad_f", "fb_f", "floor", "grad_n",
+                                                         "fb_n")}
     print(f"    S x{last['S'] / first['S']:.0f} ({first['S']} -> {last['S']}), factored sensor: "
-          f"gradient x{last['grad_f'] / first['grad_f']:.1f}, forward-backward "
-          f"x{last['fb_f'] / first['fb_f']:.1f}; max RSS of this process "
+          f"gradient x{grow['grad_f']:.1f}, forward-backward x{grow['fb_f']:.1f}, the products "
+          f"alone x{grow['floor']:.1f}" + (
+              f"; numba backend: gradient x{grow['grad_n']:.1f}, forward-backward "
+              f"x{grow['fb_n']:.1f}" if NUMBA else "") + "; max RSS of this process "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
 
 
@@ -241,19 +273,8 @@ def bench_floor(repeats: int) -> None:
     t_fb = fb_time(mdp, factored, demos, log_pi, repeats)
     if NUMBA:
         t_numba = fb_time(mdp, factored, demos, log_pi, repeats, backend="numba")
-    P = mdp._flat  # the flat operator T[s * A + a, s'] forward-backward multiplies by
-    PT = P.T.tocsr()
-    N, L, S, A = len(demos), len(demos[0]), mdp.n_states, mdp.n_actions
-    alpha = np.random.default_rng(0).random((S * A, N))
-    g = np.random.default_rng(1).random((S, N))
-
-    def floor():
-        for _ in range(L - 1):
-            PT @ alpha
-        for _ in range(L - 1):
-            P @ g
-
-    t_floor = best_time(floor, repeats)
+    N, L, S = len(demos), len(demos[0]), mdp.n_states
+    t_floor = products_floor(mdp, N, L, repeats)
     print(f"[4] forward-backward at S = {S}, {N} demos x {L} steps, factored sensor: "
           f"{t_fb * 1e3:.0f} ms; the same {2 * (L - 1)} sparse products alone "
           f"{t_floor * 1e3:.0f} ms; ratio {t_fb / t_floor:.1f}x")

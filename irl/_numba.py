@@ -15,7 +15,12 @@ Layouts (action-major, as in :mod:`irl.inference`; ``r = a * S + s`` indexes a p
 - ``pi[a, s]`` (A, S): ``exp(log_policy).T``;
 - ``factor[n, t, a, s]`` (N, T, A, S) and ``shift[n, t]`` (N, T): the shifted observation
   likelihoods of :func:`irl.inference.observation_factors` (ones and 0 at occluded and padded
-  steps);
+  steps); or, for a model whose likelihoods factor into a state and an action part
+  (:func:`scaled_forward_backward_separable`), ``state[n, t, s]`` (N, T, S) and ``action[n,
+  t, a]`` (N, T, A) with ``factor[n, t, a, s] = action[n, t, a] * state[n, t, s]``, as
+  :meth:`irl.observation.ObservationModel.separable_likelihoods` returns them; the kernel
+  forms each step's row of that product in place when it visits the step (once forward, once
+  backward), so the full factor is never held;
 - ``lengths[n]``: each demonstration's number of real steps (``<= T``);
 - ``p0[s]``: the initial distribution, ``exp(log_p0)`` as the numpy pass takes it.
 
@@ -36,7 +41,8 @@ is then multiplied by ``1 / c_t``. A row with ``E_t[r] = 0`` or ``pred_t[s] = 0`
 its posterior and its share of ``g`` are exactly 0 in the numpy pass too (``beta`` is finite,
 since every ``g`` is checked finite and the rows of ``T`` sum to 1).
 
-Storage besides the outputs: ``pred_t`` (L, S), the normalizers, and a few vectors of S A.
+Storage besides the inputs and outputs: ``pred_t`` (L, S), the normalizers, and a few
+vectors of S A.
 
 Range checks, as in the numpy pass (see :mod:`irl.inference`): ``ok`` is False when some
 ``c_t`` is not positive and finite (an observation impossible given the steps before it, or
@@ -52,7 +58,10 @@ Speed (one core, against the numpy pass given the same factors): about 3x on the
 domain (12 demonstrations x 20 steps, 0.1 ms a call); on a 10,000-state grid (10 x 100 steps)
 about 3x with an informative sensor, where most rows of an observed step are skipped (as fast
 as the bare sparse products of the numpy pass), and 1.0-1.3x when every pair stays possible at
-every step, where one demonstration at a time re-reads ``T`` for each.
+every step, where one demonstration at a time re-reads ``T`` for each. Given the separable
+parts instead of the full factor, about 12% faster with the informative sensor (the factor's
+``N T A S`` floats are not streamed from memory) and 3% slower when every pair stays possible
+(forming the rows costs more than reading them).
 """
 
 from __future__ import annotations
@@ -62,7 +71,8 @@ from functools import cache
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["available", "operator_arrays", "scaled_forward_backward"]
+__all__ = ["available", "operator_arrays", "scaled_forward_backward",
+           "scaled_forward_backward_separable"]
 
 
 @cache
@@ -96,7 +106,12 @@ def _kernel():
     cache, at the first call).
 
     One function with no calls to other compiled functions (a closure over other dispatchers
-    misses numba's cache in every new process). Indices are unsigned (``u``) in every hot
+    misses numba's cache in every new process). It takes either ``factor`` or ``state`` and
+    ``action``, the others None: numba prunes the branches on an argument that is None before
+    it types the function, so each entry point gets its own specialization (both kept in the
+    on-disk cache), and the full factor's runs the loops it ran before the separable one was
+    added, as fast (a runtime flag that picked the row's source cost it 3%). Indices are
+    unsigned (``u``) in every hot
     loop: numba wraps a signed index that could be negative, which costs more than the
     arithmetic in these loops (a gather along the rows of ``T`` takes 2.3x as long).
     """
@@ -105,9 +120,10 @@ def _kernel():
     u = numba.uint64
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(indptr, indices, data, pi, factor, shift, lengths, p0, tiny, scatter_rows):
-        n_demos, length, n_actions, n_states = factor.shape
-        n_states, n_actions = u(n_states), u(n_actions)
+    def kernel(indptr, indices, data, pi, factor, state, action, shift, lengths, p0, tiny,
+               scatter_rows):
+        n_demos, length = shift.shape
+        n_actions, n_states = u(pi.shape[0]), u(pi.shape[1])
         n_rows = n_actions * n_states
         one = u(1)
         log_likelihood = np.zeros(n_demos)
@@ -131,6 +147,7 @@ def _kernel():
                 col_vals[fill[j]] = data[k]
                 fill[j] += one
         local = pi.ravel()  # pi[r], r = a * S + s
+        row = np.empty(n_rows)  # separable: one step's factor, action[a] * state[s]
         alpha = np.empty(n_rows)
         occ = np.empty(n_rows)  # one demonstration's occupancy, action-major
         live = np.empty(n_rows, dtype=np.uint64)
@@ -148,7 +165,13 @@ def _kernel():
             # forward: alpha_t = factor pi pred_t, pushed through T
             for t in range(last + 1):
                 pred = preds[t]
-                f = factor[n, t].ravel()
+                if state is not None:  # the row factor[n, t] would hold, formed in place
+                    st, ac = state[n, t], action[n, t]
+                    for a in range(n_actions):
+                        base, w = a * n_states, ac[a]
+                        for s in range(n_states):
+                            row[base + s] = w * st[s]
+                f = factor[n, t].ravel() if factor is not None else row
                 n_live = u(0)
                 c = 0.0
                 for a in range(n_actions):
@@ -191,7 +214,13 @@ def _kernel():
             occ[:] = 0.0
             for t in range(last, -1, -1):
                 pred = preds[t]
-                f = factor[n, t].ravel()
+                if state is not None:  # the row factor[n, t] would hold, formed in place
+                    st, ac = state[n, t], action[n, t]
+                    for a in range(n_actions):
+                        base, w = a * n_states, ac[a]
+                        for s in range(n_states):
+                            row[base + s] = w * st[s]
+                f = factor[n, t].ravel() if factor is not None else row
                 inv_c = 1.0 / norms[t]
                 if t > 0:
                     g[:] = 0.0
@@ -281,16 +310,53 @@ def scaled_forward_backward(indptr, indices, data, pi, factor, shift, lengths, p
     """
     pi = np.ascontiguousarray(pi, dtype=np.float64)
     factor = np.ascontiguousarray(factor, dtype=np.float64)
+    if factor.ndim != 4 or pi.shape != factor.shape[2:]:
+        raise ValueError(f"factor must have shape (N, T, A, S) with (A, S) = pi.shape "
+                         f"{pi.shape}; got {factor.shape}")
+    return _run(indptr, indices, data, pi, factor, None, None, shift, lengths, p0, floor,
+                factor.shape[:2])
+
+
+def scaled_forward_backward_separable(indptr, indices, data, pi, state, action, shift, lengths,
+                                      p0, floor):
+    """:func:`scaled_forward_backward` for ``factor[n, t, a, s] = action[n, t, a] * state[n,
+    t, s]``, never formed: each step's ``A S`` row of it is formed in place when the step is
+    visited (once forward, once backward), the product numpy forms, so that the results are
+    those of :func:`scaled_forward_backward` given ``action[..., :, None] * state[..., None,
+    :]``, bit for bit, and ``ok`` is False in the same cases.
+
+    ``state`` (N, T, S), ``action`` (N, T, A) and ``shift`` (N, T) are what
+    :meth:`irl.observation.ObservationModel.separable_likelihoods` returns for ``obs`` of
+    shape (N, T) (the caller checks its ``min_log`` as for the full factor); the other
+    parameters, the returns and the errors are those of :func:`scaled_forward_backward`.
+    Memory: the inputs, the outputs, and the kernel's ``T x S`` predictions and few vectors of
+    ``S A``. The inputs hold ``N T S`` floats (800 MB at N = 10, T = 100, S = 100,000); one
+    demonstration per call keeps them to ``T (S + A)``, at a cost per call (the transpose of
+    ``T`` and fresh work arrays: about 35 ms at S = 100,000, half as much again as the whole
+    batch in one call).
+    """
+    pi = np.ascontiguousarray(pi, dtype=np.float64)
+    state = np.ascontiguousarray(state, dtype=np.float64)
+    action = np.ascontiguousarray(action, dtype=np.float64)
+    if state.ndim != 3 or action.ndim != 3 or state.shape[:2] != action.shape[:2] \
+            or (action.shape[2], state.shape[2]) != pi.shape:
+        raise ValueError(f"state and action must have shapes (N, T, S) and (N, T, A) with "
+                         f"(A, S) = pi.shape {pi.shape}; got {state.shape} and {action.shape}")
+    return _run(indptr, indices, data, pi, None, state, action, shift, lengths, p0, floor,
+                state.shape[:2])
+
+
+def _run(indptr, indices, data, pi, factor, state, action, shift, lengths, p0, floor, batch):
+    """Checks the arguments both entry points share, then runs the kernel (``batch``: (N, T),
+    ``pi`` already checked)."""
     shift = np.ascontiguousarray(shift, dtype=np.float64)
     p0 = np.ascontiguousarray(p0, dtype=np.float64)
     lengths = np.ascontiguousarray(lengths, dtype=np.int64)
     indptr = np.ascontiguousarray(indptr, dtype=np.int64)
     indices = np.ascontiguousarray(indices, dtype=np.int64)  # checked, then made unsigned
     data = np.ascontiguousarray(data, dtype=np.float64)
-    if factor.ndim != 4 or pi.shape != factor.shape[2:]:
-        raise ValueError(f"factor must have shape (N, T, A, S) with (A, S) = pi.shape "
-                         f"{pi.shape}; got {factor.shape}")
-    n_demos, length, n_actions, n_states = factor.shape
+    n_demos, length = batch
+    n_actions, n_states = pi.shape
     if shift.shape != (n_demos, length) or p0.shape != (n_states,):
         raise ValueError(f"shift must have shape {(n_demos, length)} and p0 {(n_states,)}; "
                          f"got {shift.shape} and {p0.shape}")
@@ -306,6 +372,6 @@ def scaled_forward_backward(indptr, indices, data, pi, factor, shift, lengths, p
                          f"{len(indptr)}, {len(indices)}, {len(data)}")
     scatter_rows = int(_SCATTER_FRACTION * n_actions * n_states)
     ok, ll, occ, init = _kernel()(indptr.astype(np.uint64), indices.astype(np.uint64), data, pi,
-                                  factor, shift, lengths, p0, float(np.exp(-floor)),
-                                  np.uint64(scatter_rows))
+                                  factor, state, action, shift, lengths, p0,
+                                  float(np.exp(-floor)), np.uint64(scatter_rows))
     return bool(ok), ll, occ, init

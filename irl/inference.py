@@ -82,8 +82,11 @@ BACKENDS = ("numpy", "numba")
 _CHUNK_ELEMENTS = 1 << 19
 #: Largest ``N T S A`` whose observation log-likelihoods a packing keeps for reuse (32 MB).
 _CACHE_ELEMENTS = 1 << 22
-#: Largest batch (``N T S A``) whose local factors the numba backend takes at once (256 MB).
-_NUMBA_ELEMENTS = 1 << 25
+#: Largest state parts (``N T S`` floats) the numba backend computes for a whole batch (1 GiB),
+#: and largest local factors (``N T S A``) it computes when the model does not factor (256 MB;
+#: beyond that the numpy pass, which computes them chunk by chunk, is as fast).
+_NUMBA_ELEMENTS = 1 << 27
+_NUMBA_FACTOR_ELEMENTS = 1 << 25
 #: Largest scratch array (floats) a thread keeps between passes (8 MB).
 _WORKSPACE_ELEMENTS = 1 << 20
 #: Padding allowed in a batch of ragged demonstrations, as a fraction of its real steps.
@@ -403,9 +406,10 @@ def forward_backward(
         fails (see the module docstring); ``"log"``: the log-space pass only.
     backend : {"numpy", "numba"}
         Kernels of the scaled pass (see :data:`BACKENDS`); equal to rounding. ``"numba"`` runs
-        a stationary policy's batch whose local factors fit in memory
-        (``_NUMBA_ELEMENTS``) through one compiled loop and hands anything else, and any
-        batch its range check refuses, to the numpy passes.
+        a stationary policy's batch through one compiled loop when its local factors are kept,
+        or can be held for the whole batch (as a state and an action part when the model
+        factors that way; ``_NUMBA_ELEMENTS``, ``_NUMBA_FACTOR_ELEMENTS``), and hands anything
+        else, and any batch its range check refuses, to the numpy passes.
 
     Raises
     ------
@@ -436,23 +440,38 @@ def forward_backward(
 
 def _numba_pass(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
     """The scaled pass as one compiled loop (:mod:`irl._numba`); ``None`` when it does not
-    apply (a time-indexed policy, factors too large to hold) or its range check fails."""
+    apply (a time-indexed policy, a batch whose local factors are too large to hold) or its
+    range check fails. A batch whose factors are not kept goes in as a state part and an action
+    part when the model factors that way (``N T S`` floats instead of ``N T S A``)."""
     from irl import _numba
 
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
     F = _scaled_floor(mdp)
-    if log_policy.ndim != 2 or F < 20.0 or n_demos * length * S * A > _NUMBA_ELEMENTS:
+    if log_policy.ndim != 2 or F < 20.0:
         return None
-    blk = emissions.steps(0, length)
-    if not blk.possible or blk.min_log + finite_min(log_policy) < -F:
-        return None
+    log_pi_min = finite_min(log_policy)
     csr = mdp._action_major_csr
+    operator = (csr.indptr, csr.indices, csr.data)
     pi = np.ascontiguousarray(np.exp(log_policy).T)
-    ok, ll, occupancy, initial = _numba.scaled_forward_backward(
-        csr.indptr, csr.indices, csr.data, pi, np.ascontiguousarray(blk.factor),
-        np.ascontiguousarray(blk.shift, dtype=float), np.asarray(lengths, dtype=np.int64),
-        np.exp(log_p0), float(F))
+    tail = (np.asarray(lengths, dtype=np.int64), np.exp(log_p0), float(F))
+    parts = None
+    if emissions.factors is None and n_demos * length * S <= _NUMBA_ELEMENTS:
+        parts = emissions.separable(0, length)
+    if parts is not None:
+        state, action, shift, min_log = parts
+        if min_log + log_pi_min < -F:
+            return None
+        ok, ll, occupancy, initial = _numba.scaled_forward_backward_separable(
+            *operator, pi, state, action, shift, *tail)
+    else:
+        if emissions.factors is None and n_demos * length * S * A > _NUMBA_FACTOR_ELEMENTS:
+            return None  # the numpy pass computes them chunk by chunk instead
+        blk = emissions.steps(0, length)
+        if not blk.possible or blk.min_log + log_pi_min < -F:
+            return None
+        ok, ll, occupancy, initial = _numba.scaled_forward_backward(
+            *operator, pi, blk.factor, blk.shift, *tail)
     if not ok:
         return None
     return PosteriorStats(log_likelihood=ll, occupancy=occupancy, initial=initial)

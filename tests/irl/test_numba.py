@@ -1,5 +1,7 @@
 """The compiled scaled forward-backward kernel (irl/_numba.py) computes what the numpy pass
-computes, and declines (``ok`` False) where the numpy pass would hand over to the log space."""
+computes, and declines (``ok`` False) where the numpy pass would hand over to the log space;
+its separable entry point, given a model's state and action parts, computes what it computes
+given their product."""
 
 import subprocess
 import sys
@@ -19,6 +21,7 @@ from irl.inference import (
     pack_demonstrations,
     posterior_stats,
 )
+from irl.observation import FactoredObservationModel, StateObservationModel
 from tests.irl.conftest import OM_KINDS, random_demo, random_mdp, random_observation_model
 
 pytest.importorskip("numba")
@@ -196,6 +199,144 @@ def test_scattered_and_gathered_pushes_are_the_same_sums(om_kind, monkeypatch):
     for gathered, scattered in zip(*runs, strict=True):
         np.testing.assert_array_equal(gathered, scattered)
     assert runs[0][0]
+
+
+# -- the separable entry point ------------------------------------------------------------
+
+#: The kinds of random_observation_model whose likelihoods are separable.
+SEPARABLE_KINDS = ("factored", "state")
+
+
+def separable_kernel(mdp, log_pi, om, obs, lengths, p0=None):
+    """One batch through the separable kernel, its parts from ``om.separable_likelihoods``."""
+    state, action, shift, _ = om.separable_likelihoods(obs)
+    p0 = np.exp(mdp.log_initial) if p0 is None else p0
+    return _numba.scaled_forward_backward_separable(
+        *_numba.operator_arrays(mdp._action_major), np.exp(log_pi.T), state, action, shift,
+        lengths, p0, _scaled_floor(mdp))
+
+
+def product_kernel(mdp, log_pi, om, obs, lengths, p0=None):
+    """The same batch through the full kernel, given the parts' product as numpy forms it."""
+    state, action, shift, _ = om.separable_likelihoods(obs)
+    p0 = np.exp(mdp.log_initial) if p0 is None else p0
+    return _numba.scaled_forward_backward(
+        *_numba.operator_arrays(mdp._action_major), np.exp(log_pi.T),
+        action[..., :, None] * state[..., None, :], shift, lengths, p0, _scaled_floor(mdp))
+
+
+def both_kernels(mdp, log_pi, om, obs, lengths, p0=None):
+    """The separable kernel's result, checked bit for bit against the full kernel's given the
+    product (``ok`` included)."""
+    got = separable_kernel(mdp, log_pi, om, obs, lengths, p0)
+    want = product_kernel(mdp, log_pi, om, obs, lengths, p0)
+    assert got[0] == want[0]
+    if got[0]:
+        for g, w in zip(got[1:], want[1:], strict=True):
+            np.testing.assert_array_equal(g, w)
+    return got
+
+
+@pytest.mark.parametrize("om_kind", SEPARABLE_KINDS)
+@pytest.mark.parametrize("mdp_kind", MDP_KINDS)
+def test_separable_kernel_equals_the_full_kernel_and_the_numpy_pass(mdp_kind, om_kind):
+    rng = np.random.default_rng(100 + MDP_KINDS.index(mdp_kind) * 10
+                                + SEPARABLE_KINDS.index(om_kind))
+    mdp = make_mdp(rng, mdp_kind)
+    om = random_observation_model(rng, mdp.n_states, mdp.n_actions, n_obs=5, kind=om_kind)
+    log_pi = np.log(rng.dirichlet(np.ones(mdp.n_actions), size=mdp.n_states))
+    demos = [random_demo(rng, n, om.n_observations, p_occluded=0.3)
+             for n in (9, 8, 1, 9, 7, 9)]
+    assert sum(d.n_occluded for d in demos) >= 5
+    packed = pack_demonstrations(demos, om)
+    assert any(len(set(lens.tolist())) > 1 for lens in packed.lengths)  # ragged and padded
+    n, S, A = packed.n_demos, mdp.n_states, mdp.n_actions
+    ll, occ, init = np.empty(n), np.empty((n, S, A)), np.empty((n, S))
+    for idx, obs, lengths in zip(packed.batches, packed.obs, packed.lengths, strict=True):
+        ok, ll[idx], occ[idx], init[idx] = both_kernels(mdp, log_pi, om, obs, lengths)
+        assert ok
+    got = PosteriorStats(log_likelihood=ll, occupancy=occ, initial=init)
+    assert_same(got, kernel_stats(mdp, log_pi, packed))  # the full kernel on its own factors
+    assert_same(got, posterior_stats(mdp, log_pi, packed, method="auto"))
+
+
+def test_separable_kernel_scatters_and_gathers_as_the_full_kernel(monkeypatch):
+    rng = np.random.default_rng(5)
+    mdp = make_mdp(rng, "dense-mostly-zero", n_states=8, n_actions=3)
+    om = random_observation_model(rng, 8, 3, kind="factored")
+    log_pi = np.log(rng.dirichlet(np.ones(3), size=8))
+    obs = np.array([random_demo(rng, 30, om.n_observations, 0.2).as_array()
+                    for _ in range(3)])
+    for fraction in (0.0, 2.0):  # always gather, always scatter
+        monkeypatch.setattr(_numba, "_SCATTER_FRACTION", fraction)
+        assert both_kernels(mdp, log_pi, om, obs, np.array([30, 21, 30]))[0]
+
+
+def chain_model(kind, confusion):
+    """A separable model of the chain's states observed through ``confusion`` (3 x 3; actions
+    through a blind action sensor by the factored one), and its encoding of an observed state."""
+    if kind == "state":
+        return StateObservationModel(confusion, 2), lambda o: o
+    return (FactoredObservationModel([confusion], np.full((2, 2), 0.5)),
+            lambda o: -1 if o < 0 else 2 * o)
+
+
+@pytest.mark.parametrize("om_kind", SEPARABLE_KINDS)
+def test_separable_kernel_fails_the_range_checks_of_the_full_kernel(om_kind):
+    mdp = chain()
+    om, _ = chain_model(om_kind, np.full((3, 3), 1 / 3))
+    obs = np.full((2, 4), -1)
+    # two moves of probability e^-300 in a row predict e^-600 < e^-F for the last state
+    log_pi = np.tile([np.log1p(-np.exp(-300.0)), -300.0], (3, 1))
+    assert not both_kernels(mdp, log_pi, om, obs, np.array([4, 4]))[0]
+    ok, ll, occ, init = both_kernels(mdp, log_pi, om, obs, np.array([2, 1]))
+    assert ok
+    assert_same(PosteriorStats(ll, occ, init),
+                forward_backward(mdp, log_pi, obs[:, :2], om, lengths=np.array([2, 1]),
+                                 method="log"), atol=1e-15)
+    # an initial probability below the floor
+    log_pi = np.log(np.full((3, 2), 0.5))
+    p0 = np.array([1.0, 1e-200, 0.0])
+    assert not both_kernels(mdp, log_pi, om, obs[:1, :2], np.array([2]), p0=p0)[0]
+
+
+@pytest.mark.parametrize("om_kind", SEPARABLE_KINDS)
+def test_separable_kernel_fails_on_impossible_observations(om_kind):
+    mdp = chain()
+    log_pi = np.log(np.full((3, 2), 0.5))
+    # state 2 observed at step 1: possible under some pair, but the chain cannot reach it
+    om, code = chain_model(om_kind, np.eye(3))
+    obs = np.array([[-1, code(2)], [code(0), code(0)]])
+    assert np.isfinite(om.separable_likelihoods(obs)[2]).all()
+    assert not both_kernels(mdp, log_pi, om, obs, np.array([2, 2]))[0]
+    assert both_kernels(mdp, log_pi, om, obs[1:], np.array([2]))[0]
+    # state 2 observed where no state shows as 2: undefined parts (NaN), shift -inf
+    om, code = chain_model(om_kind, np.array([[1.0, 0, 0], [0, 1, 0], [0, 1, 0]]))
+    obs = np.array([[code(0), code(1), code(2)]])
+    assert np.isneginf(om.separable_likelihoods(obs)[2][0, 2])
+    assert not separable_kernel(mdp, log_pi, om, obs, np.array([3]))[0]
+    assert both_kernels(mdp, log_pi, om, obs, np.array([2]))[0]  # the step after the end
+
+
+def test_separable_kernel_checks_its_shapes():
+    mdp = chain()
+    ops = _numba.operator_arrays(mdp._action_major)
+    pi, p0 = np.full((2, 3), 0.5), mdp.initial
+    state, action, shift = np.ones((1, 2, 3)), np.ones((1, 2, 2)), np.zeros((1, 2))
+    run = _numba.scaled_forward_backward_separable
+    assert run(*ops, pi, state, action, shift, [2], p0, 300.0)[0]
+    for bad_state, bad_action, bad_pi in ((state[:, :1], action, pi),
+                                          (state, np.ones((1, 2, 3)), pi),
+                                          (state, action, pi.T),
+                                          (state[0], action[0], pi)):
+        with pytest.raises(ValueError, match="state and action"):
+            run(*ops, bad_pi, bad_state, bad_action, shift, [2], p0, 300.0)
+    with pytest.raises(ValueError, match="shift"):
+        run(*ops, pi, state, action, shift[:, :1], [2], p0, 300.0)
+    with pytest.raises(ValueError, match="lengths"):
+        run(*ops, pi, state, action, shift, [3], p0, 300.0)
+    with pytest.raises(ValueError, match="CSR"):
+        run(ops[0], ops[1] + 1, ops[2], pi, state, action, shift, [2], p0, 300.0)
 
 
 def test_operator_arrays_drop_zeros_of_dense_and_sparse_operators():
