@@ -145,10 +145,16 @@ class StateObservationModel(ObservationModel):
             best = self._by_obs.argmax(axis=1)
         return np.stack([best, np.zeros(n_obs, np.int64)], axis=1)
 
+    @cached_property
+    def _log_by_obs(self) -> np.ndarray:
+        """``log C[s, o]`` observation-major (dense C), taken once: the log-space pass reads
+        one row per demonstration and step, twice."""
+        return safe_log(self._by_obs)
+
     def _log_state(self, obs: np.ndarray) -> np.ndarray:
         if self._csc is not None:
             return _log_columns(self._csc, self._log_data, obs)
-        return safe_log(self._by_obs[obs])
+        return self._log_by_obs[obs]
 
     def _log_likelihoods(self, obs: np.ndarray) -> np.ndarray:
         out = np.empty((obs.size, self.n_states, self.n_actions))
