@@ -44,7 +44,6 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads; see the docstring
 
 import numpy as np
-import scipy.sparse as sp
 
 import irl
 from irl import _numba
@@ -129,26 +128,11 @@ def bench_gradient_vs_occlusion(repeats: int) -> None:
 # -- 3 and 4 ------------------------------------------------------------------------------
 
 def grid_world(nx: int, ny: int, seed: int = 0):
-    """A sparse noisy grid of nx x ny cells (s = x * ny + y), 4 moves, 4 features; with a
-    factored sensor and a 10 x 10 block state sensor."""
-    rng = np.random.default_rng(seed)
-    n = nx * ny
+    """The sparse noisy grid :func:`irl.domains.grid_mdp` (s = x * ny + y, 4 moves, 4
+    features), with a factored sensor and a 10 x 10 block state sensor."""
+    mdp = irl.domains.grid_mdp(nx, ny, seed=seed)
+    n = mdp.n_states
     x, y = np.divmod(np.arange(n), ny)
-    moves = [(0, 1), (1, 0), (0, -1), (-1, 0)]
-    mats = []
-    for a in range(4):
-        rows, cols, vals = [], [], []
-        for b, (dx, dy) in enumerate(moves):
-            rows.append(np.arange(n))
-            cols.append(np.clip(x + dx, 0, nx - 1) * ny + np.clip(y + dy, 0, ny - 1))
-            vals.append(np.full(n, 0.9 if a == b else 0.1 / 3))
-        mats.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                   np.concatenate(cols))), shape=(n, n)))
-    phi = np.zeros((n, 4, 4))
-    for k in range(4):
-        phi[rng.choice(n, size=max(1, n // 20), replace=False), :, k] = 1.0
-    mdp = irl.TabularMDP(transitions=mats, features=phi, discount=0.99,
-                         initial=np.full(n, 1.0 / n))
     factored = irl.factored_observation_model([_neighbour_confusion(nx),
                                                _neighbour_confusion(ny)], n_actions=4)
     block = (x * 10 // nx) * 10 + (y * 10 // ny)

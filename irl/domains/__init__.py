@@ -1,7 +1,9 @@
-"""The paper's benchmark domains: Forestworld and onion sorting, and tasks described as data."""
+"""The paper's benchmark domains: Forestworld and onion sorting, and tasks described as data;
+and a sparse grid world for tests of scale."""
 
 from irl.domains.base import Domain
 from irl.domains.forestworld import FORESTWORLD_TASK, forestworld
+from irl.domains.grid import grid_mdp
 from irl.domains.onion_sorting import SORTING_TASK, onion_sorting
 from irl.domains.task import TaskDescription
 
@@ -11,5 +13,6 @@ __all__ = [
     "Domain",
     "TaskDescription",
     "forestworld",
+    "grid_mdp",
     "onion_sorting",
 ]

@@ -89,3 +89,16 @@ def test_sorting_transition_table_in_the_docs_is_current():
 
     doc = (Path(__file__).parents[2] / "docs" / "onion-sorting.md").read_text()
     assert transition_table_markdown() in doc
+
+
+def test_grid_mdp_is_a_sparse_noisy_grid():
+    mdp = irl.domains.grid_mdp(5, 4, slip=0.2, n_features=3, seed=1)
+    assert (mdp.n_states, mdp.n_actions, mdp.n_features) == (20, 4, 3) and mdp.is_sparse
+    T = np.stack([m.toarray() for m in mdp.transitions], axis=1)  # [s, a, s']
+    np.testing.assert_allclose(T.sum(axis=2), 1.0, rtol=1e-14)
+    s = 2 * 4 + 1  # cell (2, 1): moving +y reaches (2, 2) with 1 - slip, (3, 1) with slip / 3
+    assert T[s, 0, 2 * 4 + 2] == pytest.approx(0.8)
+    assert T[s, 0, 3 * 4 + 1] == pytest.approx(0.2 / 3)
+    assert T[0, 0, 0] == pytest.approx(2 * 0.2 / 3)  # slips off the grid (-y, -x) stay put
+    with pytest.raises(ValueError, match="slip"):
+        irl.domains.grid_mdp(3, 3, slip=1.5)

@@ -137,6 +137,18 @@ def test_impossible_demonstration_names_demo_and_step():
         posterior_stats(dom.mdp, np.log(pi), [ok, jump], dom.observation_model)
 
 
+def _mdp_of(T, sparse: bool) -> irl.TabularMDP:
+    """An MDP of transitions ``T[s, a, s']`` (rows renormalized), dense or one sparse matrix per
+    action, with no reward to speak of."""
+    import scipy.sparse as sps
+
+    T = T / T.sum(axis=2, keepdims=True)
+    S, A, _ = T.shape
+    transitions = [sps.csr_matrix(T[:, a, :]) for a in range(A)] if sparse else T
+    return irl.TabularMDP(transitions=transitions, features=np.zeros((S, A, 1)), discount=0.5,
+                          initial=np.full(S, 1.0 / S))
+
+
 @pytest.mark.parametrize("sparse", [False, True])
 def test_log_space_kernels_equal_the_linear_ones(sparse, rng):
     """log_push_forward / log_expect_next are the logs of push_forward / expect_next, with -inf
@@ -144,15 +156,7 @@ def test_log_space_kernels_equal_the_linear_ones(sparse, rng):
     T = rng.dirichlet(np.ones(4), size=(4, 3))
     T[:, :, 3] = 0.0  # state 3 is never entered
     T[1, 2, 1:] = 0.0  # a row with one successor
-    T /= T.sum(axis=2, keepdims=True)
-    if sparse:
-        import scipy.sparse as sps
-
-        transitions = [sps.csr_matrix(T[:, a, :]) for a in range(3)]
-    else:
-        transitions = T
-    mdp = irl.TabularMDP(transitions=transitions, features=np.zeros((4, 3, 1)), discount=0.5,
-                         initial=np.full(4, 0.25))
+    mdp = _mdp_of(T, sparse)
     mass = rng.random((2, 4, 3))
     mass[0, 2] = 0.0
     values = rng.random((2, 4))
@@ -213,15 +217,7 @@ def test_column_kernels_equal_the_batch_ones(sparse, rng):
     (multiplied through a CSR copy)."""
     T = rng.dirichlet(np.ones(5), size=(5, 3))
     T[T < 0.15] = 0.0
-    T /= T.sum(axis=2, keepdims=True)
-    if sparse:
-        import scipy.sparse as sps
-
-        transitions = [sps.csr_matrix(T[:, a, :]) for a in range(3)]
-    else:
-        transitions = T
-    mdp = irl.TabularMDP(transitions=transitions, features=np.zeros((5, 3, 1)), discount=0.5,
-                         initial=np.full(5, 0.2))
+    mdp = _mdp_of(T, sparse)
     mass = rng.random((4, 5, 3))  # [n, s, a]
     values = rng.random((4, 5))  # [n, s']
     columns = np.ascontiguousarray(mass.transpose(2, 1, 0))  # [a, s, n]

@@ -67,24 +67,7 @@ def test_sparse_and_dense_give_the_same_solution():
 
 def _grid(nx, ny, seed=0, discount=0.99):
     """A noisy nx x ny grid, 4 moves, sparse features: a long horizon, as in the bench."""
-    rng = np.random.default_rng(seed)
-    n = nx * ny
-    x, y = np.divmod(np.arange(n), ny)
-    moves = [(0, 1), (1, 0), (0, -1), (-1, 0)]
-    mats = []
-    for a in range(4):
-        rows, cols, vals = [], [], []
-        for b, (dx, dy) in enumerate(moves):
-            rows.append(np.arange(n))
-            cols.append(np.clip(x + dx, 0, nx - 1) * ny + np.clip(y + dy, 0, ny - 1))
-            vals.append(np.full(n, 0.9 if a == b else 0.1 / 3))
-        mats.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                   np.concatenate(cols))), shape=(n, n)))
-    phi = np.zeros((n, 4, 4))
-    for k in range(4):
-        phi[rng.choice(n, size=max(1, n // 20), replace=False), :, k] = 1.0
-    return irl.TabularMDP(transitions=mats, features=phi, discount=discount,
-                          initial=np.full(n, 1.0 / n))
+    return irl.domains.grid_mdp(nx, ny, seed=seed, discount=discount)
 
 
 def _howard(mdp, theta):
