@@ -4,6 +4,7 @@ import doctest
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import irl
@@ -57,3 +58,19 @@ def test_readme_gymnasium_example_matches_evaluate(capsys):
     result = evaluate_policy(onion_sorting().expert_policy(), n_onions=6, n_blemished=3, seed=0,
                              classify=scope["inspection_classifier"](scope["detector"]))
     assert counts == [result.tp, result.fp, result.tn, result.fn]
+
+
+@pytest.mark.slow
+def test_readme_scale_example_runs_and_backends_agree(capsys):
+    """The 10,000-state example of the Performance section: its fit recovers the true weights'
+    signs and order (as the README prints), and the default backend finds the same weights."""
+    pytest.importorskip("numba")
+    text = (ROOT / "README.md").read_text()
+    example = next(b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S)
+                   if "grid_mdp" in b)
+    scope: dict = {}
+    exec(compile(example, "README.md", "exec"), scope)
+    theta = scope["est"].theta_
+    np.testing.assert_allclose(theta, [1.09, -0.59, 0.54, -0.41], atol=0.005)
+    numpy_fit = irl.MMAPBIRL(scope["mdp"], scope["sensor"]).fit(scope["demos"])
+    np.testing.assert_allclose(numpy_fit.theta_, theta, rtol=1e-8, atol=1e-10)
