@@ -128,6 +128,8 @@ def brute_force_log(mdp, log_pi, om, demo):
             terms = terms + log_T[s[:, t], a[:, t], s[:, t + 1]]
     total = float(logsumexp(terms))
     marg = np.zeros((L, S, A))
+    if not np.isfinite(total):  # an impossible demonstration: no marginals
+        return total, marg
     for t in range(L):
         for x in range(S * A):
             hit = seqs[:, t] == x
