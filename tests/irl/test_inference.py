@@ -198,16 +198,19 @@ def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatc
 
     monkeypatch.setattr(om, "separable_likelihoods", counted)
     monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
-    chunked = posterior_stats(mdp, np.log(pi), demos, om)
-    chunked_timed = forward_backward(mdp, np.log(pis), obs, om)
-    assert any(separable) == (kind in ("factored", "state"))
-    for a in (kept, exact):
-        np.testing.assert_allclose(chunked.log_likelihood, a.log_likelihood, rtol=1e-12)
-        np.testing.assert_allclose(chunked.occupancy, a.occupancy, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(chunked.initial, a.initial, rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(chunked_timed.log_likelihood, timed.log_likelihood, rtol=1e-12)
-    np.testing.assert_allclose(chunked_timed.occupancy, timed.occupancy, rtol=1e-12,
-                               atol=1e-14)
+    for held in (1 << 24, 0):  # separable parts held for both passes, or computed in each
+        monkeypatch.setattr(irl.inference, "_SEPARABLE_ELEMENTS", held)
+        chunked = posterior_stats(mdp, np.log(pi), demos, om)
+        chunked_timed = forward_backward(mdp, np.log(pis), obs, om)
+        assert any(separable) == (kind in ("factored", "state"))
+        for a in (kept, exact):
+            np.testing.assert_allclose(chunked.log_likelihood, a.log_likelihood, rtol=1e-12)
+            np.testing.assert_allclose(chunked.occupancy, a.occupancy, rtol=1e-12, atol=1e-14)
+            np.testing.assert_allclose(chunked.initial, a.initial, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(chunked_timed.log_likelihood, timed.log_likelihood,
+                                   rtol=1e-12)
+        np.testing.assert_allclose(chunked_timed.occupancy, timed.occupancy, rtol=1e-12,
+                                   atol=1e-14)
 
 
 @pytest.mark.parametrize("sparse", [False, True])
