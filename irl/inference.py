@@ -526,27 +526,23 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         pi_columns = ws.get("pi", (A, S, n_demos))
         pi_columns[...] = pi[:, :, None]
     u = ws.get("u", (S, n_demos)) if separable else None
-    whole = None  # the separable parts of every step, when small enough to hold for both passes
-    if separable and n_demos * length * S <= _SEPARABLE_ELEMENTS:
-        state, action, shift, min_log = emissions.separable(0, length)
-        whole = (np.ascontiguousarray(np.moveaxis(state, 0, -1)),
-                 np.ascontiguousarray(np.moveaxis(action, 0, -1)), shift, min_log)
+    # the separable parts of every step, when small enough to hold for both passes
+    whole = (emissions.separable(0, length) if separable
+             and n_demos * length * S <= _SEPARABLE_ELEMENTS else None)
 
     def local(t0, t1):
         """The chunk's local factors, ``(E[t, a, s, n], shift[n, t])``, or
-        ``((state[t, s, n], action[t, a, n]), shift)`` when separable; None outside the safe
-        range."""
+        ``((state[t, s, n], action[t, a, n]), shift)`` (views) when separable; None outside
+        the safe range."""
         if separable:
             if whole is not None:
                 state, action, shift, min_log = whole
-                parts = (state[t0:t1], action[t0:t1])
-                shift = shift[:, t0:t1]
+                state, action, shift = state[:, t0:t1], action[:, t0:t1], shift[:, t0:t1]
             else:
                 state, action, shift, min_log = emissions.separable(t0, t1)
-                parts = (np.moveaxis(state, 0, -1).copy(), np.moveaxis(action, 0, -1).copy())
             if not np.all(np.isfinite(shift)) or min_log + log_pi_min < -F:
                 return None
-            return parts, shift
+            return (np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1)), shift
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
