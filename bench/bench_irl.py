@@ -221,10 +221,10 @@ def bench_scaling(quick: bool) -> None:
         log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
         r = {"S": mdp.n_states}
         warm = mdp.n_states <= 40_000  # beyond, both run the minute-long log-space pass
-        r["fb_new"], r["peak_new"] = traced(
-            lambda m=mdp, o=blocks, d=demos_b, p=log_pi: fb_time(m, o, d, p, 1, warm=warm))
-        r["fb_old"], r["peak_old"] = traced(lambda m=mdp, o=blocks, d=demos_b, p=log_pi: fb_time(
-            m, o, d, p, 1, baseline=True, warm=warm))
+        r["fb_new"], r["peak_new"] = traced(lambda m=mdp, o=blocks, d=demos_b, p=log_pi, w=warm:
+                                            fb_time(m, o, d, p, 1, warm=w))
+        r["fb_old"], r["peak_old"] = traced(lambda m=mdp, o=blocks, d=demos_b, p=log_pi, w=warm:
+                                            fb_time(m, o, d, p, 1, baseline=True, warm=w))
         del blocks.log_emissions  # the frozen path's dense table
         r["grad_f"], r["peak_f"] = traced(
             lambda m=mdp, o=factored, d=demos_f: cold_gradient(irl.MMAPBIRL, m, o, d, theta))
