@@ -3,10 +3,11 @@
 Layouts: ``log_pi[s, a]`` or ``log_pi[t, s, a]``, packed observations ``obs[n, t]``
 (-1 = occluded or padding), lengths ``lengths[n]``, log-likelihoods of the observations
 ``log O(obs[n, t] | s, a)`` (0 at occluded steps) kept as ``factor[n, t, a, s] =
-exp(log O - shift[n, t])`` with ``shift[n, t] = max_{s, a} log O``, messages
-``alpha[n, a, s]`` over a batch of n demonstrations. The scaled pass keeps pairs action-major
-(``[a, s]``, states innermost), so that broadcasting a state vector over the few actions runs
-along the long axis; its results are returned as ``[n, s, a]`` like everything else.
+exp(log O - shift[n, t])`` with ``shift[n, t] = max_{s, a} log O``. The scaled pass holds a
+batch's messages action-major with the demonstrations innermost, ``alpha[a, s, n]`` and
+``pred[s, n]`` (its sparse products then read and write their blocks in place, and a state
+array broadcasts over the few actions as whole ``(S, N)`` slabs); its results are returned as
+``[n, s, a]`` like everything else.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
 ``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
@@ -422,8 +423,10 @@ def forward_backward(
 
     Notes
     -----
-    Only the predicted state marginals ``(T, N, S)`` and the normalizers are stored; the local
-    factors are recomputed during the backward pass unless the whole batch fits in one chunk.
+    Only the predicted state marginals ``(T, S, N)`` and the normalizers are stored; the local
+    factors are recomputed during the backward pass unless they are kept (the packing's), the
+    whole batch fits in one chunk, or a separable model's parts fit in
+    ``_SEPARABLE_ELEMENTS``.
     """
     obs, lengths = _check_batch(mdp, log_policy, obs, observation_model, lengths, factors,
                                 method)
