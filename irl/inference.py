@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -72,6 +73,7 @@ __all__ = [
     "observation_factors",
     "pack_demonstrations",
     "posterior_stats",
+    "scratch_held",
 ]
 
 METHODS = ("auto", "log")
@@ -264,25 +266,52 @@ def pack_demonstrations(
 class _Workspace(threading.local):
     """Scratch arrays of the scaled pass, kept between calls in one thread.
 
-    A fit runs forward-backward on the same shapes a few dozen times; a fresh array of a few
-    hundred kilobytes comes from the operating system as untouched pages, and faulting them in
-    costs more than the arithmetic on them. Arrays above ``_WORKSPACE_ELEMENTS`` are not kept.
+    A fit runs forward-backward on the same shapes a few dozen times; a fresh array comes from
+    the operating system as untouched pages, and faulting them in can cost more than the
+    arithmetic on them (on a virtual machine, memory freed a few seconds earlier may have been
+    handed back to the host, and faulting it in again took about 2 ms per MB on the 2-core VM
+    of the README's figures). Every array is kept until the pass ends, so that a pass asks for
+    each of its arrays once; then those above ``_WORKSPACE_ELEMENTS`` floats are dropped,
+    unless the caller holds them for its next passes (:func:`scratch_held`).
     """
 
     def __init__(self) -> None:
         self.arrays: dict[str, np.ndarray] = {}
+        self.holders = 0
 
     def get(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """An uninitialized float array of ``shape``, reused when the last one fits."""
         a = self.arrays.get(name)
         if a is None or a.shape != shape:
-            a = np.empty(shape)
-            if a.size <= _WORKSPACE_ELEMENTS:
-                self.arrays[name] = a
+            a = self.arrays[name] = np.empty(shape)
         return a
+
+    def release(self) -> None:
+        """Drop the arrays above ``_WORKSPACE_ELEMENTS`` floats, unless they are held."""
+        if self.holders:
+            return
+        for name in [k for k, a in self.arrays.items() if a.size > _WORKSPACE_ELEMENTS]:
+            del self.arrays[name]
 
 
 _workspace = _Workspace()
+
+
+@contextmanager
+def scratch_held():
+    """Keep the scaled pass's large scratch arrays between the passes run inside (in this
+    thread), and drop them at the end.
+
+    A fit runs forward-backward once per gradient on the same shapes; at S = 100,000 its
+    predicted marginals alone are 800 MB, faulted in afresh by every pass unless held. The
+    learners hold them for the length of a fit; a single pass drops them when it ends.
+    """
+    _workspace.holders += 1
+    try:
+        yield
+    finally:
+        _workspace.holders -= 1
+        _workspace.release()
 
 
 def _logsumexp(x: np.ndarray, axis) -> np.ndarray:
@@ -438,7 +467,11 @@ def forward_backward(
             stats = _numba_pass(mdp, log_policy, emissions, obs.shape, lengths, log_p0)
             if stats is not None:
                 return stats
-        stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape, lengths, log_p0)
+        try:
+            stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape, lengths,
+                                             log_p0)
+        finally:
+            _workspace.release()
         if stats is not None:
             return stats
     return _log_pass(mdp, log_policy, emissions, obs, lengths, log_p0, ids)
@@ -525,7 +558,9 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     ws = _workspace
     separable = (emissions.factors is None and len(chunks) > 1
                  and emissions.separable(0, 1) is not None)
-    if stationary:
+    # a stationary policy is folded into T when the factors are separable (see below)
+    folded = separable and stationary
+    if stationary and not folded:
         pi_columns = ws.get("pi", (A, S, n_demos))
         pi_columns[...] = pi[:, :, None]
     u = ws.get("u", (S, n_demos)) if separable else None
@@ -561,10 +596,10 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
 
     def times_local(E, i, t, vec, out):
         """``out[a, s, n] = E_t[a, s, n] vec`` for step t (i within its chunk), ``vec`` of
-        shape (S, N) or (A, S, N), when the factors are separable (else the loops multiply
-        by ``E[i]`` themselves)."""
+        shape (S, N) or (A, S, N), when the factors are separable and the policy is
+        time-indexed (else the loops multiply by ``E[i]`` or fold the policy into T)."""
         state, action = E
-        policy = pi_columns if stationary else pi[t][:, :, None]
+        policy = pi[t][:, :, None]
         if vec.ndim == 2:  # pi (e_t pred): the state part joins the (S, N) vector
             np.multiply(policy, np.multiply(state[i], vec, out=u), out=out)
         else:  # the state part is applied by the caller, on the (S, N) sum
@@ -578,7 +613,9 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     alpha = ws.get("alpha", (A, S, n_demos))
     alpha_flat = alpha.reshape(A * S, n_demos)
     ones = np.ones(A * S)
-    push, expect = mdp.column_products(n_demos)
+    push, expect = mdp.column_products(n_demos, pi.ravel() if folded else None)
+    closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
+    closing[lengths - 1] = True
     kept = None
     with np.errstate(divide="ignore", invalid="ignore"):
         for t0, t1 in chunks:
@@ -587,13 +624,25 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 return None
             E, shifts[t0:t1] = got[0], got[1].T
             for t in range(t0, t1):
-                if separable:
+                if folded:  # alpha / pi = e'_t (e_t pred_t); pi is in the pushes
+                    state, action = E[0][t - t0], E[1][t - t0]
+                    np.multiply(state, preds[t], out=u)
+                    np.multiply(action[:, None, :], u, out=alpha)
+                    if closing[t]:  # the likelihood's own sum: sum_s e_t pred_t (pi' e'_t)
+                        np.einsum("sn,sn->n", u, pi.T @ action, out=norms[t])
+                elif separable:
                     times_local(E, t - t0, t, preds[t], alpha)
                 else:
                     np.multiply(E[t - t0], preds[t], out=alpha)
-                np.dot(ones, alpha_flat, out=norms[t])
+                if not folded:
+                    np.dot(ones, alpha_flat, out=norms[t])
                 if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
                     push(alpha, preds[t + 1])
+                    if folded and not closing[t]:
+                        # T's rows sum to 1, so this is alpha's sum (up to the rows'
+                        # rounding), without a pass over alpha; any positive normalizer
+                        # is exact where no demonstration ends (see the module notes)
+                        np.add.reduce(preds[t + 1], axis=0, out=norms[t])
                     preds[t + 1] /= norms[t]
         if len(chunks) == 1:
             kept = E  # one chunk: the backward pass reuses it
@@ -620,8 +669,9 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         scale *= valid[:, None, :]
         last = lengths - 1
     occupancy = np.zeros((A, S, n_demos))
-    beta = ws.get("beta", (A, S, n_demos))
-    beta.fill(1.0)
+    beta = ws.get("beta", (A, S, n_demos))  # pi beta when the policy is folded into T
+    restart = pi[:, :, None] if folded else 1.0
+    beta[...] = restart
     g = ws.get("g", (S, n_demos))
     with np.errstate(over="ignore", invalid="ignore"):
         for t0, t1 in reversed(chunks):
@@ -639,9 +689,11 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 if ragged:
                     ends = last == t
                     if ends.any():
-                        beta[:, :, ends] = 1.0
+                        beta[:, :, ends] = restart
                 gamma_t = gamma[t - t0]
-                if separable:
+                if folded:
+                    np.multiply(beta, E[1][t - t0][:, None, :], out=gamma_t)
+                elif separable:
                     times_local(E, t - t0, t, beta, gamma_t)
                 else:
                     np.multiply(E[t - t0], beta, out=gamma_t)

@@ -177,15 +177,33 @@ class TabularMDP:
             _csr_times(self._action_major_csr, values, flat)
         return out
 
-    def column_products(self, n: int):
+    def column_products(self, n: int, pair_weights: np.ndarray | None = None):
         """``(push, expect)``: :meth:`push_forward_columns` and :meth:`expect_next_columns` for
         a batch of n columns, as two functions of flat C-contiguous arrays (``push(mass (A S,
         n), out (S, n))``, ``expect(values (S, n), out (A S, n))``) with every lookup done once,
-        for a loop that calls them at every step."""
-        if not self._products_sparse or _csr_matvecs is None:
-            return (lambda mass, out: self.push_forward_columns(mass, out),
-                    lambda values, out: self.expect_next_columns(values, out))
+        for a loop that calls them at every step.
+
+        With ``pair_weights`` ``w`` (A S,), indexed ``a * S + s``, they are the products of the
+        operator whose pair rows are scaled by ``w``: ``push`` sums ``T[s, a, s'] w[a, s]
+        mass[a, s, n]`` and ``expect`` returns ``w[a, s] sum_s' T[s, a, s'] values[s', n]``.
+        Forward-backward folds a stationary policy into ``T`` this way, once per pass (``O(nnz
+        (T))``), and saves a product over every ``(A, S, N)`` message at every step.
+        """
+        if not self._products_sparse:
+            P, PT = self._action_major, self._action_major_dense_T
+            if pair_weights is not None:
+                P, PT = P * pair_weights[:, None], PT * pair_weights[None, :]
+            return (lambda mass, out: np.dot(PT, mass.reshape(-1, n), out=out),
+                    lambda values, out: np.dot(P, values, out=out.reshape(-1, n)))
         fwd, bwd = self._action_major_T, self._action_major_csr
+        if pair_weights is not None:
+            fwd = sp.csr_matrix((fwd.data * pair_weights[fwd.indices], fwd.indices, fwd.indptr),
+                                shape=fwd.shape)
+            rows = np.repeat(pair_weights, np.diff(bwd.indptr))
+            bwd = sp.csr_matrix((bwd.data * rows, bwd.indices, bwd.indptr), shape=bwd.shape)
+        if _csr_matvecs is None:
+            return (lambda mass, out: _csr_times(fwd, mass.reshape(-1, n), out),
+                    lambda values, out: _csr_times(bwd, values, out.reshape(-1, n)))
         n_pairs, n_states = bwd.shape
         f_args = (n_states, n_pairs, n, fwd.indptr, fwd.indices, fwd.data)
         b_args = (n_pairs, n_states, n, bwd.indptr, bwd.indices, bwd.data)

@@ -26,7 +26,7 @@ import numpy as np
 from irl._random import check_random_state
 from irl._validation import check_int, check_real, describe
 from irl.demonstrations import Demonstration
-from irl.inference import check_backend, pack_demonstrations, posterior_stats
+from irl.inference import check_backend, pack_demonstrations, posterior_stats, scratch_held
 from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.mdp import TabularMDP
@@ -201,17 +201,18 @@ class _BayesianIRL(LearnerBase):
             value, prior_grad = prior._value_and_grad(theta)
             return ll + value, grad + prior_grad
 
-        if self.optimizer == "lbfgs":
-            res = maximize_lbfgs(objective, starts, max_iter=search["max_iter"],
-                                 tol=search["tol"])
-        else:
-            gamma = self.mdp.discount
-            eps = search["epsilon"]
-            threshold = eps * (1 - gamma) / gamma if gamma > 0 else eps
-            res = maximize_gradient_ascent(
-                objective, starts, step_size=search["step_size"], decay=search["decay"],
-                threshold=threshold, max_iter=search["max_iter"],
-            )
+        with scratch_held():  # one set of forward-backward buffers for the whole search
+            if self.optimizer == "lbfgs":
+                res = maximize_lbfgs(objective, starts, max_iter=search["max_iter"],
+                                     tol=search["tol"])
+            else:
+                gamma = self.mdp.discount
+                eps = search["epsilon"]
+                threshold = eps * (1 - gamma) / gamma if gamma > 0 else eps
+                res = maximize_gradient_ascent(
+                    objective, starts, step_size=search["step_size"], decay=search["decay"],
+                    threshold=threshold, max_iter=search["max_iter"],
+                )
         self._solver = model.solver
         self.theta_ = res.theta
         self.log_posterior_ = res.value

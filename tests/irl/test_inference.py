@@ -104,9 +104,10 @@ def _count_operator_calls(mdp, monkeypatch) -> dict[str, int]:
     for name in ("log_push_forward", "log_expect_next"):
         monkeypatch.setattr(mdp, name, counting(name, getattr(mdp, name)))
     products = mdp.column_products
-    monkeypatch.setattr(mdp, "column_products", lambda n: tuple(
+    monkeypatch.setattr(mdp, "column_products", lambda n, weights=None: tuple(
         counting(name, kernel) for name, kernel in zip(
-            ("push_forward_columns", "expect_next_columns"), products(n), strict=True)))
+            ("push_forward_columns", "expect_next_columns"), products(n, weights),
+            strict=True)))
     return calls
 
 
@@ -236,6 +237,59 @@ def test_column_kernels_equal_the_batch_ones(sparse, rng):
     out = np.full((15, 4), np.nan)
     expect(np.ascontiguousarray(values.T), out)
     np.testing.assert_allclose(out.reshape(3, 5, 4), got, rtol=1e-14)
+    # a policy folded into T: pair rows a * S + s scaled by w
+    w = rng.random(15)
+    push, expect = mdp.column_products(4, w)
+    out = np.full((5, 4), np.nan)
+    push(columns.reshape(15, 4), out)
+    np.testing.assert_allclose(out, pushed_of(mdp, columns * w.reshape(3, 5, 1)), rtol=1e-14)
+    out = np.full((15, 4), np.nan)
+    expect(np.ascontiguousarray(values.T), out)
+    np.testing.assert_allclose(out.reshape(3, 5, 4), got * w.reshape(3, 5, 1), rtol=1e-14)
+
+
+def pushed_of(mdp, columns):
+    return mdp.push_forward_columns(np.ascontiguousarray(columns), out=np.empty((5, 4)))
+
+
+def test_folded_policy_is_exact_when_rows_sum_to_one_only_to_rounding(rng, monkeypatch):
+    """The chunked pass with the policy folded into T normalizes each step by the pushed mass,
+    which equals alpha's sum only as far as T's rows sum to 1; rows off by 1e-7 (accepted by
+    the MDP's check) still give the log-space pass to 1e-12, ragged batches included."""
+    T = rng.dirichlet(np.ones(6), size=(6, 3))
+    T *= 1.0 + rng.uniform(-1e-7, 1e-7, size=(6, 3, 1))
+    mdp = irl.TabularMDP(transitions=T, features=rng.normal(size=(6, 3, 2)), discount=0.9,
+                         initial=rng.dirichlet(np.ones(6)))
+    om = random_observation_model(rng, 6, 3, kind="factored")
+    pi = rng.dirichlet(np.ones(3), size=6)
+    demos = [random_demo(rng, n, om.n_observations) for n in (9, 4, 9, 6)]
+    exact = posterior_stats(mdp, np.log(pi), demos, om, method="log")
+    monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
+    folded = posterior_stats(mdp, np.log(pi), demos, om)
+    np.testing.assert_allclose(folded.log_likelihood, exact.log_likelihood, rtol=1e-12)
+    np.testing.assert_allclose(folded.occupancy, exact.occupancy, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(folded.initial, exact.initial, rtol=1e-12, atol=1e-14)
+
+
+def test_large_scratch_is_held_only_inside_scratch_held(monkeypatch):
+    """A pass drops its large scratch arrays when it ends; inside ``scratch_held`` the next
+    pass reuses them, and they are dropped when the block exits."""
+    dom = irl.domains.onion_sorting(noise=0.3)
+    demos, _ = dom.sample(3, 20, seed=0)
+    log_pi = np.log(dom.expert_policy())
+    monkeypatch.setattr(irl.inference, "_WORKSPACE_ELEMENTS", 0)  # every array is "large"
+    ws = irl.inference._workspace
+    posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    assert ws.arrays == {}
+    with irl.inference.scratch_held():
+        posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+        held = dict(ws.arrays)
+        assert "preds" in held
+        again = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+        assert all(ws.arrays[k] is a for k, a in held.items())
+    assert ws.arrays == {}
+    alone = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    np.testing.assert_array_equal(again.occupancy, alone.occupancy)
 
 
 def test_backend_is_checked_by_name(monkeypatch):
