@@ -35,7 +35,11 @@ observation log-likelihood is shifted by its maximum over pairs before it is exp
 the observations do not change with theta), and the local factor ``factor * pi`` is multiplied
 into the predicted state distribution; messages
 are renormalized at every step (Rabiner scaling) and ``shift + log(normalizer)`` summed, as in
-dynamax's filter. This scaled pass is exact to rounding as long as every positive shifted local
+dynamax's filter. A step's normalizer may be any positive number (the likelihood adds its log
+and the backward pass divides by the same one), except at a demonstration's last step, where
+it must be the sum of the forward message; where a stationary policy is folded into ``T``, it
+is the pushed mass, which is that sum (as far as T's rows sum to 1) without a pass over the
+message. This scaled pass is exact to rounding as long as every positive shifted local
 factor and every positive predicted probability stays above ``e^-F``, about ``e^-340`` (``F``
 depends on the smallest transition probability, :func:`_scaled_floor`), so that no product of
 them underflows; it checks that. When the check fails (large reward weights make the policy
@@ -639,9 +643,8 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
                     push(alpha, preds[t + 1])
                     if folded and not closing[t]:
-                        # T's rows sum to 1, so this is alpha's sum (up to the rows'
-                        # rounding), without a pass over alpha; any positive normalizer
-                        # is exact where no demonstration ends (see the module notes)
+                        # the pushed mass: alpha's sum without a pass over alpha (see
+                        # the module's numerics)
                         np.add.reduce(preds[t + 1], axis=0, out=norms[t])
                     preds[t + 1] /= norms[t]
         if len(chunks) == 1:
