@@ -562,11 +562,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     ws = _workspace
     separable = (emissions.factors is None and len(chunks) > 1
                  and emissions.separable(0, 1) is not None)
-    # a stationary policy is folded into T when the factors are separable (see below)
-    folded = separable and stationary
-    if stationary and not folded:
-        pi_columns = ws.get("pi", (A, S, n_demos))
-        pi_columns[...] = pi[:, :, None]
+    folded = stationary  # the policy is folded into T's pair rows (see below)
     u = ws.get("u", (S, n_demos)) if separable else None
     # the separable parts of every step, when small enough to hold for both passes
     whole = (emissions.separable(0, length) if separable
@@ -590,12 +586,13 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             return None  # a step no pair can emit: the log-space pass names it
         if blk.min_log + log_pi_min < -F:
             return None
+        if folded and emissions.factors is not None:  # kept in columns for every pass
+            return emissions.factors.columns[t0:t1], blk.shift
         E = ws.get("E", (t1 - t0, A, S, n_demos))
-        if stationary and emissions.factors is not None:  # kept in columns for every pass
-            np.multiply(emissions.factors.columns[t0:t1], pi_columns, out=E)
+        if folded:
+            np.copyto(E, np.moveaxis(blk.factor, 0, -1))
         else:
-            policy = pi if stationary else pi[t0:t1]
-            np.multiply(np.moveaxis(blk.factor, 0, -1), policy[..., None], out=E)
+            np.multiply(np.moveaxis(blk.factor, 0, -1), pi[t0:t1, ..., None], out=E)
         return E, blk.shift
 
     def times_local(E, i, t, vec, out):
@@ -614,69 +611,78 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     shifts = ws.get("shifts", (length, n_demos))
     norms = ws.get("norms", (length, n_demos))
     preds[0] = np.exp(log_p0)[:, None]
+    preds[1:] = 0.0  # the pushes add into it
+    preds_1d = preds.reshape(length, S * n_demos)
     alpha = ws.get("alpha", (A, S, n_demos))
     alpha_flat = alpha.reshape(A * S, n_demos)
-    ones = np.ones(A * S)
-    push, expect = mdp.column_products(n_demos, pi.ravel() if folded else None)
+    alpha_1d = alpha.reshape(-1)
+    pair_weights = pi.ravel() if folded else np.ones(A * S)  # alpha's sum: w alpha
+    push, expect = mdp.column_products(n_demos, pair_weights if folded else None)
     closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
     closing[lengths - 1] = True
+    single = len(chunks) == 1
     kept = None
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for t0, t1 in chunks:
             got = local(t0, t1)
             if got is None:
                 return None
             E, shifts[t0:t1] = got[0], got[1].T
-            for t in range(t0, t1):
-                if folded:  # alpha / pi = e'_t (e_t pred_t); pi is in the pushes
+            if separable and folded:  # alpha / pi = e'_t (e_t pred_t), pi in the pushes
+                for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
                     np.multiply(state, preds[t], out=u)
                     np.multiply(action[:, None, :], u, out=alpha)
                     if closing[t]:  # the likelihood's own sum: sum_s e_t pred_t (pi' e'_t)
                         np.einsum("sn,sn->n", u, pi.T @ action, out=norms[t])
-                elif separable:
+                    if t + 1 < length:  # push, then normalize the (S, N) result
+                        push(alpha_1d, preds_1d[t + 1])
+                        if not closing[t]:  # the pushed mass: alpha's sum without a pass
+                            # over alpha (see the module's numerics)
+                            np.add.reduce(preds[t + 1], axis=0, out=norms[t])
+                        preds[t + 1] /= norms[t]
+                continue
+            for t in range(t0, t1):  # alpha, or alpha / pi when pi is in the pushes
+                if separable:
                     times_local(E, t - t0, t, preds[t], alpha)
                 else:
                     np.multiply(E[t - t0], preds[t], out=alpha)
-                if not folded:
-                    np.dot(ones, alpha_flat, out=norms[t])
+                np.dot(pair_weights, alpha_flat, out=norms[t])
                 if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
-                    push(alpha, preds[t + 1])
-                    if folded and not closing[t]:
-                        # the pushed mass: alpha's sum without a pass over alpha (see
-                        # the module's numerics)
-                        np.add.reduce(preds[t + 1], axis=0, out=norms[t])
+                    push(alpha_1d, preds_1d[t + 1])
                     preds[t + 1] /= norms[t]
-        if len(chunks) == 1:
-            kept = E  # one chunk: the backward pass reuses it
-    if not np.all(norms > 0.0):
-        return None  # impossible somewhere: the log-space pass names the demonstration
-    tiny = np.exp(-F)
-    step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
-    for t0 in range(0, length, step):  # in chunks: no (T, S, N) temporaries
-        p = preds[t0:t0 + step]
-        if np.min(p, where=p > 0.0, initial=np.inf) < tiny:
-            return None
+        if single:
+            kept = E  # the backward pass reuses it
+        if not norms.min() > 0.0:
+            return None  # impossible somewhere: the log-space pass names the demonstration
+        tiny = np.exp(-F)
+        step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
+        for t0 in range(0, length, step):  # in chunks: no (T, S, N) temporaries
+            p = preds[t0:t0 + step]
+            if np.any((p < tiny) & (p > 0.0)):
+                return None
 
-    # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
-    # divided by c_{t+1} (Rabiner scaling), so that alpha_t * beta_t is the posterior
-    # marginal of step t. The local factors carry the forward pass's shifts, so alpha_t and
-    # beta_t are scaled consistently. A state the forward pass cannot reach at step t gets
-    # g = 0: no pair with forward mass leads there, and so every beta stays below about e^F.
-    # Padded steps (t >= lengths[n]) add nothing, and beta restarts at 1 at each last step.
-    inv_norms = np.divide(1.0, norms, out=ws.get("inv_norms", norms.shape))
-    scale = preds  # becomes pred_t / c_t in place (T, S, N): no second copy
-    scale *= inv_norms[:, None, :]
-    if ragged:
-        valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
-        scale *= valid[:, None, :]
-        last = lengths - 1
-    occupancy = np.zeros((A, S, n_demos))
-    beta = ws.get("beta", (A, S, n_demos))  # pi beta when the policy is folded into T
-    restart = pi[:, :, None] if folded else 1.0
-    beta[...] = restart
-    g = ws.get("g", (S, n_demos))
-    with np.errstate(over="ignore", invalid="ignore"):
+        # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
+        # divided by c_{t+1} (Rabiner scaling), so that alpha_t * beta_t is the posterior
+        # marginal of step t. The local factors carry the forward pass's shifts, so alpha_t
+        # and beta_t are scaled consistently. A state the forward pass cannot reach at step t
+        # gets g = 0: no pair with forward mass leads there, and so every beta stays below
+        # about e^F. Padded steps (t >= lengths[n]) add nothing, and beta restarts at 1 at
+        # each last step.
+        inv_norms = np.divide(1.0, norms, out=ws.get("inv_norms", norms.shape))
+        scale = preds  # becomes pred_t / c_t in place (T, S, N): no second copy
+        scale *= inv_norms[:, None, :]
+        if ragged:
+            valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
+            scale *= valid[:, None, :]
+            last = lengths - 1
+        occupancy = np.zeros((A, S, n_demos))
+        restart = pi[:, :, None] if folded else 1.0  # pi beta when pi is folded into T
+        beta = ws.get("beta", (A, S, n_demos))
+        beta[...] = restart
+        beta_1d = beta.reshape(-1)
+        g = ws.get("g", (S, n_demos))
+        g_1d = g.reshape(-1)
         for t0, t1 in reversed(chunks):
             E = kept if kept is not None else local(t0, t1)[0]
             # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real
@@ -688,26 +694,35 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 sends *= E[0]
                 weights = weights * E[0]
             gamma = ws.get("gamma", (t1 - t0, A, S, n_demos))  # pi e_t beta_t of the chunk
+            gamma_1d = gamma.reshape(t1 - t0, -1)
+            if single:  # every beta is received in gamma, where it becomes gamma in place
+                gamma[:-1] = 0.0
+                gamma[-1] = restart
             for t in range(t1 - 1, t0 - 1, -1):
+                gamma_t = gamma[t - t0]
+                beta_t = gamma_t if single else beta
                 if ragged:
                     ends = last == t
                     if ends.any():
-                        beta[:, :, ends] = restart
-                gamma_t = gamma[t - t0]
-                if folded:
-                    np.multiply(beta, E[1][t - t0][:, None, :], out=gamma_t)
+                        beta_t[:, :, ends] = restart
+                if separable and folded:
+                    np.multiply(beta_t, E[1][t - t0][:, None, :], out=gamma_t)
                 elif separable:
-                    times_local(E, t - t0, t, beta, gamma_t)
+                    times_local(E, t - t0, t, beta_t, gamma_t)
                 else:
-                    np.multiply(E[t - t0], beta, out=gamma_t)
+                    np.multiply(E[t - t0], beta_t, out=gamma_t)
                 if t > 0:
                     np.add.reduce(gamma_t, axis=0, out=g)
                     g *= sends[t - t0]
-                    expect(g, beta)
+                    if single:
+                        expect(g_1d, gamma_1d[t - 1])
+                    else:
+                        beta.fill(0.0)
+                        expect(g_1d, beta_1d)
             gamma *= weights[:, None]
             occupancy += gamma[0] if t1 - t0 == 1 else np.add.reduce(gamma, axis=0)
-    initial = np.ascontiguousarray(gamma[0].sum(axis=0).T)
-    if not (np.all(np.isfinite(occupancy)) and np.all(np.isfinite(initial))):
+        initial = np.ascontiguousarray(gamma[0].sum(axis=0).T)
+    if not np.isfinite(occupancy.sum() + initial.sum()):  # (each entry is at most T)
         return None
     per_step = shifts + np.log(norms)
     if ragged:

@@ -179,13 +179,15 @@ class TabularMDP:
 
     def column_products(self, n: int, pair_weights: np.ndarray | None = None):
         """``(push, expect)``: :meth:`push_forward_columns` and :meth:`expect_next_columns` for
-        a batch of n columns, as two functions of flat C-contiguous arrays (``push(mass (A S,
-        n), out (S, n))``, ``expect(values (S, n), out (A S, n))``) with every lookup done once,
-        for a loop that calls them at every step.
+        a batch of n columns, as two functions that add their product into ``out`` (``push(mass,
+        out)``: ``out += `` the next-state mass of ``mass`` (A, S, n); ``expect(values, out)``:
+        ``out += `` the expectation (A, S, n) of ``values`` (S, n)), all four arrays flat views
+        of C-contiguous ones. Every lookup is done once, for a loop that calls them at every
+        step; a caller that writes each product into zeros it set once saves a pass per step.
 
         With ``pair_weights`` ``w`` (A S,), indexed ``a * S + s``, they are the products of the
         operator whose pair rows are scaled by ``w``: ``push`` sums ``T[s, a, s'] w[a, s]
-        mass[a, s, n]`` and ``expect`` returns ``w[a, s] sum_s' T[s, a, s'] values[s', n]``.
+        mass[a, s, n]`` and ``expect`` adds ``w[a, s] sum_s' T[s, a, s'] values[s', n]``.
         Forward-backward folds a stationary policy into ``T`` this way, once per pass (``O(nnz
         (T))``), and saves a product over every ``(A, S, N)`` message at every step.
         """
@@ -193,30 +195,29 @@ class TabularMDP:
             P, PT = self._action_major, self._action_major_dense_T
             if pair_weights is not None:
                 P, PT = P * pair_weights[:, None], PT * pair_weights[None, :]
-            return (lambda mass, out: np.dot(PT, mass.reshape(-1, n), out=out),
-                    lambda values, out: np.dot(P, values, out=out.reshape(-1, n)))
+
+            def push(mass, out):
+                out += (PT @ mass.reshape(-1, n)).ravel()
+
+            def expect(values, out):
+                out += (P @ values.reshape(-1, n)).ravel()
+
+            return push, expect
         fwd, bwd = self._action_major_T, self._action_major_csr
+        f_data, b_data = fwd.data, bwd.data
         if pair_weights is not None:
-            fwd = sp.csr_matrix((fwd.data * pair_weights[fwd.indices], fwd.indices, fwd.indptr),
-                                shape=fwd.shape)
-            rows = np.repeat(pair_weights, np.diff(bwd.indptr))
-            bwd = sp.csr_matrix((bwd.data * rows, bwd.indices, bwd.indptr), shape=bwd.shape)
+            f_data = f_data * pair_weights[fwd.indices]
+            b_data = b_data * pair_weights[self._action_major_rows]
         if _csr_matvecs is None:
-            return (lambda mass, out: _csr_times(fwd, mass.reshape(-1, n), out),
-                    lambda values, out: _csr_times(bwd, values, out.reshape(-1, n)))
+            fwd = sp.csr_matrix((f_data, fwd.indices, fwd.indptr), shape=fwd.shape)
+            bwd = sp.csr_matrix((b_data, bwd.indices, bwd.indptr), shape=bwd.shape)
+            return (lambda mass, out: out.__iadd__((fwd @ mass.reshape(-1, n)).ravel()),
+                    lambda values, out: out.__iadd__((bwd @ values.reshape(-1, n)).ravel()))
         n_pairs, n_states = bwd.shape
-        f_args = (n_states, n_pairs, n, fwd.indptr, fwd.indices, fwd.data)
-        b_args = (n_pairs, n_states, n, bwd.indptr, bwd.indices, bwd.data)
-
-        def push(mass, out):
-            out.fill(0.0)
-            _csr_matvecs(*f_args, mass.reshape(-1), out.reshape(-1))
-
-        def expect(values, out):
-            out.fill(0.0)
-            _csr_matvecs(*b_args, values.reshape(-1), out.reshape(-1))
-
-        return push, expect
+        f_args = (n_states, n_pairs, n, fwd.indptr, fwd.indices, f_data)
+        b_args = (n_pairs, n_states, n, bwd.indptr, bwd.indices, b_data)
+        return (lambda mass, out: _csr_matvecs(*f_args, mass, out),
+                lambda values, out: _csr_matvecs(*b_args, values, out))
 
     @cached_property
     def _products_sparse(self) -> bool:
@@ -231,6 +232,12 @@ class TabularMDP:
         csr = sp.csr_matrix(self._action_major, dtype=float)
         csr.eliminate_zeros()
         return csr
+
+    @cached_property
+    def _action_major_rows(self) -> np.ndarray:
+        """The row (``a * S + s``) of each stored entry of :attr:`_action_major_csr`."""
+        csr = self._action_major_csr
+        return np.repeat(np.arange(csr.shape[0]), np.diff(csr.indptr))
 
     @cached_property
     def _action_major_dense_T(self) -> np.ndarray:

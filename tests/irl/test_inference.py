@@ -230,22 +230,16 @@ def test_column_kernels_equal_the_batch_ones(sparse, rng):
     expected = mdp.expect_next_batch(values)  # [n, s, a]
     got = mdp.expect_next_columns(np.ascontiguousarray(values.T), out=np.empty((3, 5, 4)))
     np.testing.assert_allclose(got.transpose(2, 1, 0), expected, rtol=1e-14)
-    push, expect = mdp.column_products(4)  # the loop's bound form
-    out = np.full((5, 4), np.nan)
-    push(columns.reshape(15, 4), out)
-    np.testing.assert_allclose(out, pushed, rtol=1e-14)
-    out = np.full((15, 4), np.nan)
-    expect(np.ascontiguousarray(values.T), out)
-    np.testing.assert_allclose(out.reshape(3, 5, 4), got, rtol=1e-14)
-    # a policy folded into T: pair rows a * S + s scaled by w
-    w = rng.random(15)
-    push, expect = mdp.column_products(4, w)
-    out = np.full((5, 4), np.nan)
-    push(columns.reshape(15, 4), out)
-    np.testing.assert_allclose(out, pushed_of(mdp, columns * w.reshape(3, 5, 1)), rtol=1e-14)
-    out = np.full((15, 4), np.nan)
-    expect(np.ascontiguousarray(values.T), out)
-    np.testing.assert_allclose(out.reshape(3, 5, 4), got * w.reshape(3, 5, 1), rtol=1e-14)
+    for w in (None, rng.random(15)):  # w: a policy folded into T (pair rows a * S + s)
+        push, expect = mdp.column_products(4, w)  # the loop's bound form: out += product
+        scaled = columns if w is None else columns * w.reshape(3, 5, 1)
+        out = np.ones(20)
+        push(columns.ravel(), out)
+        np.testing.assert_allclose(out.reshape(5, 4), 1.0 + pushed_of(mdp, scaled), rtol=1e-14)
+        out = np.ones(60)
+        expect(np.ascontiguousarray(values.T).ravel(), out)
+        expected = got if w is None else got * w.reshape(3, 5, 1)
+        np.testing.assert_allclose(out.reshape(3, 5, 4), 1.0 + expected, rtol=1e-14)
 
 
 def pushed_of(mdp, columns):
