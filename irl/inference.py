@@ -569,9 +569,10 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
              and n_demos * length * S <= _SEPARABLE_ELEMENTS else None)
 
     def local(t0, t1):
-        """The chunk's local factors, ``(E[t, a, s, n], shift[n, t])``, or
-        ``((state[t, s, n], action[t, a, n]), shift)`` (views) when separable; None outside
-        the safe range."""
+        """The chunk's local factors and the log of their smallest positive entry, ``(E[t, a,
+        s, n], shift[n, t], min_log)``, or ``((state[t, s, n], action[t, a, n]), shift,
+        min_log)`` (views) when separable; None outside the safe range. ``E`` leaves out the
+        policy where it is folded into T."""
         if separable:
             if whole is not None:
                 state, action, shift, min_log = whole
@@ -580,20 +581,20 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 state, action, shift, min_log = emissions.separable(t0, t1)
             if not np.all(np.isfinite(shift)) or min_log + log_pi_min < -F:
                 return None
-            return (np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1)), shift
+            return (np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1)), shift, min_log
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
         if blk.min_log + log_pi_min < -F:
             return None
         if folded and emissions.factors is not None:  # kept in columns for every pass
-            return emissions.factors.columns[t0:t1], blk.shift
+            return emissions.factors.columns[t0:t1], blk.shift, blk.min_log
         E = ws.get("E", (t1 - t0, A, S, n_demos))
         if folded:
             np.copyto(E, np.moveaxis(blk.factor, 0, -1))
         else:
             np.multiply(np.moveaxis(blk.factor, 0, -1), pi[t0:t1, ..., None], out=E)
-        return E, blk.shift
+        return E, blk.shift, blk.min_log
 
     def times_local(E, i, t, vec, out):
         """``out[a, s, n] = E_t[a, s, n] vec`` for step t (i within its chunk), ``vec`` of
@@ -621,6 +622,8 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
     closing[lengths - 1] = True
     single = len(chunks) == 1
+    norms[...] = 1.0  # a step not renormalized keeps 1
+    since = 0  # steps since the last renormalization
     kept = None
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for t0, t1 in chunks:
@@ -628,29 +631,41 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             if got is None:
                 return None
             E, shifts[t0:t1] = got[0], got[1].T
+            # renormalize every `every` steps: where every pair can emit what is seen, the
+            # mass falls by at most e^min_log a step (the policy sums to 1), so by at most
+            # e^(-F/4) between renormalizations; the range check below covers the rest
+            every = max(1, int(F / (4.0 * max(-got[2], 1.0))))
             if separable and folded:  # alpha / pi = e'_t (e_t pred_t), pi in the pushes
                 for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
                     np.multiply(state, preds[t], out=u)
                     np.multiply(action[:, None, :], u, out=alpha)
+                    since += 1
                     if closing[t]:  # the likelihood's own sum: sum_s e_t pred_t (pi' e'_t)
                         np.einsum("sn,sn->n", u, pi.T @ action, out=norms[t])
-                    if t + 1 < length:  # push, then normalize the (S, N) result
+                    if t + 1 < length:
                         push(alpha_1d, preds_1d[t + 1])
-                        if not closing[t]:  # the pushed mass: alpha's sum without a pass
-                            # over alpha (see the module's numerics)
-                            np.add.reduce(preds[t + 1], axis=0, out=norms[t])
-                        preds[t + 1] /= norms[t]
+                        if closing[t] or since >= every:
+                            if not closing[t]:  # the pushed mass: alpha's sum without a
+                                # pass over alpha (see the module's numerics)
+                                np.add.reduce(preds[t + 1], axis=0, out=norms[t])
+                            preds[t + 1] /= norms[t]
+                            since = 0
                 continue
             for t in range(t0, t1):  # alpha, or alpha / pi when pi is in the pushes
                 if separable:
                     times_local(E, t - t0, t, preds[t], alpha)
                 else:
                     np.multiply(E[t - t0], preds[t], out=alpha)
-                np.dot(pair_weights, alpha_flat, out=norms[t])
-                if t + 1 < length:  # push, then normalize the (S, N) result: one pass less
+                since += 1
+                if closing[t] or since >= every:
+                    np.dot(pair_weights, alpha_flat, out=norms[t])
+                    if t + 1 < length:  # push, then normalize the (S, N) result
+                        push(alpha_1d, preds_1d[t + 1])
+                        preds[t + 1] /= norms[t]
+                    since = 0
+                elif t + 1 < length:
                     push(alpha_1d, preds_1d[t + 1])
-                    preds[t + 1] /= norms[t]
         if single:
             kept = E  # the backward pass reuses it
         if not norms.min() > 0.0:
