@@ -32,12 +32,14 @@ Numerics. The policy and the emissions come in as log-probabilities, so a Boltzm
 any temperature is represented exactly (``log_softmax``, never ``exp`` then ``log``). Each step's
 observation log-likelihood is shifted by its maximum over pairs before it is exponentiated
 (a whole chunk of steps at once; for one fit the packed demonstrations keep the result, since
-the observations do not change with theta), and the local factor ``factor * pi`` is multiplied
-into the predicted state distribution; messages
-are renormalized at every step (Rabiner scaling) and ``shift + log(normalizer)`` summed, as in
-dynamax's filter. A step's normalizer may be any positive number (the likelihood adds its log
-and the backward pass divides by the same one), except at a demonstration's last step, where
-it must be the sum of the forward message; where a stationary policy is folded into ``T``, it
+the observations do not change with theta), and the local factor is multiplied into the
+predicted state distribution (a stationary policy is folded into ``T``'s pair rows once per
+pass instead). Messages are renormalized (Rabiner scaling) and ``shift + log(normalizer)``
+summed, as in dynamax's filter, but only every few steps: as often as the smallest local
+factor requires for the mass to fall by less than ``e^(-F/4)`` in between. A step's normalizer
+may be any positive number, 1 included (the likelihood adds its log and the backward pass
+divides by the same one), except at a demonstration's last step, where it must be the sum of
+the forward message; where the observations factor into a state part and an action part, it
 is the pushed mass, which is that sum (as far as T's rows sum to 1) without a pass over the
 message. This scaled pass is exact to rounding as long as every positive shifted local
 factor and every positive predicted probability stays above ``e^-F``, about ``e^-340`` (``F``
@@ -540,14 +542,18 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
 
     Layout: the batch's messages are held in columns, demonstrations innermost (``pred[s, n]``,
     ``alpha[a, s, n]``), so that the two sparse products of a step read and write their blocks
-    in place and a state array broadcasts over the actions as whole ``(S, N)`` slabs. Each chunk
-    of steps gets its local factors ``E[t, a, s, n] = factor * pi`` in one vectorized product;
-    a step of the forward pass is then four array operations (``alpha = E_t pred_t``, its sum,
-    the push through ``T``, the division), a step of the backward pass four more, and the
-    posteriors of a whole chunk are formed at once. When the observations are computed chunk
-    by chunk (too many to keep) and the model's likelihoods are a state part times an action
-    part (:meth:`~irl.observation.ObservationModel.separable_likelihoods`), ``E`` is never
-    formed: ``alpha_t = pi (e_t pred_t) e'_t``.
+    in place and a state array broadcasts over the actions as whole ``(S, N)`` slabs. A
+    stationary policy is folded into the products (:meth:`TabularMDP.column_products`), so the
+    local factors ``E[t, a, s, n]`` are the observations' alone (kept in this layout by the
+    packing for a whole fit); a time-indexed one is multiplied in, a chunk of steps at once. A
+    step of the forward pass is then two to four array operations (``alpha = E_t pred_t``, the
+    push through ``T``, and at a renormalization the sum and the division), a step of the
+    backward pass four (the products add into zeros set once per pass, and each beta is
+    received where it becomes gamma), and the posteriors of a whole chunk are formed at once.
+    When the observations are computed chunk by chunk (too many to keep) and the model's
+    likelihoods are a state part times an action part
+    (:meth:`~irl.observation.ObservationModel.separable_likelihoods`), ``E`` is never formed:
+    ``alpha_t / pi = (e_t pred_t) e'_t``.
     """
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
