@@ -117,18 +117,20 @@ class FactoredObservationModel(ObservationModel):
         m = flat.size
         occluded = flat < 0
         seen_state, seen_action = np.divmod(np.where(occluded, 0, flat), self.n_actions)
-        parts = np.unravel_index(seen_state, self.sizes)
-        columns = [c[:, part].T for c, part in zip(self.factor_confusions, parts, strict=True)]
-        columns.append(self.action_confusion[:, seen_action].T)
+        parts = [*np.unravel_index(seen_state, self.sizes), seen_action]
+        columns = []
         shift = np.zeros(m)
         low = np.zeros(m)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for col in columns:  # (m, n_f), a fresh array
+        with np.errstate(invalid="ignore"):
+            for (scaled, log_top, log_low), part in zip(self._scaled_columns, parts,
+                                                        strict=True):
+                col = scaled[part]  # (m, n_f), a fresh array
                 col[occluded] = 1.0
-                top = col.max(axis=1)
-                col /= top[:, None]
-                shift += np.log(top)
-                low += np.log(np.where(col > 0, col, np.inf).min(axis=1))
+                columns.append(col)
+                shift += log_top[part]
+                low += log_low[part]
+        shift[occluded] = 0.0
+        low[occluded] = 0.0
         possible = np.isfinite(shift)
         min_log = float(low[possible].min()) if possible.any() else 0.0
         state = columns[0]
@@ -137,6 +139,22 @@ class FactoredObservationModel(ObservationModel):
         return (state.reshape((*obs.shape, self.n_states)),
                 columns[-1].reshape((*obs.shape, self.n_actions)), shift.reshape(obs.shape),
                 min_log)
+
+    @cached_property
+    def _scaled_columns(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per confusion (the factors', then the action's), what a seen value selects:
+        ``(scaled[observed, true], log_top[observed], log_low[observed])``, its columns
+        divided by their maxima, the log of each maximum, and the log of each scaled column's
+        smallest positive entry (``-inf``, ``nan`` and ``inf`` where a column is all zeros: an
+        impossible observation, as its shift says)."""
+        out = []
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for c in [*self.factor_confusions, self.action_confusion]:
+                top = c.max(axis=0)
+                scaled = np.ascontiguousarray((c / top).T)
+                out.append((scaled, np.log(top),
+                            np.log(np.where(scaled > 0, scaled, np.inf).min(axis=1))))
+        return out
 
     def scaled_likelihoods(self, obs, *, action_major: bool = False
                            ) -> tuple[np.ndarray, np.ndarray, float]:
