@@ -15,6 +15,11 @@ itself), a factor of the domain's beta written ``"x0.5"``, or ``"paper"`` (the p
 with the domain's prior). Learners without a ``beta`` (HiddenDataEM, MaxEnt IRL) are built the
 same way and simply have nothing to change; every method is run at every setting.
 
+The forward-backward kernels (``SweepConfig.backend``: numpy or numba) are how a trial is
+computed, not what: they go to the learners that have a ``backend`` parameter
+(:func:`irl.learners.make_estimator`), give the same results to rounding, and are recorded in
+each result, but are no part of a trial's identity or seeds.
+
 :func:`summarize` reports, per (method, occlusion, noise, trajectories, length, learner setting),
 means over batches with percentile-bootstrap confidence intervals (:func:`irl.stats.bootstrap_ci`)
 seeded from the sweep seed.
@@ -38,6 +43,7 @@ from irl.demonstrations import observe, sample_trajectory
 from irl.domains import Domain, forestworld, onion_sorting
 from irl.domains.onion_sorting import reachable_states as sorting_reachable_states
 from irl.exceptions import ConvergenceWarning
+from irl.inference import check_backend
 from irl.learners.registry import LEARNERS, make_estimator
 from irl.metrics import inverse_learning_error, normalized_inverse_learning_error, policy_mismatch
 from irl.stats import bootstrap_ci
@@ -142,6 +148,9 @@ class SweepConfig:
         Learner settings (see :func:`parse_learner_setting`); ``("x1",)``: the true beta.
     seed : int
         Seeds the data of every batch and the bootstrap of :func:`summarize`.
+    backend : {"numpy", "numba"}
+        Forward-backward kernels of the learners that have a ``backend`` parameter
+        (:data:`irl.inference.BACKENDS`); equal to rounding, so not part of the data or seeds.
     """
 
     domain: str
@@ -152,8 +161,10 @@ class SweepConfig:
     length: int | tuple[int, ...] = 20
     learners: tuple[str, ...] = ("x1",)
     seed: int = 0
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
+        check_backend(self.backend)
         if self.domain not in DOMAINS:
             raise ValueError(f"domain must be one of {sorted(DOMAINS)}; got {self.domain!r}")
         unknown = [m for m in self.methods if m not in LEARNERS]
@@ -184,7 +195,7 @@ class SweepConfig:
 
     def trials(self) -> list[Trial]:
         return [
-            Trial(self.domain, m, occ, noise, b, n, length, self.seed, learner)
+            Trial(self.domain, m, occ, noise, b, n, length, self.seed, learner, self.backend)
             for occ, noise in self.points
             for length in self.length
             for n in self.trajectories
@@ -205,6 +216,8 @@ class Trial:
     length: int
     seed: int
     learner: str = "x1"
+    #: Forward-backward kernels (numpy or numba); not part of the data seeds.
+    backend: str = "numpy"
 
     def data_seed(self, index: int) -> np.random.SeedSequence:
         """Seed of the batch's ``index``-th demonstration: shared by all methods, all learner
@@ -230,6 +243,8 @@ class TrialResult:
     learner: str = "x1"
     learner_beta: float = math.nan
     exact_policy: int = 0
+    #: The trial's ``backend``, used by the learners that run forward-backward.
+    backend: str = "numpy"
 
 
 def sample_batch(domain: Domain, trial: Trial) -> list:
@@ -248,7 +263,7 @@ def run_trial(trial: Trial) -> TrialResult:
     domain = DOMAINS[trial.domain](noise=trial.noise)
     demos = sample_batch(domain, trial)
     told = learner_domain(domain, trial.learner)
-    est = make_estimator(trial.method, told, seed=trial.batch)
+    est = make_estimator(trial.method, told, seed=trial.batch, backend=trial.backend)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
@@ -272,6 +287,7 @@ def run_trial(trial: Trial) -> TrialResult:
         learner=trial.learner,
         learner_beta=float(told.beta),
         exact_policy=int(policy_mismatch(mdp, theta, est.theta_, states) == 0),
+        backend=trial.backend,
     )
 
 

@@ -98,6 +98,8 @@ CASES = [
      ["batches must be >= 1", "0"]),
     (["experiment", "forestworld", "--workers", "0", "--out", "{d}/x"],
      ["workers must be >= 1", "0"]),
+    (["experiment", "forestworld", "--backend", "cuda", "--out", "{d}/x"],
+     ["--backend", "invalid choice", "'cuda'", "'numba'"]),
     (["dataset", "--frames", "12", "--difficulty", "clean,foggy", "--out", "{d}/x"],
      ["unknown level", "'foggy'"]),
     (["evaluate", "{d}/run_nomodel", "--connect", "rerun+http://h/proxy"],
@@ -184,6 +186,8 @@ CASES = [
      ["run_done/model.json exists", "--overwrite"]),
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--method", "svm",
       "--out", "{d}/x"], ["--method", "'svm'"]),
+    (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--backend", "cuda",
+      "--out", "{d}/x"], ["--backend", "invalid choice", "'cuda'", "'numba'"]),
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--connect",
       "rerun+http://host/proxy", "--out", "{d}/x"], ["connect must be", "no port",
                                                      "'rerun+http://host/proxy'"]),
@@ -261,6 +265,25 @@ def test_no_traceback_reaches_stderr_of_the_process(fx, argv, words):
                           text=True, cwd=fx, timeout=120)
     _one_clear_line(done.returncode, done.stderr, words)
     assert done.stdout == ""
+
+
+@pytest.mark.parametrize("argv", [
+    ["experiment", "forestworld", "--quick", "--backend", "numba", "--out", "{d}/x"],
+    ["experiment", "forestworld", "--quick", "--backend", "numba", "--out", "{d}/x", "--resume"],
+    ["learn", "{d}/perceived.mcap", "--observation-model", CAL, "--method", "maxent",
+     "--backend", "numba", "--out", "{d}/x"],
+])
+def test_numba_asked_for_but_not_installed_is_one_line_with_the_install_hint(fx, capsys,
+                                                                              monkeypatch, argv):
+    """Refused before anything is read, fitted or written, whichever learner would run."""
+    import irl._numba
+
+    monkeypatch.setattr(irl._numba, "available", lambda: False)
+    argv = [a.format(d=fx) for a in argv]
+    code, err = _run_in_process(argv, capsys)
+    _one_clear_line(code, err, ["backend 'numba' needs numba, which is not installed",
+                                "pip install 'onionsort[fast]'"])
+    assert not (fx / "x").exists() or not any((fx / "x").iterdir())
 
 
 def test_debug_shows_the_traceback(fx):

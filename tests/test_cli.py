@@ -3,6 +3,7 @@
 import csv
 import json
 
+import numpy as np
 import pytest
 
 from onionsort.cli import main
@@ -107,3 +108,95 @@ def test_bad_number_list_is_rejected_by_the_parser(capsys):
     with pytest.raises(SystemExit):
         main(["experiment", "forestworld", "--noise", "a,b"])
     assert "comma-separated numbers" in capsys.readouterr().err
+
+
+# --- --backend: the forward-backward kernels of learn and experiment -------------------------
+
+@pytest.fixture
+def built(monkeypatch):
+    """The estimators that ``learn`` and ``experiment`` build (both call
+    ``irl.experiments.make_estimator``), fitted, in order."""
+    import irl.experiments
+
+    real, estimators = irl.experiments.make_estimator, []
+
+    def recording(*args, **kwargs):
+        estimators.append(real(*args, **kwargs))
+        return estimators[-1]
+
+    monkeypatch.setattr(irl.experiments, "make_estimator", recording)
+    return estimators
+
+
+def test_experiment_backend_reaches_the_learners_and_agrees_with_numpy(tmp_path, built):
+    pytest.importorskip("numba")
+    runs = {}
+    for backend in ("numpy", "numba"):
+        built.clear()
+        out = tmp_path / backend
+        assert main(["experiment", "sorting", "--occlusion", "0.2", "--noise", "0.3",
+                     "--batches", "1", "--trajectories", "2", "--length", "8", "--methods",
+                     "mmap-birl,hidden-data-em,maxent", "--workers", "1", "--backend", backend,
+                     "--out", str(out)]) == 0
+        assert [getattr(e, "backend", None) for e in built] == [backend, None, None]
+        rows = list(csv.DictReader((out / "results.csv").open()))
+        assert [r["backend"] for r in rows] == [backend] * 3
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["config"]["backend"] == backend
+        assert summary["trial_backends"] == {backend: 3}
+        runs[backend] = rows, [e.theta_ for e in built]
+    (ref, ref_theta), (fast, fast_theta) = runs["numpy"], runs["numba"]
+    for a, b, ta, tb in zip(ref, fast, ref_theta, fast_theta, strict=True):
+        np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-9, err_msg=a["method"])
+        assert float(b["ile"]) == pytest.approx(float(a["ile"]), rel=1e-9, abs=1e-9)
+        assert (a["method"], a["n_iter"], a["exact_policy"]) == \
+            (b["method"], b["n_iter"], b["exact_policy"])
+
+
+@pytest.fixture(scope="module")
+def perceived_sessions(tmp_path_factory):
+    """Two perceived sessions of 10 steps (20% occluded) without the simulator: sensor frames
+    of plain arrays, observations drawn from the sorting expert through a 30%-noise sensor."""
+    from irl.demonstrations import observe, sample_trajectory
+    from irl.domains import onion_sorting
+    from recordings.perception import add_perception
+    from tests.test_bad_cli import _sensor_session
+
+    folder, dom, paths = tmp_path_factory.mktemp("perceived"), onion_sorting(noise=0.3), []
+    for i in range(2):
+        rng = np.random.default_rng(i)
+        demo = observe(sample_trajectory(dom.mdp, dom.expert_policy(), 10, rng),
+                       dom.observation_model, 0.2, rng)
+        obs = demo.as_array()
+        path = _sensor_session(folder / f"session_{i:03d}.mcap", frames_per_step=1,
+                               steps=len(obs))
+        steps = [{"step": t, "frame": t, "occluded": bool(o < 0),
+                  "observation": None if o < 0 else int(o)} for t, o in enumerate(obs)]
+        add_perception(path, steps, detections={}, inspection={},
+                       frame_times={t: t * 10**8 for t in range(len(obs))},
+                       models={"folder": "test"})
+        paths.append(path)
+    return paths
+
+
+@pytest.mark.parametrize("method", ["mmap-birl", "hidden-data-em", "maxent"])
+def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built, method,
+                                                                  perceived_sessions):
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+
+    pytest.importorskip("numba")
+    models = {}
+    for backend in ("numpy", "numba"):
+        out = tmp_path / backend
+        assert main(["learn", *map(str, perceived_sessions), "--method", method,
+                     "--observation-model", str(DEFAULT_MODELS / CALIBRATION_FILE),
+                     "--allow-model-mismatch", "--backend", backend, "--out", str(out)]) == 0
+        est = built[-1]
+        assert getattr(est, "backend", None) == (backend if method == "mmap-birl" else None)
+        model = json.loads((out / "model.json").read_text())
+        assert model["backend"] == backend and model["method"] == method
+        models[backend] = est.theta_, model
+    (ref, ref_model), (fast, fast_model) = models["numpy"], models["numba"]
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-9)
+    assert fast_model["policy_indices"] == ref_model["policy_indices"]
+    assert fast_model["n_iter"] == ref_model["n_iter"]

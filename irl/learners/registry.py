@@ -3,7 +3,10 @@
 Each learner is a :class:`LearnerSpec` whose ``build(domain, *, seed)`` returns an unfitted
 estimator configured with the domain's settings. The four learners of the paper are registered
 on import, in this order: ``mmap-birl``, ``map-birl``, ``hidden-data-em``, ``maxent``. Others can
-be added with :func:`register_learner`; a name can be registered once.
+be added with :func:`register_learner`; a name can be registered once. ``make_estimator``'s
+``backend`` goes to every estimator with a ``backend`` parameter (``get_params``): of the four,
+``mmap-birl`` (HiddenDataEM's E-step has a time-indexed policy, which the compiled kernel does
+not take).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
+from irl.inference import check_backend
 from irl.learners.birl import MAPBIRL, MMAPBIRL
 from irl.learners.maxent import HiddenDataEM, MaxEntIRL
 
@@ -89,18 +93,43 @@ def unregister_learner(name: str) -> LearnerSpec:
     return _REGISTRY.pop(name)
 
 
-def make_estimator(name: str, domain: Domain, *, seed=None):
+def make_estimator(name: str, domain: Domain, *, seed=None, backend: str | None = None):
     """The unfitted estimator of the learner ``name``, configured with ``domain``'s settings.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`LEARNERS`.
+    domain : irl.domains.Domain
+    seed : int, Generator or None
+        Passed to the learner's ``build``.
+    backend : {"numpy", "numba"} or None
+        Forward-backward kernels (:data:`irl.inference.BACKENDS`), set on an estimator that
+        has a ``backend`` parameter (``get_params``); the others do not run
+        forward-backward and are built as they are. None: the estimator's own default.
 
     Raises
     ------
     ValueError
-        If ``name`` is not in :data:`LEARNERS`; the message lists the registered names.
+        If ``name`` is not in :data:`LEARNERS` (the message lists the registered names), or
+        ``backend`` is not a backend or cannot run here (:func:`irl.inference.check_backend`).
     """
     spec = _REGISTRY.get(name) if isinstance(name, str) else None
     if spec is None:
         raise ValueError(f"method must be one of {tuple(_REGISTRY)}; got {name!r}")
-    return spec.build(domain, seed=seed)
+    if backend is not None:
+        check_backend(backend)
+    estimator = spec.build(domain, seed=seed)
+    if backend is not None and _accepts_backend(estimator):
+        estimator.set_params(backend=backend)
+    return estimator
+
+
+def _accepts_backend(estimator) -> bool:
+    """Whether ``estimator`` has a ``backend`` parameter (in ``get_params``, which
+    ``set_params`` then writes), as :class:`MMAPBIRL` has."""
+    get_params = getattr(estimator, "get_params", None)
+    return callable(get_params) and "backend" in get_params()
 
 
 def _mmap_birl(domain: Domain, *, seed=None) -> MMAPBIRL:

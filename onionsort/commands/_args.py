@@ -33,6 +33,16 @@ def add_connect_argument(parser: argparse.ArgumentParser, *,
                              "`rerun`)")
 
 
+def add_backend_argument(parser: argparse.ArgumentParser) -> None:
+    """``--backend {numpy,numba}``: the forward-backward kernels of the learners that run it."""
+    from irl.inference import BACKENDS
+
+    parser.add_argument("--backend", choices=BACKENDS, default="numpy",
+                        help="forward-backward kernels: numpy (default) or numba, compiled "
+                             "and equal to rounding (pip install -e \".[fast]\"); used by "
+                             "mmap-birl; the other learners ignore it")
+
+
 def subcommand(subparsers, name: str, doc: str, help_: str) -> argparse.ArgumentParser:
     """A subparser whose description is the command module's docstring."""
     return subparsers.add_parser(name, help=help_, description=doc,

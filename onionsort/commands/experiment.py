@@ -10,6 +10,7 @@ Examples
     onionsort experiment sorting --trajectories 2,8 --noise 0.3 --occlusion 0.2 \\
         --learner-beta x0.25,x1,x4,paper --batches 20 --out runs/beta   # misspecified beta
     onionsort experiment forestworld --out runs/forestworld --resume   # after an interruption
+    onionsort experiment sorting --quick --backend numba               # compiled kernels
     onionsort experiment forestworld --quick --executor ray            # a local Ray instance
     RAY_ADDRESS=head-node:6379 onionsort experiment forestworld --executor ray   # a cluster
 """
@@ -19,7 +20,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from onionsort.commands._args import floats, subcommand
+from onionsort.commands._args import add_backend_argument, floats, subcommand
 
 
 def register(subparsers) -> None:
@@ -40,10 +41,12 @@ def register(subparsers) -> None:
                    help="parallel processes, or CPUs of a local Ray instance (run times are "
                         "comparable within one run)")
     p.add_argument("--quick", action="store_true", help="a small sweep that takes seconds")
+    add_backend_argument(p)
     p.add_argument("--out", type=Path, help="run folder (default runs/experiment-DOMAIN)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted sweep in --out: keep the trials in its "
-                        "results.csv.partial and run the rest")
+                        "results.csv.partial and run the rest (same options; --backend may "
+                        "differ)")
     p.add_argument("--executor", choices=["process", "ray"], default="process",
                    help="run trials on a local process pool (default) or as Ray tasks "
                         '(pip install -e ".[ray]")')
@@ -66,7 +69,8 @@ def run(args) -> int:
         learner_beta=listed("learner-beta", "learner"),
         methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
         seed=args.seed, workers=args.workers, quick=args.quick, out=args.out,
-        executor=args.executor, ray_address=args.ray_address, resume=args.resume)
+        executor=args.executor, ray_address=args.ray_address, resume=args.resume,
+        backend=args.backend)
     summary = run_experiment(config)
     print(format_table(summary["points"]))
     print(f"wrote results.csv, summary.json and {len(summary['plots'])} plots to "

@@ -12,13 +12,15 @@ Examples
         --observation-model runs/calibration/calibration.json --out runs/learn-mmap
     onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --out runs/learn-mmap --connect rerun+http://192.168.1.20:9876/proxy
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
+        --out runs/learn-mmap --backend numba       # compiled forward-backward (the fast extra)
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_connect_argument, subcommand
+from onionsort.commands._args import add_backend_argument, add_connect_argument, subcommand
 
 
 def register(subparsers) -> None:
@@ -37,6 +39,7 @@ def register(subparsers) -> None:
     parser.add_argument("--allow-model-mismatch", action="store_true",
                         help="learn even if the sessions were perceived by other models (or "
                              "in another sensor mode) than the calibration measured")
+    add_backend_argument(parser)
     add_connect_argument(parser, what="the learning run (learn.rrd)")
     parser.set_defaults(func=run)
 
@@ -47,7 +50,8 @@ def run(args) -> int:
     model = learn(LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
                               out=args.out, method=args.method, seed=args.seed,
                               allow_model_mismatch=args.allow_model_mismatch,
-                              overwrite=args.overwrite, connect=args.connect))
+                              overwrite=args.overwrite, connect=args.connect,
+                              backend=args.backend))
     print(f"{args.method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
           f"steps, {model['n_occluded']} occluded)")
     print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))

@@ -9,7 +9,10 @@ and runs only the missing trials, so the final ``results.csv`` (rows in trial or
 of an uninterrupted run, timings aside. Trials run on a local process pool (``executor="process"``)
 or as Ray tasks (``executor="ray"``: the Ray instance this process already joined, else
 ``ray_address``, else ``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give
-the same rows.
+the same rows. ``backend`` picks the forward-backward kernels of MMAP-BIRL: numpy, or numba, which
+gives the same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed, always
+runs numpy). Each row records the backend it was run with (``summary.json`` their counts), and
+a sweep may be resumed with the other one: the kept rows keep theirs.
 
 Example::
 
@@ -20,6 +23,7 @@ Example::
         learner_beta=("x0.25", "x1", "paper"), batches=20, out=Path("runs/efficiency")))
     summary = run_experiment(ExperimentConfig(domain="forestworld", executor="ray",
                                               ray_address="auto", resume=True))
+    summary = run_experiment(ExperimentConfig(domain="sorting", quick=True, backend="numba"))
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import dataclasses
 import json
 import logging
 import os
+from collections import Counter
 from concurrent.futures import Executor, Future
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -55,7 +60,7 @@ QUICK_POINTS = {
 }
 CSV_COLUMNS = ["method", "occlusion", "noise", "trajectories", "length", "learner",
                "learner_beta", "batch", "ile", "seconds", "normalized_ile", "exact_policy",
-               "n_iter", "converged"]
+               "n_iter", "converged", "backend"]
 #: The columns that name a trial (all but its scores): a row's identity when resuming.
 TRIAL_COLUMNS = ("method", "occlusion", "noise", "trajectories", "length", "learner", "batch")
 EXECUTORS = ("process", "ray")
@@ -117,6 +122,10 @@ class ExperimentConfig:
     resume : bool
         Keep the rows of ``results.csv.partial`` (an interrupted run of this same sweep in
         this folder) and run only the missing trials.
+    backend : str
+        Forward-backward kernels of the learners that run it (``irl.inference.BACKENDS``):
+        ``numpy`` or ``numba`` (the ``fast`` extra). Not part of the sweep's identity: a sweep
+        may be resumed with the other backend.
     """
 
     domain: str
@@ -134,8 +143,12 @@ class ExperimentConfig:
     executor: str = "process"
     ray_address: str | None = None
     resume: bool = False
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
+        from irl.inference import check_backend
+
+        check_backend(self.backend)
         if self.executor not in EXECUTORS:
             raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; "
                              f"got {self.executor!r}")
@@ -164,7 +177,8 @@ class ExperimentConfig:
             batches=self.batches if self.batches is not None else defaults["batches"],
             trajectories=self.trajectories or defaults["trajectories"],
             length=self.length or defaults["length"],
-            learners=tuple(self.learner_beta or ("x1",)), seed=self.seed)
+            learners=tuple(self.learner_beta or ("x1",)), seed=self.seed,
+            backend=self.backend)
 
     @property
     def folder(self) -> Path:
@@ -191,6 +205,11 @@ def run_experiment(config: ExperimentConfig) -> dict:
     if config.resume and partial.exists():
         done = _read_partial(out, sweep_doc, trials)
         logger.info("resuming %s: %d of %d trials already done", partial, len(done), len(trials))
+        other = sorted({r.backend for r in done.values()} - {sweep.backend})
+        if other:
+            logger.info("the kept trials ran on backend %s, the rest run on %s (equal to "
+                        "rounding; each row of results.csv names its backend)",
+                        " and ".join(other), sweep.backend)
     elif partial.exists():
         raise FileExistsError(f"{partial} holds the rows of an interrupted sweep; continue it "
                               "with --resume, or delete it to start over")
@@ -225,6 +244,7 @@ def run_experiment(config: ExperimentConfig) -> dict:
     points = summarize(ordered, seed=sweep.seed)
     summary = {"config": asdict(sweep), "workers": config.workers, "executor": config.executor,
                "resumed_trials": len(done),
+               "trial_backends": dict(sorted(Counter(r.backend for r in ordered).items())),
                "bootstrap": {"method": "percentile, resampling batches",
                              "n_resamples": N_RESAMPLES, "confidence": CONFIDENCE,
                              "seed": sweep.seed},
@@ -236,8 +256,11 @@ def run_experiment(config: ExperimentConfig) -> dict:
 
 
 def _sweep_doc(sweep) -> dict:
-    """The sweep's parameters as JSON reads them back (lists, not tuples)."""
-    return json.loads(json.dumps({"columns": CSV_COLUMNS, "config": asdict(sweep)}))
+    """The sweep's parameters that a resumed run must share, as JSON reads them back (lists,
+    not tuples). The backend is not among them: it changes how the trials are computed, not
+    their results (to rounding), and each row records its own."""
+    config = {k: v for k, v in asdict(sweep).items() if k != "backend"}
+    return json.loads(json.dumps({"columns": CSV_COLUMNS, "config": config}))
 
 
 def _write_rows(path: Path, results) -> None:

@@ -6,8 +6,9 @@ must have been measured with the same perception models (their hashes) and in th
 mode as the sessions were perceived; ``allow_model_mismatch`` overrides the refusal.
 
 Writes into ``out``: ``model.json`` (method, learned reward weights with feature names, the
-greedy policy with state and action names, the inputs), ``learning_curve.json`` and ``.png``,
-and ``learn.rrd`` (Rerun), which ``connect`` also streams to a viewer on another machine.
+greedy policy with state and action names, the inputs, the forward-backward backend),
+``learning_curve.json`` and ``.png``, and ``learn.rrd`` (Rerun), which ``connect`` also streams
+to a viewer on another machine.
 
 Example::
 
@@ -65,6 +66,10 @@ class LearnConfig:
     connect : str or None
         Also stream the Rerun recording to the viewer at this gRPC URL
         (``rerun+http://HOST:9876/proxy``), in addition to ``learn.rrd``.
+    backend : str
+        Forward-backward kernels (``irl.inference.BACKENDS``): ``numpy`` or ``numba`` (the
+        ``fast`` extra), equal to rounding; used by the methods that run forward-backward
+        (``mmap-birl``, ``hidden-data-em``), recorded in ``model.json`` for every method.
     """
 
     sessions: tuple[Path, ...]
@@ -76,12 +81,15 @@ class LearnConfig:
     rerun: bool = True
     overwrite: bool = False
     connect: str | None = None
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
         from irl.experiments import METHODS
+        from irl.inference import check_backend
 
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
+        check_backend(self.backend)
         if not self.sessions:
             raise ValueError("sessions must name at least one session file; got none")
         missing = [str(p) for p in self.sessions if not Path(p).is_file()]
@@ -159,12 +167,13 @@ def learn(config: LearnConfig) -> dict:
                 logger.warning("allowed by --allow-model-mismatch: %s", exc)
         demos = [s.perceived_demonstration() for s in sessions]
         domain = dataclasses.replace(base, observation_model=calibration.observation_model())
-        estimator = make_estimator(config.method, domain, seed=config.seed)
+        estimator = make_estimator(config.method, domain, seed=config.seed,
+                                   backend=config.backend)
         estimator.fit(demos)
         theta = np.asarray(estimator.theta_, float)
         policy = np.asarray(estimator.policy_, int)
         model = {
-            "format": MODEL_FORMAT, "method": config.method,
+            "format": MODEL_FORMAT, "method": config.method, "backend": config.backend,
             "theta": dict(zip(domain.feature_names, theta.round(6).tolist(), strict=True)),
             "policy": [{"state": domain.state_names[s], "action": domain.action_names[a]}
                        for s, a in enumerate(policy)],

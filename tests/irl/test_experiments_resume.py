@@ -8,6 +8,7 @@ run of the same sweep, every column but the timings.
 from __future__ import annotations
 
 import csv
+import json
 import subprocess
 import sys
 import time
@@ -145,3 +146,26 @@ def test_resume_refuses_a_sweep_with_other_parameters(tmp_path, monkeypatch, cap
     assert err.count("\n") == 1
     assert partial.read_bytes() == before
     assert not (out / "results.csv").exists()
+
+
+def test_a_sweep_resumed_with_the_other_backend_equals_an_uninterrupted_one(tmp_path,
+                                                                          monkeypatch,
+                                                                          uninterrupted):
+    """The backend is how trials are computed, not what: a numpy sweep may be finished with
+    numba. Each row names the backend that computed it, the summary counts them, and the
+    scores equal the uninterrupted numpy run's to 1e-9."""
+    pytest.importorskip("numba")
+    out, _ = interrupted_run(tmp_path, monkeypatch, n_trials=5)
+    assert main([*SWEEP, "--out", str(out), "--resume", "--backend", "numba"]) == 0
+    resumed = rows(out / "results.csv")
+    assert [r["backend"] for r in resumed] == ["numpy"] * 5 + ["numba"] * (N_TRIALS - 5)
+    scores = ("ile", "normalized_ile")
+    for mine, ref in zip(resumed, uninterrupted, strict=True):
+        assert {k: v for k, v in mine.items() if k not in ("seconds", "backend", *scores)} == \
+            {k: v for k, v in ref.items() if k not in ("seconds", "backend", *scores)}
+        for k in scores:
+            assert float(mine[k]) == pytest.approx(float(ref[k]), rel=1e-9, abs=1e-9)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["backend"] == "numba"
+    assert summary["trial_backends"] == {"numba": N_TRIALS - 5, "numpy": 5}
+    assert summary["resumed_trials"] == 5
