@@ -30,7 +30,12 @@ from scipy.special import logsumexp
 from irl._validation import check_int, check_real
 from irl.demonstrations import Demonstration
 from irl.exceptions import ConvergenceWarning
-from irl.inference import PackedDemonstrations, pack_demonstrations, posterior_stats
+from irl.inference import (
+    PackedDemonstrations,
+    pack_demonstrations,
+    posterior_stats,
+    scratch_held,
+)
 from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_lbfgs
 from irl.mdp import TabularMDP
@@ -314,26 +319,27 @@ class HiddenDataEM(_MCEBase):
         history: list[dict] = []
         converged = False
         delta = np.inf
-        for it in range(params["max_iter"]):
-            stats = self._e_step(theta, packed)
-            groups: Groups = {}
-            for i, d in enumerate(demos):
-                D0, fbar = groups.setdefault(
-                    len(d), (np.zeros(self.mdp.n_states), np.zeros(self.mdp.n_features))
-                )
-                D0 += stats.initial[i]
-                fbar += np.einsum("sa,sak->k", stats.occupancy[i], self.mdp.features)
-            new, _, _, _ = _fit_dual(self.mdp, groups, theta, params["l2"], m_max_iter, m_tol)
-            delta = float(np.max(np.abs(new - theta)))
-            history.append({
-                "iteration": it,
-                "log_likelihood": float(stats.log_likelihood.sum()),
-                "delta": delta,
-            })
-            theta = new
-            if delta < params["tol"]:
-                converged = True
-                break
+        with scratch_held():  # one set of forward-backward buffers for every E-step
+            for it in range(params["max_iter"]):
+                stats = self._e_step(theta, packed)
+                groups: Groups = {}
+                for i, d in enumerate(demos):
+                    D0, fbar = groups.setdefault(
+                        len(d), (np.zeros(self.mdp.n_states), np.zeros(self.mdp.n_features))
+                    )
+                    D0 += stats.initial[i]
+                    fbar += np.einsum("sa,sak->k", stats.occupancy[i], self.mdp.features)
+                new, _, _, _ = _fit_dual(self.mdp, groups, theta, params["l2"], m_max_iter, m_tol)
+                delta = float(np.max(np.abs(new - theta)))
+                history.append({
+                    "iteration": it,
+                    "log_likelihood": float(stats.log_likelihood.sum()),
+                    "delta": delta,
+                })
+                theta = new
+                if delta < params["tol"]:
+                    converged = True
+                    break
         if not converged:
             warnings.warn(
                 f"HiddenDataEM stopped at max_iter={params['max_iter']} with the weights still "
