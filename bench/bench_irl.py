@@ -23,10 +23,12 @@ before timing).
    100-block state sensor (wrong 30% of the time, uniformly: the largest model the frozen path
    can hold at S = 100,000, since its emission table is dense); at S = 100,000 this sensor's
    messages span more than a float's range, so both run the exact log-space pass; (b) one
-   cold gradient (MDP solve included) and its forward-backward with a factored sensor (each
-   coordinate misread by one cell 15% of the time, actions exact; 400,000 observations at
-   S = 100,000, which the frozen path cannot build), and the products floor of 4 at the same
-   size, which shows what linear scaling means on this machine's memory hierarchy.
+   cold gradient (MDP solve included), its forward-backward, and a gradient as a fit takes it
+   after its first (theta 1% away: the solve warm-started, the buffers held) with a factored
+   sensor (each coordinate misread by one cell 15% of the time, actions exact; 400,000
+   observations at S = 100,000, which the frozen path cannot build), and the products floor
+   of 4 at the same size, which shows what linear scaling means on this machine's memory
+   hierarchy.
 4. Forward-backward at S = 10,000 (factored sensor) against its floor: the same sparse
    products, forward and backward, done by scipy alone on arrays of the same shapes.
 """
