@@ -210,7 +210,10 @@ def close_recording(rec: rr.RecordingStream) -> None:
     try:
         rec.flush()
     except RuntimeError as exc:
-        lost = [url for url in urls if url in str(exc)]
+        # the SDK names the viewer's URL, or only its gRPC sink ("gRPC connection is open,
+        # but flush still failed"); a file sink's failure names neither
+        lost = [url for url in urls if url in str(exc)] or (urls if "grpc" in str(exc).lower()
+                                                            else [])
         rec.disconnect()
         if not lost:
             raise OSError(f"the Rerun recording {', '.join(str(p) for _, p in files)} could "
