@@ -95,8 +95,20 @@ def boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
 
 
 def log_boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
-    """``log pi[s, a]`` of the Boltzmann policy, computed stably."""
-    return log_softmax(beta * Q, axis=1)
+    """``log pi[s, a]`` of the Boltzmann policy, computed stably (``log_softmax`` over the
+    actions, one column at a time: numpy reduces a short contiguous axis slowly, and the
+    learners call this at every gradient)."""
+    Q = np.asarray(Q, dtype=float)
+    if Q.ndim != 2:
+        return log_softmax(beta * Q, axis=1)
+    z = np.multiply(Q, beta)
+    z -= _row_max(z)[:, None]
+    e = np.exp(z)
+    total = e[:, 0].copy()
+    for a in range(1, e.shape[1]):
+        total += e[:, a]
+    z -= np.log(total)[:, None]
+    return z
 
 
 class _PolicySystem:
