@@ -343,8 +343,8 @@ class _CheckedPrior(GaussianPrior):
     """The prior as the fit called it before: ``log_prob`` and ``grad_log_prob`` each
     validating theta at every optimizer step."""
 
-    def _value_and_grad(self, theta):
-        return self.log_prob(theta), self.grad_log_prob(theta)
+    def _value_and_grad(self, n_features):
+        return lambda theta: (self.log_prob(theta), self.grad_log_prob(theta))
 
 
 # -- the planning kernels of e77f9cd (irl/solvers.py), frozen --------------------------

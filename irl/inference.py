@@ -681,7 +681,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
         for t0 in range(0, length, step):  # in chunks: no (T, S, N) temporaries
             p = preds[t0:t0 + step]
-            if np.any((p < tiny) & (p > 0.0)):
+            if ((p < tiny) & (p > 0.0)).any():
                 return None
 
         # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),

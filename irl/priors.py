@@ -56,12 +56,17 @@ class GaussianPrior:
         mu, sd = self._broadcast(theta.shape[0])
         return -(theta - mu) / sd**2
 
-    def _value_and_grad(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
-        """``(log p(theta), d log p / dtheta)`` for a theta already checked (in a fit's loop)."""
-        mu, sd = self._broadcast(theta.shape[0])
-        z = (theta - mu) / sd
-        value = -0.5 * (z @ z) - np.log(sd).sum() - 0.5 * theta.shape[0] * np.log(2 * np.pi)
-        return float(value), -z / sd
+    def _value_and_grad(self, n_features: int):
+        """``theta -> (log p(theta), d log p / dtheta)`` for thetas of ``n_features`` weights
+        already checked, with the prior's constants computed once (for a fit's loop)."""
+        mu, sd = (np.array(a, dtype=float) for a in self._broadcast(n_features))
+        const = -np.log(sd).sum() - 0.5 * n_features * np.log(2 * np.pi)
+
+        def value_and_grad(theta: np.ndarray) -> tuple[float, np.ndarray]:
+            z = (theta - mu) / sd
+            return float(const - 0.5 * (z @ z)), -z / sd
+
+        return value_and_grad
 
     def sample(self, n_features: int, seed=None) -> np.ndarray:
         """One draw of theta, shape (n_features,)."""

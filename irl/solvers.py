@@ -272,7 +272,7 @@ class OptimalQSolver:
         Q = sol.q_values(theta)
         chosen = Q[np.arange(Q.shape[0]), sol.policy]
         tol = _TIE_TOL * (1.0 + np.abs(Q).max())
-        return bool(np.all(chosen >= _row_max(Q) - tol))
+        return bool((chosen >= _row_max(Q) - tol).all())
 
     def _value_iteration(self, reward: np.ndarray, Q: np.ndarray, policy: np.ndarray,
                          max_sweeps: int) -> tuple[np.ndarray, np.ndarray, int]:

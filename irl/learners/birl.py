@@ -196,9 +196,11 @@ class _BayesianIRL(LearnerBase):
                  if search["init"] is None else search["init"])
         starts = [first] + [prior.sample(K, search["rng"]) for _ in range(search["n_restarts"] - 1)]
 
+        log_prior = prior._value_and_grad(K)
+
         def objective(theta):  # theta comes from the optimizer: no checks in the loop
             ll, grad = self._likelihood_and_gradient(model, theta, data)
-            value, prior_grad = prior._value_and_grad(theta)
+            value, prior_grad = log_prior(theta)
             return ll + value, grad + prior_grad
 
         with scratch_held():  # one set of forward-backward buffers for the whole search

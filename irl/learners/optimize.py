@@ -82,11 +82,11 @@ class _Guarded:
 
     def __call__(self, theta: np.ndarray) -> tuple[float, np.ndarray] | None:
         theta = np.asarray(theta, float)
-        if np.all(np.isfinite(theta)):
+        if np.isfinite(theta).all():
             with np.errstate(all="ignore"):
                 value, grad = self.objective(theta)
             value, grad = float(value), np.asarray(grad, float)
-            if np.isfinite(value) and np.all(np.isfinite(grad)):
+            if np.isfinite(value) and np.isfinite(grad).all():
                 if self.best is None or value > self.best[0]:
                     self.best = (value, theta.copy())
                 self.worst = min(self.worst, value)
