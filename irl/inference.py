@@ -102,6 +102,10 @@ _NUMBA_FACTOR_ELEMENTS = 1 << 25
 _SEPARABLE_ELEMENTS = 1 << 24
 #: Largest scratch array (floats) a thread keeps between passes (8 MB).
 _WORKSPACE_ELEMENTS = 1 << 20
+#: Largest ``N S A`` whose scaled pass renormalizes every few steps rather than at each.
+_LAZY_ELEMENTS = 1 << 16
+#: What the scaled pass returns when renormalizing at every step may keep it in range.
+_RENORMALIZE = object()
 #: Padding allowed in a batch of ragged demonstrations, as a fraction of its real steps.
 _PAD_SLACK = 0.25
 
@@ -475,8 +479,14 @@ def forward_backward(
             if stats is not None:
                 return stats
         try:
+            # renormalizing every few steps saves array calls where they cost more than the
+            # arithmetic (small batches); it can leave the range where the other cannot
+            lazy = obs.shape[0] * mdp.n_states * mdp.n_actions <= _LAZY_ELEMENTS
             stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape, lengths,
-                                             log_p0)
+                                             log_p0, lazy=lazy)
+            if stats is _RENORMALIZE:
+                stats = _scaled_forward_backward(mdp, log_policy, emissions, obs.shape,
+                                                 lengths, log_p0, lazy=False)
         finally:
             _workspace.release()
         if stats is not None:
@@ -538,8 +548,11 @@ def _chunks(length: int, per_step: int) -> list[tuple[int, int]]:
     return [(t0, min(t0 + size, length)) for t0 in range(0, length, size)]
 
 
-def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
-    """The scaled pass; ``None`` when a message would leave its safe range (see module).
+def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0,
+                             lazy: bool = True):
+    """The scaled pass; ``None`` when a message would leave its safe range (see module), and
+    ``_RENORMALIZE`` when it left it renormalizing every few steps (``lazy``), which fewer
+    mass lost between renormalizations may avoid.
 
     Layout: the batch's messages are held in columns, demonstrations innermost (``pred[s, n]``,
     ``alpha[a, s, n]``), so that the two sparse products of a step read and write their blocks
@@ -631,6 +644,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     single = len(chunks) == 1
     norms[...] = 1.0  # a step not renormalized keeps 1
     since = 0  # steps since the last renormalization
+    lazy_used = False
     kept = None
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for t0, t1 in chunks:
@@ -641,7 +655,8 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             # renormalize every `every` steps: where every pair can emit what is seen, the
             # mass falls by at most e^min_log a step (the policy sums to 1), so by at most
             # e^(-F/4) between renormalizations; the range check below covers the rest
-            every = max(1, int(F / (4.0 * max(-got[2], 1.0))))
+            every = max(1, int(F / (4.0 * max(-got[2], 1.0)))) if lazy else 1
+            lazy_used = lazy_used or every > 1
             if separable and folded:  # alpha / pi = e'_t (e_t pred_t), pi in the pushes
                 for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
@@ -675,14 +690,18 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                     push(alpha_1d, preds_1d[t + 1])
         if single:
             kept = E  # the backward pass reuses it
+        # out of range: with fewer renormalizations than steps, the caller tries again
+        # renormalizing at every step; else the log-space pass takes over (and names an
+        # impossible demonstration)
+        out_of_range = _RENORMALIZE if lazy_used else None
         if not norms.min() > 0.0:
-            return None  # impossible somewhere: the log-space pass names the demonstration
+            return out_of_range
         tiny = np.exp(-F)
         step = max(1, _CHUNK_ELEMENTS // (n_demos * S))
         for t0 in range(0, length, step):  # in chunks: no (T, S, N) temporaries
             p = preds[t0:t0 + step]
             if ((p < tiny) & (p > 0.0)).any():
-                return None
+                return out_of_range
 
         # beta_t(s, a) = sum_s' T(s, a, s') sum_a' pi(a'|s') e_{t+1}(s', a') beta_{t+1}(s', a'),
         # divided by c_{t+1} (Rabiner scaling), so that alpha_t * beta_t is the posterior

@@ -299,3 +299,33 @@ def test_backend_is_checked_by_name(monkeypatch):
     monkeypatch.setattr(_numba, "available", lambda: False)
     with pytest.raises(ValueError, match=r"needs numba, which is not installed: pip install"):
         irl.MMAPBIRL(dom.mdp, dom.observation_model, backend="numba").fit(demos)
+
+
+def test_a_lazily_renormalized_pass_out_of_range_is_run_again_at_every_step(monkeypatch):
+    """Renormalizing every few steps can leave the scaled pass's range where renormalizing at
+    every step does not: then the pass runs again, renormalizing at every step, before the
+    log-space pass is considered."""
+    dom = irl.domains.onion_sorting(noise=0.3)
+    demos, _ = dom.sample(4, 30, occlusion=0.2, seed=3)
+    log_pi = np.log(dom.expert_policy())
+    exact = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model, method="log")
+    real, seen = irl.inference._scaled_forward_backward, []
+
+    def lazy_out_of_range(*args, lazy=True):
+        seen.append(lazy)
+        return irl.inference._RENORMALIZE if lazy else real(*args, lazy=lazy)
+
+    monkeypatch.setattr(irl.inference, "_scaled_forward_backward", lazy_out_of_range)
+    again = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    assert seen == [True, False]
+    np.testing.assert_allclose(again.log_likelihood, exact.log_likelihood, rtol=1e-12)
+    np.testing.assert_allclose(again.occupancy, exact.occupancy, rtol=1e-12, atol=1e-14)
+    # the pass says so itself only when it renormalized lazily; a batch too large for that
+    # renormalizes at every step from the start
+    monkeypatch.setattr(irl.inference, "_scaled_forward_backward", real)
+    monkeypatch.setattr(irl.inference, "_LAZY_ELEMENTS", 0)
+    calls = []
+    monkeypatch.setattr(irl.inference, "_scaled_forward_backward",
+                        lambda *a, lazy=True: calls.append(lazy) or real(*a, lazy=lazy))
+    posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
+    assert calls == [False]
