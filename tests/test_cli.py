@@ -112,21 +112,6 @@ def test_bad_number_list_is_rejected_by_the_parser(capsys):
 
 # --- --backend: the forward-backward kernels of learn and experiment -------------------------
 
-@pytest.fixture
-def built(monkeypatch):
-    """The estimators that ``learn`` and ``experiment`` build (both call
-    ``irl.experiments.make_estimator``), fitted, in order."""
-    import irl.experiments
-
-    real, estimators = irl.experiments.make_estimator, []
-
-    def recording(*args, **kwargs):
-        estimators.append(real(*args, **kwargs))
-        return estimators[-1]
-
-    monkeypatch.setattr(irl.experiments, "make_estimator", recording)
-    return estimators
-
 
 def test_experiment_backend_reaches_the_learners_and_agrees_with_numpy(tmp_path, built):
     pytest.importorskip("numba")

@@ -34,19 +34,6 @@ def numba_present(monkeypatch):
     monkeypatch.setattr(irl._numba, "available", lambda: True)
 
 
-@pytest.fixture
-def built(monkeypatch):
-    """The estimators ``run_trial`` builds, fitted, in order."""
-    real, estimators = irl.experiments.make_estimator, []
-
-    def recording(*args, **kwargs):
-        estimators.append(real(*args, **kwargs))
-        return estimators[-1]
-
-    monkeypatch.setattr(irl.experiments, "make_estimator", recording)
-    return estimators
-
-
 # -- make_estimator ------------------------------------------------------------------------
 
 
