@@ -576,13 +576,12 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         return None
     log_pi_min = finite_min(log_policy)
     pi = np.exp(np.swapaxes(log_policy, -1, -2))  # [.., a, s]
-    stationary = log_policy.ndim == 2
+    stationary = log_policy.ndim == 2  # then folded into T's pair rows (see below)
     chunks = _chunks(length, n_demos * S * A)
     ragged = bool(lengths.min() < length)
     ws = _workspace
     separable = (emissions.factors is None and len(chunks) > 1
                  and emissions.separable(0, 1) is not None)
-    folded = stationary  # the policy is folded into T's pair rows (see below)
     u = ws.get("u", (S, n_demos)) if separable else None
     # the separable parts of every step, when small enough to hold for both passes
     whole = (emissions.separable(0, length) if separable
@@ -607,10 +606,10 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             return None  # a step no pair can emit: the log-space pass names it
         if blk.min_log + log_pi_min < -F:
             return None
-        if folded and emissions.factors is not None:  # kept in columns for every pass
+        if stationary and emissions.factors is not None:  # kept in columns for every pass
             return emissions.factors.columns[t0:t1], blk.shift, blk.min_log
         E = ws.get("E", (t1 - t0, A, S, n_demos))
-        if folded:
+        if stationary:
             np.copyto(E, np.moveaxis(blk.factor, 0, -1))
         else:
             np.multiply(np.moveaxis(blk.factor, 0, -1), pi[t0:t1, ..., None], out=E)
@@ -637,8 +636,8 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     alpha = ws.get("alpha", (A, S, n_demos))
     alpha_flat = alpha.reshape(A * S, n_demos)
     alpha_1d = alpha.reshape(-1)
-    pair_weights = pi.ravel() if folded else np.ones(A * S)  # alpha's sum: w alpha
-    push, expect = mdp.column_products(n_demos, pair_weights if folded else None)
+    pair_weights = pi.ravel() if stationary else np.ones(A * S)  # alpha's sum: w alpha
+    push, expect = mdp.column_products(n_demos, pair_weights if stationary else None)
     closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
     closing[lengths - 1] = True
     single = len(chunks) == 1
@@ -657,7 +656,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             # e^(-F/4) between renormalizations; the range check below covers the rest
             every = max(1, int(F / (4.0 * max(-got[2], 1.0)))) if lazy else 1
             lazy_used = lazy_used or every > 1
-            if separable and folded:  # alpha / pi = e'_t (e_t pred_t), pi in the pushes
+            if separable and stationary:  # alpha / pi = e'_t (e_t pred_t), pi in the pushes
                 for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
                     np.multiply(state, preds[t], out=u)
@@ -718,7 +717,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             scale *= valid[:, None, :]
             last = lengths - 1
         occupancy = np.zeros((A, S, n_demos))
-        restart = pi[:, :, None] if folded else 1.0  # pi beta when pi is folded into T
+        restart = pi[:, :, None] if stationary else 1.0  # pi beta when pi is folded into T
         beta = ws.get("beta", (A, S, n_demos))
         beta[...] = restart
         beta_1d = beta.reshape(-1)
@@ -746,7 +745,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                     ends = last == t
                     if ends.any():
                         beta_t[:, :, ends] = restart
-                if separable and folded:
+                if separable and stationary:
                     np.multiply(beta_t, E[1][t - t0][:, None, :], out=gamma_t)
                 elif separable:
                     times_local(E, t - t0, t, beta_t, gamma_t)
