@@ -11,8 +11,8 @@ or as Ray tasks (``executor="ray"``: the Ray instance this process already joine
 ``ray_address``, else ``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give
 the same rows. ``backend`` picks the forward-backward kernels of MMAP-BIRL: numpy, or numba, which
 gives the same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed, always
-runs numpy). Each row records the backend it was run with (``summary.json`` their counts), and
-a sweep may be resumed with the other one: the kept rows keep theirs.
+runs numpy). Each row records the backend of the sweep that ran it (``summary.json`` their
+counts), and a sweep may be resumed with the other one: the kept rows keep theirs.
 
 Example::
 
