@@ -1,7 +1,7 @@
 """Performance of the irl core, as ratios against baselines measured in the same run.
 
-    python bench/bench_irl.py            # everything (about 3 minutes on 2 cores)
-    python bench/bench_irl.py --quick    # one repeat, S up to 40,000 (about 1 minute)
+    python bench/bench_irl.py            # everything (about 3.5 minutes on 2 cores)
+    python bench/bench_irl.py --quick    # one repeat, S up to 40,000 (about 2 minutes)
 
 BLAS threads: the bench runs OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``, set before
 numpy loads, unless the variable is already set), the library and its baseline alike: at these
