@@ -247,6 +247,9 @@ def bench_scaling(quick: bool) -> None:
         r["fb_f"] = fb_time(mdp, factored, demos_f, log_pi, 1)
         r["warm_f"] = warm_gradient(mdp, factored, demos_f, theta)
         r["floor"] = products_floor(mdp, len(demos_f), len(demos_f[0]), 1)
+        r["solve"], r["solve_lu"] = (best_time(lambda m=mdp, kw=kw: OptimalQSolver(m, **kw)
+                                               .solve(theta), 1 if quick else 2)
+                                     for kw in ({}, {"krylov_min_states": None}))
         print(f"    S = {r['S']:6d}, block sensor:    forward-backward {r['fb_new']:6.2f} s vs "
               f"frozen {r['fb_old']:6.2f} s ({r['fb_old'] / r['fb_new']:4.1f}x), peak "
               f"{r['peak_new'] / mib:6.0f} MiB vs {r['peak_old'] / mib:6.0f} MiB")
@@ -254,6 +257,9 @@ def bench_scaling(quick: bool) -> None:
               f"forward-backward {r['fb_f']:6.2f} s, peak {r['peak_f'] / mib:6.0f} MiB "
               f"(the frozen path cannot build this model); products alone {r['floor']:6.2f} s; "
               f"a gradient within a fit {r['warm_f']:6.2f} s")
+        print(f"    S = {r['S']:6d}, a cold MDP solve: {r['solve']:6.2f} s (BiCGSTAB "
+              f"evaluations) vs {r['solve_lu']:6.2f} s factored "
+              f"({r['solve_lu'] / r['solve']:3.1f}x)")
         if NUMBA:
             # forward-backward first: it loads the compiled kernel, as the gradient above
             # runs after the block sensor's passes
@@ -267,10 +273,12 @@ def bench_scaling(quick: bool) -> None:
         rows.append(r)
     first, last = rows[0], rows[-1]
     grow = {k: last[k] / first[k] for k in first if k in ("grad_f", "fb_f", "floor", "grad_n",
-                                                         "fb_n", "warm_f", "warm_n")}
+                                                         "fb_n", "warm_f", "warm_n", "solve",
+                                                         "solve_lu")}
     print(f"    S x{last['S'] / first['S']:.0f} ({first['S']} -> {last['S']}), factored sensor: "
           f"gradient x{grow['grad_f']:.1f} (within a fit x{grow['warm_f']:.1f}), "
-          f"forward-backward x{grow['fb_f']:.1f}, the products alone x{grow['floor']:.1f}" + (
+          f"forward-backward x{grow['fb_f']:.1f}, the products alone x{grow['floor']:.1f}, a "
+          f"cold solve x{grow['solve']:.1f} (factored x{grow['solve_lu']:.1f})" + (
               f"; numba backend: gradient x{grow['grad_n']:.1f} (within a fit "
               f"x{grow['warm_n']:.1f}), forward-backward x{grow['fb_n']:.1f}" if NUMBA else "")
           + "; max RSS of this process "

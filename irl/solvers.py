@@ -30,6 +30,19 @@ lowest-index one); the warm start hands over the lowest-index greedy policy.
 needs no pivoting: SuperLU factors it in symmetric mode on diagonal pivots with a minimum-degree
 ordering of ``A + A^T`` (less fill than its default column ordering on grid-like MDPs), and the
 ordering is reused while the sparsity pattern of ``P_pi`` repeats.
+
+On sparse MDPs of at least ``krylov_min_states`` states a policy is evaluated by BiCGSTAB
+instead, from the last values as the guess, with products by ``P_pi`` only: the LU's fill grows
+faster than S on grids (``bench/bench_irl.py`` times both at each size in [3]). Those
+evaluations stop at a relative residual of ``krylov_tol``, which only steers the iteration: the
+policy that no state improves on is checked again on exact values. Its derivatives ``dV`` (one
+right-hand side per feature) come from BiCGSTAB solved to a true residual that bounds their
+error below 1e-12 of their size, or from one factorization where that is predicted to cost
+fewer sweeps, from the slowest convergence rate seen; an iteration that does not converge in
+``krylov_max_iter`` falls back to factoring. A near-optimal policy that an inexact evaluation
+called final, and its exact check did not, makes the rest of that solve's evaluations exact, as
+does a policy evaluated twice (an inexact evaluation can make a near-tie look improvable), so
+the solve ends as exact policy iteration does.
 """
 
 from __future__ import annotations
@@ -62,6 +75,11 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 _TIE_TOL = 1e-10
+#: Relative error (max norm) to which BiCGSTAB solves the last policy's derivatives.
+_EXACT_ERROR = 1e-12
+#: A factorization's cost in value-iteration sweeps assumed before the first one (about
+#: that of a 100 x 100 grid's): BiCGSTAB computes the last derivatives where it costs less.
+_FACTOR_SWEEPS = 100.0
 
 
 @dataclass(frozen=True)
@@ -175,6 +193,64 @@ def _solve_policy_system(mdp: TabularMDP, policy: np.ndarray, rhs: np.ndarray) -
     return _PolicySystem(mdp).factor(policy)(rhs)
 
 
+def _policy_operator(mdp: TabularMDP, policy: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``x -> (I - gamma P_pi) x`` for x of shape (S,) or (S, m), one product with the sparse
+    ``P_pi`` of a deterministic policy."""
+    P = mdp.policy_transitions(policy)
+    P = sp.csr_matrix((P.data * -mdp.discount, P.indices, P.indptr), shape=P.shape)
+
+    def matvec(x: np.ndarray) -> np.ndarray:
+        y = P @ x
+        y += x
+        return y
+
+    return matvec
+
+
+def _bicgstab(matvec: Callable[[np.ndarray], np.ndarray], b: np.ndarray, x: np.ndarray,
+              tol: float, max_iter: int) -> tuple[np.ndarray | None, int, float]:
+    """Unpreconditioned BiCGSTAB (van der Vorst 1992) for ``A x = b`` from the guess ``x``.
+
+    Stops once the recurred residual has ``||r||_2 <= tol``. Returns the solution (None where
+    it did not get there in ``max_iter`` iterations or broke down on a zero inner product),
+    the number of iterations (two products with ``A`` each) and the convergence rate, ``log
+    ||r||_2 / ||r_0||_2`` per iteration (0 where no iteration ran).
+    """
+    x = x.copy()
+    r = b - matvec(x)
+    start = rr = r @ r
+    r_hat = r.copy()
+    p = r.copy()
+    rho = rr
+    it = 0
+    while rr > tol * tol and it < max_iter:
+        it += 1
+        v = matvec(p)
+        denom = r_hat @ v
+        if rho == 0.0 or denom == 0.0:
+            return None, it, 0.0
+        alpha = rho / denom
+        x += alpha * p
+        r -= alpha * v  # s in the usual notation
+        t = matvec(r)
+        tt = t @ t
+        omega = (t @ r) / tt if tt > 0.0 else 0.0
+        x += omega * r
+        r -= omega * t
+        rr = r @ r
+        if rr <= tol * tol:
+            break
+        if omega == 0.0:
+            return None, it, 0.0
+        rho_next = r_hat @ r
+        p -= omega * v
+        p *= (rho_next / rho) * (alpha / omega)
+        p += r
+        rho = rho_next
+    rate = np.log(rr / start) / (2 * it) if it and rr > 0.0 else 0.0
+    return (x if rr <= tol * tol else None), it, rate
+
+
 def _derivatives(mdp: TabularMDP, policy: np.ndarray,
                  solve: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """``dQ^pi = phi + gamma T (I - gamma P_pi)^{-1} phi_pi`` with a factored system."""
@@ -204,25 +280,35 @@ class OptimalQSolver:
     ----------
     mdp : TabularMDP
     max_iter : int
-        Maximum policy evaluations (factorizations) per solve.
+        Maximum policy evaluations per solve.
     cache_size : int
         How many greedy policies (and their ``dQ``) to keep.
     warm_start_sweeps : int
         At most this many value-iteration sweeps (one product with T each) pick the first
-        policy of a solve with an empty cache; they save policy evaluations (one factorization
-        each) on large MDPs.
+        policy of a solve with an empty cache; they save policy evaluations on large MDPs.
     sweep_patience : int or None
         Value iteration (the warm start's, and the sweeps after an evaluation) stops once the
         policy it follows has held for this many consecutive sweeps; None never stops early.
     improvement_sweeps : int
-        At most this many value-iteration sweeps, from an evaluated policy's exact values,
-        choose the next policy to evaluate; fewer where a factorization costs fewer sweeps
-        (estimated from its fill), none where it costs fewer than ``sweep_patience`` (a small
-        dense MDP, where Howard's step is as cheap). 0 gives Howard's policy iteration.
+        At most this many value-iteration sweeps, from an evaluated policy's values, choose
+        the next policy to evaluate; fewer where an evaluation costs fewer sweeps (a
+        factorization's cost is estimated from its fill, BiCGSTAB's from its iterations),
+        none where it costs fewer than ``sweep_patience`` (a small dense MDP, where Howard's
+        step is as cheap). 0 gives Howard's policy iteration.
+    krylov_min_states : int or None
+        Sparse MDPs with at least this many states evaluate policies by BiCGSTAB (products
+        with ``P_pi`` only) rather than by a sparse LU factorization, whose cost grows faster
+        than S on grid-like MDPs; None always factors. See the module docstring.
+    krylov_tol : float
+        Relative residual (2-norm) at which BiCGSTAB stops on a policy that is not known to
+        be the last; the last one's derivatives are always exact (to about 1e-12).
+    krylov_max_iter : int
+        BiCGSTAB iterations per solve of one right-hand side; a solve that does not converge
+        in them falls back to a factorization, as do the rest of that policy iteration.
 
-        These options change how many sweeps and factorizations a solve takes, never its
-        result's optimality; on exact ties (within the tolerance) they can change which of
-        several optimal policies is returned.
+        These options change how a solve gets to its result, never the result's optimality;
+        on exact ties (within the tolerance) they can change which of several optimal
+        policies is returned.
 
     Attributes
     ----------
@@ -235,15 +321,25 @@ class OptimalQSolver:
     def __init__(
         self, mdp: TabularMDP, *, max_iter: int = 200, cache_size: int = 64,
         warm_start_sweeps: int = 100, sweep_patience: int | None = 10,
-        improvement_sweeps: int = 100,
+        improvement_sweeps: int = 100, krylov_min_states: int | None = 1000,
+        krylov_tol: float = 1e-6, krylov_max_iter: int = 1000,
     ) -> None:
         self.mdp = mdp
         self.max_iter = max_iter
         self.warm_start_sweeps = warm_start_sweeps
         self.sweep_patience = sweep_patience
         self.improvement_sweeps = improvement_sweeps
+        self.krylov_min_states = krylov_min_states
+        self.krylov_tol = krylov_tol
+        self.krylov_max_iter = krylov_max_iter
         self.cache_size = cache_size
         self._system = _PolicySystem(mdp)
+        #: The last evaluation's cost in value-iteration sweeps, roughly.
+        self._evaluation_sweeps = 0.0
+        #: The slowest BiCGSTAB convergence seen (log residual reduction per iteration).
+        self._krylov_rate = 0.0
+        #: What the current policy iteration has done, for its debug log.
+        self._counts = {"sweeps": 0, "iterations": 0, "factorizations": 0}
         self._cache: OrderedDict[bytes, OptimalSolution] = OrderedDict()
         self.n_solves_ = 0
         self.n_reuses_ = 0
@@ -256,7 +352,7 @@ class OptimalQSolver:
                 self._cache.move_to_end(key)
                 self.n_reuses_ += 1
                 return sol
-        start = next(reversed(self._cache.values())).policy if self._cache else None
+        start = next(reversed(self._cache.values())) if self._cache else None
         sol = self._policy_iteration(theta, start)
         self.n_solves_ += 1
         self._cache[sol.policy.tobytes()] = sol
@@ -312,43 +408,152 @@ class OptimalQSolver:
                     break
         return Q, policy, sweep
 
-    def _policy_iteration(self, theta: np.ndarray, policy: np.ndarray | None) -> OptimalSolution:
+    def _policy_iteration(self, theta: np.ndarray,
+                          start: OptimalSolution | None) -> OptimalSolution:
+        """Policy iteration from the warm start's policy, or from the cached ``start``."""
         mdp = self.mdp
         reward = mdp.reward(theta)
-        n_sweeps = 0
-        if policy is None:
-            Q, _, n_sweeps = self._value_iteration(reward, reward, greedy_policy(reward),
-                                                   self.warm_start_sweeps)
-            policy = greedy_policy(Q)
         rows = np.arange(mdp.n_states)
-        for it in range(self.max_iter):
-            solve = self._system.factor(policy)
-            V = solve(reward[rows, policy][:, None])[:, 0]
-            Q = reward + mdp.discount * mdp.expect_next(V)
+        iterative = mdp.is_sparse and self.krylov_min_states is not None \
+            and mdp.n_states >= self.krylov_min_states
+        # Whether iterative evaluations must be exact: once a final check failed, or a policy
+        # came back (an inexact evaluation's error can make a near-tie look improvable).
+        exact = False
+        evaluated: set[int] = set()
+        self._counts = counts = dict.fromkeys(self._counts, 0)
+        if start is None:
+            Q, _, counts["sweeps"] = self._value_iteration(
+                reward, reward, greedy_policy(reward), self.warm_start_sweeps)
+            policy = greedy_policy(Q)
+            V, Q = Q[rows, policy], None
+        else:
+            # The start's dQ gives its exact Q for this theta: no evaluation.
+            policy, Q = start.policy.copy(), start.q_values(theta)
+        for _ in range(self.max_iter):
+            solve = operator = None
+            if Q is None:
+                r_pi = reward[rows, policy]
+                if iterative and not exact:
+                    key = hash(policy.tobytes())
+                    exact = key in evaluated
+                    evaluated.add(key)
+                if iterative:
+                    operator = _policy_operator(mdp, policy)
+                    tol = self._exact_tol(r_pi) if exact \
+                        else self.krylov_tol * np.sqrt(r_pi @ r_pi)
+                    V = self._iterate(operator, r_pi, V, tol)
+                    iterative = V is not None
+                if not iterative:
+                    solve = self._factor(policy)
+                    V = solve(r_pi[:, None])[:, 0]
+                Q = reward + mdp.discount * mdp.expect_next(V)
             improve, best = _improvable(Q, policy)
             if not improve.any():
-                # The derivatives from the same factorization; their Q decides again (it
-                # differs from the one above by rounding only).
-                dQ = _derivatives(mdp, policy, solve)
+                dQ = None
+                if solve is None and iterative and self._iteration_pays(policy):
+                    dQ = self._iterative_derivatives(
+                        operator or _policy_operator(mdp, policy), policy)
+                if dQ is None:
+                    # The derivatives from one factorization (that of the values above where
+                    # they were factored); their Q decides again: it differs from the one
+                    # above by rounding, or by the iterative evaluation's error.
+                    dQ = _derivatives(mdp, policy, solve or self._factor(policy))
                 improve, best = _improvable(dQ @ theta, policy)
                 if not improve.any():
-                    logger.debug("policy iteration: %d value-iteration sweeps, %d evaluations",
-                                 n_sweeps, it + 1)
+                    logger.debug("policy iteration: %(sweeps)d value-iteration sweeps, "
+                                 "%(iterations)d BiCGSTAB iterations, %(factorizations)d "
+                                 "factorizations", counts)
                     return OptimalSolution(policy=policy.copy(), dQ=dQ)
+                exact = True
             policy = np.where(improve, best, policy)
-            # Sweeps pay where a factorization costs at least enough of them for the policy to
+            # Sweeps pay where an evaluation costs at least enough of them for the policy to
             # settle (sweep_patience); on a small dense MDP it costs a few.
-            budget = min(self.improvement_sweeps, int(self._system.sweep_equivalent))
+            budget = min(self.improvement_sweeps, int(self._evaluation_sweeps))
             if budget > 0 and budget >= (self.sweep_patience or 0):
-                _, policy, k = self._value_iteration(reward, Q, policy, budget)
-                n_sweeps += k
+                Q, policy, k = self._value_iteration(reward, Q, policy, budget)
+                counts["sweeps"] += k
+            V, Q = Q[rows, policy], None
         warnings.warn(
             f"policy iteration did not converge in max_iter={self.max_iter} evaluations",
             ConvergenceWarning,
             stacklevel=3,
         )
         return OptimalSolution(policy=policy.copy(),
-                               dQ=_derivatives(mdp, policy, self._system.factor(policy)))
+                               dQ=_derivatives(mdp, policy, self._factor(policy)))
+
+    def _factor(self, policy: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        solve = self._system.factor(policy)
+        self._counts["factorizations"] += 1
+        self._evaluation_sweeps = self._system.sweep_equivalent
+        return solve
+
+    def _exact_tol(self, b: np.ndarray) -> float:
+        """A 2-norm residual small enough for ``(I - gamma P_pi) x = b`` to be solved to a
+        relative error of ``_EXACT_ERROR`` in the max norm.
+
+        ``||x - x*||_inf <= ||r||_inf / (1 - gamma) <= ||r||_2 / (1 - gamma)``, and
+        ``||x*||_inf >= ||b||_inf / (1 + gamma)``.
+        """
+        gamma = self.mdp.discount
+        return _EXACT_ERROR * (1.0 - gamma) / (1.0 + gamma) * np.abs(b).max()
+
+    def _iterate(self, operator: Callable[[np.ndarray], np.ndarray], b: np.ndarray,
+                 guess: np.ndarray, tol: float) -> np.ndarray | None:
+        """BiCGSTAB for ``(I - gamma P_pi) x = b`` from ``guess``; None if it fails."""
+        x, k, rate = _bicgstab(operator, b, guess, tol, self.krylov_max_iter)
+        self._counts["iterations"] += k
+        # an iteration's two products with P_pi read about 2 / A of T's entries
+        self._evaluation_sweeps = 2 * k / self.mdp.n_actions
+        if x is not None and k:
+            self._krylov_rate = max(self._krylov_rate, rate) if self._krylov_rate else rate
+        if x is None:
+            logger.debug("BiCGSTAB did not converge in %d iterations: factoring", k)
+        return x
+
+    def _iteration_pays(self, policy: np.ndarray) -> bool:
+        """Whether the last policy's exact derivatives (K right-hand sides) are predicted to
+        cost BiCGSTAB fewer sweeps than a factorization (the last one's estimated cost, or
+        ``_FACTOR_SWEEPS`` before any), at the slowest convergence rate seen."""
+        rate = self._krylov_rate
+        if rate >= 0.0:
+            return False
+        phi_pi = self.mdp.features[np.arange(self.mdp.n_states), policy]
+        n_iter = 0.0
+        for b in phi_pi.T:
+            norm = np.sqrt(b @ b)
+            if norm > 0.0:
+                n_iter += max(0.0, np.log(self._exact_tol(b) / norm) / rate)
+        factor_sweeps = self._system.sweep_equivalent or _FACTOR_SWEEPS
+        return 2 * n_iter / self.mdp.n_actions < factor_sweeps
+
+    def _iterative_derivatives(self, operator: Callable[[np.ndarray], np.ndarray],
+                               policy: np.ndarray) -> np.ndarray | None:
+        """``dQ^pi`` from BiCGSTAB solves of ``dV`` (one per feature), each to a true residual
+        that bounds its error below ``_EXACT_ERROR`` (relative, max norm); None where one
+        does not get there.
+
+        BiCGSTAB's recurred residual drifts from the true one near rounding level, so a solve
+        that stops short of the bound is restarted once from its solution (on the true
+        residual).
+        """
+        mdp = self.mdp
+        phi_pi = mdp.features[np.arange(mdp.n_states), policy]
+        dV = np.empty(phi_pi.shape)
+        for k, b in enumerate(np.ascontiguousarray(phi_pi.T)):
+            x = np.zeros_like(b)
+            for _ in range(2):
+                x = self._iterate(operator, b, x, self._exact_tol(b))
+                if x is None:
+                    return None
+                # ||x - x*||_inf <= ||b - A x||_inf / (1 - gamma)
+                bound = _EXACT_ERROR * (1.0 - mdp.discount) * np.abs(x).max()
+                if np.abs(b - operator(x)).max() <= bound:
+                    break
+            else:
+                logger.debug("BiCGSTAB's derivatives missed their error bound: factoring")
+                return None
+            dV[:, k] = x
+        return mdp.features + mdp.discount * mdp.expect_next(dV)
 
 
 def _improvable(Q: np.ndarray, policy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,7 +3,14 @@ import pytest
 import scipy.sparse as sp
 
 import irl
-from irl.solvers import OptimalQSolver, _PolicySystem, policy_values, solve_policy_derivatives
+from irl.solvers import (
+    OptimalQSolver,
+    _bicgstab,
+    _policy_operator,
+    _PolicySystem,
+    policy_values,
+    solve_policy_derivatives,
+)
 from tests.irl.conftest import random_mdp
 
 
@@ -95,6 +102,11 @@ SCHEDULES = [
     {"warm_start_sweeps": 0},
     {"warm_start_sweeps": 200, "sweep_patience": None, "improvement_sweeps": 0},
     {"sweep_patience": 1, "improvement_sweeps": 5},
+    # sparse MDPs evaluate policies by BiCGSTAB: loosely, or falling back to factorizations
+    {"krylov_min_states": 1},
+    {"krylov_min_states": 1, "krylov_tol": 1e-2, "improvement_sweeps": 0},
+    {"krylov_min_states": 1, "krylov_tol": 0.5, "improvement_sweeps": 0},
+    {"krylov_min_states": 1, "krylov_max_iter": 2},
 ]
 
 
@@ -160,10 +172,45 @@ def test_sweeps_after_an_evaluation_save_factorizations_on_a_long_horizon_grid(m
     counts, policies = [], []
     for kw in ({}, {"improvement_sweeps": 0}):
         calls.clear()
-        sol = OptimalQSolver(mdp, **kw).solve(theta)
+        sol = OptimalQSolver(mdp, krylov_min_states=None, **kw).solve(theta)
         np.testing.assert_allclose(sol.dQ, solve_policy_derivatives(mdp, sol.policy),
                                    rtol=0, atol=1e-10 * np.abs(sol.dQ).max())
         counts.append(len(calls) - 1)  # solve_policy_derivatives factors once more
         policies.append(sol.policy)
     np.testing.assert_array_equal(*policies)
     assert counts[0] < counts[1], counts  # 3 and 5 evaluations when written
+
+
+def test_bicgstab_solves_a_policy_system_from_any_guess():
+    rng = np.random.default_rng(0)
+    mdp = _grid(15, 11)
+    policy = rng.integers(mdp.n_actions, size=mdp.n_states)
+    b = rng.normal(size=mdp.n_states)
+    expected = _PolicySystem(mdp).factor(policy)(b[:, None])[:, 0]
+    operator = _policy_operator(mdp, policy)
+    for guess in (np.zeros_like(b), expected + rng.normal(size=b.shape)):
+        x, n_iter, rate = _bicgstab(operator, b, guess, 1e-12 * np.linalg.norm(b), 1000)
+        np.testing.assert_allclose(x, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+        assert 0 < n_iter < 1000 and rate < 0.0
+    x, n_iter, _ = _bicgstab(operator, b, np.zeros_like(b), 1e-12 * np.linalg.norm(b), 3)
+    assert x is None and n_iter == 3  # not converged: no answer
+
+
+def test_krylov_evaluations_factor_at_most_the_derivatives_and_agree_with_factored_ones(
+        monkeypatch):
+    """Every policy is evaluated by BiCGSTAB; the last one's derivatives are factored only
+    where that is predicted to cost less (at this size it is)."""
+    mdp = _grid(40, 30)
+    calls = []
+    factor = _PolicySystem.factor
+    monkeypatch.setattr(_PolicySystem, "factor",
+                        lambda self, policy: calls.append(1) or factor(self, policy))
+    for theta in ([1.0, -1.0, 0.5, -0.5], [0.3, 2.0, -1.0, 0.1]):
+        theta = np.array(theta)
+        calls.clear()
+        sol = OptimalQSolver(mdp, krylov_min_states=1000).solve(theta)
+        assert len(calls) <= 1
+        reference = OptimalQSolver(mdp, krylov_min_states=None).solve(theta)
+        np.testing.assert_array_equal(sol.policy, reference.policy)
+        np.testing.assert_allclose(sol.dQ, reference.dQ, rtol=0,
+                                   atol=1e-12 * np.abs(reference.dQ).max())
