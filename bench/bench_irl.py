@@ -1,6 +1,6 @@
 """Performance of the irl core, as ratios against baselines measured in the same run.
 
-    python bench/bench_irl.py            # everything (about 3.5 minutes on 2 cores)
+    python bench/bench_irl.py            # everything (about 4 minutes on 2 cores)
     python bench/bench_irl.py --quick    # one repeat, S up to 40,000 (about 2 minutes)
 
 BLAS threads: the bench runs OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``, set before
@@ -166,18 +166,22 @@ def cold_gradient(cls, mdp, om, demos, theta, **kw):
     return cls(mdp, om, beta=1.0, **kw).log_posterior_gradient(theta, demos)
 
 
-def warm_gradient(mdp, om, demos, theta, **kw):
-    """A gradient as a fit takes it after its first: the estimator's second, at a theta 1%
-    away (the MDP solve warm-started from the first, the demonstrations packed once, the
-    forward-backward buffers held, :func:`irl.inference.scratch_held`)."""
+def warm_gradient(mdp, om, demos, theta, repeats=1, **kw):
+    """A gradient as a fit takes it after its first: the best of the estimator's next
+    ``repeats``, each at a theta 1% further away (the MDP solve warm-started from the first,
+    the demonstrations packed once, the forward-backward buffers held,
+    :func:`irl.inference.scratch_held`)."""
     est = irl.MMAPBIRL(mdp, om, beta=1.0, **kw)
     model = est._check_model()
     data = est._prepare(model, demos)
+    times = []
     with scratch_held():
         est._likelihood_and_gradient(model, theta, data)
-        start = time.perf_counter()
-        est._likelihood_and_gradient(model, theta * 1.01, data)
-        return time.perf_counter() - start
+        for k in range(1, repeats + 1):
+            start = time.perf_counter()
+            est._likelihood_and_gradient(model, theta * (1 + 0.01 * k), data)
+            times.append(time.perf_counter() - start)
+    return min(times)
 
 
 def fb_time(mdp, om, demos, log_pi, repeats, baseline=False, backend="numpy", warm=True):
@@ -225,6 +229,7 @@ def products_floor(mdp, n_demos: int, length: int, repeats: int) -> float:
 
 def bench_scaling(quick: bool) -> None:
     sizes = [(100, 100), (200, 200)] if quick else [(100, 100), (250, 400)]
+    repeats = 1 if quick else 3
     theta = np.array([1.0, -1.0, 0.5, -0.5])
     print("[3] scaling in S: sparse grid T, 10 demos x 100 steps, 20% occluded; one cold "
           "gradient (MDP solve included), its forward-backward, peak traced memory, and the "
@@ -245,10 +250,10 @@ def bench_scaling(quick: bool) -> None:
         r["grad_f"], r["peak_f"] = traced(
             lambda m=mdp, o=factored, d=demos_f: cold_gradient(irl.MMAPBIRL, m, o, d, theta))
         r["fb_f"] = fb_time(mdp, factored, demos_f, log_pi, 1)
-        r["warm_f"] = warm_gradient(mdp, factored, demos_f, theta)
+        r["warm_f"] = warm_gradient(mdp, factored, demos_f, theta, repeats)
         r["floor"] = products_floor(mdp, len(demos_f), len(demos_f[0]), 1)
         r["solve"], r["solve_lu"] = (best_time(lambda m=mdp, kw=kw: OptimalQSolver(m, **kw)
-                                               .solve(theta), 1 if quick else 2)
+                                               .solve(theta), repeats)
                                      for kw in ({}, {"krylov_min_states": None}))
         print(f"    S = {r['S']:6d}, block sensor:    forward-backward {r['fb_new']:6.2f} s vs "
               f"frozen {r['fb_old']:6.2f} s ({r['fb_old'] / r['fb_new']:4.1f}x), peak "
@@ -266,7 +271,7 @@ def bench_scaling(quick: bool) -> None:
             r["fb_n"] = fb_time(mdp, factored, demos_f, log_pi, 1, backend="numba")
             r["grad_n"], r["peak_n"] = traced(lambda m=mdp, o=factored, d=demos_f: cold_gradient(
                 irl.MMAPBIRL, m, o, d, theta, backend="numba"))
-            r["warm_n"] = warm_gradient(mdp, factored, demos_f, theta, backend="numba")
+            r["warm_n"] = warm_gradient(mdp, factored, demos_f, theta, repeats, backend="numba")
             print(f"    S = {r['S']:6d}, factored sensor, numba backend: gradient "
                   f"{r['grad_n']:6.2f} s, forward-backward {r['fb_n']:6.2f} s, peak "
                   f"{r['peak_n'] / mib:6.0f} MiB; a gradient within a fit {r['warm_n']:6.2f} s")
