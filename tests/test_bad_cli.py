@@ -206,6 +206,8 @@ CASES = [
      ["cannot resume", "half holds no demo progress", "new --out"]),
     (["demo", "--quick", "--connect", "rerun+http://h:1/viewer", "--out", "{d}/x"],
      ["connect must be", "the path must be /proxy", "'rerun+http://h:1/viewer'"]),
+    (["demo", "--quick", "--backend", "cuda", "--out", "{d}/x"],
+     ["--backend", "invalid choice", "'cuda'", "'numba'"]),
     # the top level
     (["sort-onions"], ["invalid choice", "'sort-onions'"]),
     (["--debug"], ["required", "COMMAND"]),
@@ -272,6 +274,7 @@ def test_no_traceback_reaches_stderr_of_the_process(fx, argv, words):
     ["experiment", "forestworld", "--quick", "--backend", "numba", "--out", "{d}/x", "--resume"],
     ["learn", "{d}/perceived.mcap", "--observation-model", CAL, "--method", "maxent",
      "--backend", "numba", "--out", "{d}/x"],
+    ["demo", "--quick", "--backend", "numba", "--out", "{d}/x"],
 ])
 def test_numba_asked_for_but_not_installed_is_one_line_with_the_install_hint(fx, capsys,
                                                                               monkeypatch, argv):

@@ -46,6 +46,7 @@ def test_quick_demo_runs_end_to_end(tmp_path, capsys):
     results = json.loads((out / "results.json").read_text())
     size = SIZES[True]
     assert set(results["methods"]) == set(METHODS)
+    assert results["backends"] == ["numpy"]
     assert (results["sessions"], results["onions"], results["blemished"]) == (
         size["sessions"], size["onions"], size["blemished"])
 
@@ -75,6 +76,7 @@ def test_quick_demo_runs_end_to_end(tmp_path, capsys):
         (repeat,) = pooled["per_repeat"]
         # learned from exactly the recorded, perceived steps, through this calibration
         assert model["method"] == method == evaluation["method"]
+        assert model["backend"] == repeat["backend"] == "numpy"  # the default
         assert model["sessions"] == [str(p) for p in sessions]
         assert model["n_steps"] == size["sessions"] * size["steps"]
         assert model["n_occluded"] == n_occluded

@@ -20,7 +20,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_connect_argument, add_models_argument, subcommand
+from onionsort.commands._args import (
+    add_backend_argument,
+    add_connect_argument,
+    add_models_argument,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -41,6 +46,7 @@ def register(subparsers) -> None:
     parser.add_argument("--resume", action="store_true",
                         help="continue the interrupted demo in --out: skip its finished stages")
     add_connect_argument(parser, what="the recordings of record, learn and evaluate")
+    add_backend_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -51,7 +57,7 @@ def run(args) -> int:
     results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
                               models=args.models, sessions=args.sessions, repeats=args.repeats,
                               difficulty=args.difficulty, connect=args.connect,
-                              resume=args.resume))
+                              resume=args.resume, backend=args.backend))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

@@ -83,6 +83,9 @@ class DemoConfig:
     calibration is measured on, and the robot's inspection at evaluation all face it.
     ``connect`` is a Rerun viewer's gRPC URL (``rerun+http://HOST:9876/proxy``) that the
     recordings also stream to; ``resume`` continues the interrupted demo in ``out``.
+    ``backend`` picks MMAP-BIRL's forward-backward kernels (``irl.inference.BACKENDS``: numpy,
+    or numba from the ``fast`` extra, equal to rounding); a demo may be resumed with the other
+    (each repeat's result names the backend its model was learned with, ``backends`` all).
     """
 
     out: Path = Path("runs/demo")
@@ -94,8 +97,12 @@ class DemoConfig:
     difficulty: str = "clean"
     connect: str | None = None
     resume: bool = False
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
+        from irl.inference import check_backend
+
+        check_backend(self.backend)
         if self.repeats < 1:
             raise ValueError(f"repeats must be >= 1; got {self.repeats}")
         if self.sessions is not None and self.sessions < 1:
@@ -167,6 +174,8 @@ def demo(config: DemoConfig) -> dict:
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
                "difficulty": config.difficulty, "repeats": config.repeats,
+               "backends": sorted({r["backend"] for runs in per_repeat.values()
+                                   for r in runs}),
                "sessions": size["sessions"],
                "onions": size["onions"], "blemished": size["blemished"],
                "state_error_rate": calibration.state_error_rate,
@@ -289,7 +298,7 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
         t0 = time.perf_counter()
         learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
                           method=method, seed=seed, overwrite=config.resume,
-                          connect=config.connect))
+                          connect=config.connect, backend=config.backend))
         return {"learn_seconds": round(time.perf_counter() - t0, 3)}
 
     def evaluate_stage() -> dict:
@@ -307,8 +316,8 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
     model = json.loads((run_dir / "model.json").read_text())
     return {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
                                                      "recall")},
-            "learn_seconds": learned["learn_seconds"], "theta": model["theta"],
-            "ile": _ile(model), "undecided": scored["undecided"]}
+            "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
+            "theta": model["theta"], "ile": _ile(model), "undecided": scored["undecided"]}
 
 
 def _pooled(runs: list[dict], seed: int) -> dict:
