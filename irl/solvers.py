@@ -59,6 +59,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.special import log_softmax
 
+from irl._validation import check_int, check_real, describe
 from irl.exceptions import ConvergenceWarning
 from irl.mdp import TabularMDP
 
@@ -324,15 +325,20 @@ class OptimalQSolver:
         improvement_sweeps: int = 100, krylov_min_states: int | None = 1000,
         krylov_tol: float = 1e-6, krylov_max_iter: int = 1000,
     ) -> None:
+        if not isinstance(mdp, TabularMDP):
+            raise TypeError(f"mdp must be a TabularMDP; got {describe(mdp)}")
         self.mdp = mdp
-        self.max_iter = max_iter
-        self.warm_start_sweeps = warm_start_sweeps
-        self.sweep_patience = sweep_patience
-        self.improvement_sweeps = improvement_sweeps
-        self.krylov_min_states = krylov_min_states
-        self.krylov_tol = krylov_tol
-        self.krylov_max_iter = krylov_max_iter
-        self.cache_size = cache_size
+        self.max_iter = check_int(max_iter, "max_iter", low=1)
+        self.warm_start_sweeps = check_int(warm_start_sweeps, "warm_start_sweeps", low=0)
+        self.sweep_patience = None if sweep_patience is None else check_int(
+            sweep_patience, "sweep_patience", low=1)
+        self.improvement_sweeps = check_int(improvement_sweeps, "improvement_sweeps", low=0)
+        self.krylov_min_states = None if krylov_min_states is None else check_int(
+            krylov_min_states, "krylov_min_states", low=1)
+        self.krylov_tol = check_real(krylov_tol, "krylov_tol", low=0.0, high=1.0,
+                                     low_open=True, high_open=True)
+        self.krylov_max_iter = check_int(krylov_max_iter, "krylov_max_iter", low=1)
+        self.cache_size = check_int(cache_size, "cache_size", low=1)
         self._system = _PolicySystem(mdp)
         #: The last evaluation's cost in value-iteration sweeps, roughly.
         self._evaluation_sweeps = 0.0

@@ -1,3 +1,5 @@
+import re
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -214,3 +216,21 @@ def test_krylov_evaluations_factor_at_most_the_derivatives_and_agree_with_factor
         np.testing.assert_array_equal(sol.policy, reference.policy)
         np.testing.assert_allclose(sol.dQ, reference.dQ, rtol=0,
                                    atol=1e-12 * np.abs(reference.dQ).max())
+
+
+@pytest.mark.parametrize("kw, error, words", [
+    ({"max_iter": 0}, ValueError, "max_iter must be an integer >= 1; got 0"),
+    ({"warm_start_sweeps": -1}, ValueError, "warm_start_sweeps must be an integer >= 0"),
+    ({"sweep_patience": 0}, ValueError, "sweep_patience must be an integer >= 1"),
+    ({"improvement_sweeps": 2.5}, TypeError, "improvement_sweeps must be an integer"),
+    ({"krylov_min_states": 0}, ValueError, "krylov_min_states must be an integer >= 1"),
+    ({"krylov_tol": 0.0}, ValueError, "krylov_tol must be in (0.0, 1.0)"),
+    ({"krylov_tol": float("nan")}, ValueError, "krylov_tol must be in (0.0, 1.0)"),
+    ({"krylov_max_iter": True}, TypeError, "krylov_max_iter must be an integer; got bool"),
+    ({"cache_size": 0}, ValueError, "cache_size must be an integer >= 1"),
+])
+def test_bad_solver_options_are_refused_by_name(kw, error, words):
+    with pytest.raises(error, match=re.escape(words)):
+        OptimalQSolver(_grid(3, 3), **kw)
+    with pytest.raises(TypeError, match="mdp must be a TabularMDP; got ndarray"):
+        OptimalQSolver(np.zeros((3, 3)))
