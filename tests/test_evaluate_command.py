@@ -52,3 +52,36 @@ def test_run_folders_without_a_valid_model_are_refused(tmp_path, capsys):
     run = _run_dir(tmp_path, np.zeros(12, int))
     assert main(["evaluate", str(run), "--ground-truth-inspection"]) == 2
     assert "one action in [0, 5) for each of the 48" in capsys.readouterr().err
+
+
+class _CountingDetector:
+    """Calls the onion in every image blemished (class 1), counting the images it is run on."""
+
+    def __init__(self) -> None:
+        self.images = 0
+
+    def detect(self, images):
+        from perception.detector import Detections
+
+        self.images += len(images)
+        return [Detections(boxes=np.array([[10.0, 10.0, 50.0, 50.0]]), scores=np.array([0.9]),
+                           classes=np.array([1])) for _ in images]
+
+
+def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_again(
+        tmp_path):
+    from types import SimpleNamespace
+
+    from onionsort.stages import EvaluateConfig, evaluate
+
+    expert = onion_sorting().expert_policy().argmax(axis=1)
+    calls = {}
+    for logged in (False, True):
+        (tmp_path / str(logged)).mkdir()
+        run = _run_dir(tmp_path / str(logged), expert)
+        detector = _CountingDetector()
+        result, _ = evaluate(EvaluateConfig(run=run, onions=3, blemished=1, rerun=logged,
+                                            mcap=False), SimpleNamespace(detector=detector))
+        assert (result.tp, result.fp) == (1, 2)  # every onion called blemished, one truly is
+        calls[logged] = detector.images
+    assert calls[True] == calls[False] == 3  # one view per onion, classified once
