@@ -209,6 +209,32 @@ class Calibration:
         """Measured fraction of steps whose state or action estimate is wrong."""
         return 1.0 - self.pair_correct / self.n_observed if self.n_observed else float("nan")
 
+    @property
+    def independent_state_error_rate(self) -> float:
+        """The state error rate the factored observation model implies: each step's true state
+        read right with the product of its factors' measured accuracies on their true values
+        (no smoothing), weighted as the steps were. It equals :attr:`state_error_rate` when
+        the factors' errors are independent given the truth, as the model assumes; a measured
+        rate below it means errors come together."""
+        n_s = self.joint_state.counts.sum(axis=1)
+        if not n_s.sum():
+            return float("nan")
+        values = self.task.decode_array(np.arange(self.n_states))
+        right = np.ones(self.n_states)
+        for f, name in enumerate(self.task.factor_names):
+            counts = self.factors[name].counts
+            rows = counts.sum(axis=1)
+            hit = np.divide(np.diag(counts), rows, out=np.ones(len(rows)), where=rows > 0)
+            right *= hit[values[:, f]]
+        return float(1.0 - (n_s * right).sum() / n_s.sum())
+
+    @property
+    def independent_pair_error_rate(self) -> float:
+        """The (state, action) error rate if the action's errors were independent of the
+        state's, as the factored observation model assumes: ``1 - (1 - state error rate) x
+        action accuracy``, both measured. Compare :attr:`pair_error_rate`."""
+        return 1.0 - (1.0 - self.state_error_rate) * self.factors["action"].accuracy
+
     def save(self, path: Path | str, extra: dict | None = None) -> Path:
         """Write the counts and the smoothing (applied when the model is built) as JSON.
 

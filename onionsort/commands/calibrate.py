@@ -55,5 +55,9 @@ def run(args) -> int:
     print(f"effective noise: state error rate {calibration.state_error_rate:.3f}, "
           f"(state, action) error rate {calibration.pair_error_rate:.3f} "
           "(the paper estimated about 0.30 for its camera)")
+    print(f"independence, as the observation model assumes it: state error rate "
+          f"{calibration.independent_state_error_rate:.3f} from the factors' accuracies, "
+          f"(state, action) {calibration.independent_pair_error_rate:.3f} from the state's and "
+          "the action's")
     print(f"wrote calibration.json, observation_model.npz and confusion.png to {args.out}")
     return 0

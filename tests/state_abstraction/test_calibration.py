@@ -191,3 +191,28 @@ def test_the_shipped_calibration_still_loads():
     cal = load_calibration(shipped)
     assert cal.task == SORTING_TASK
     assert cal.observation_model().probs.shape == (48, 5, 240)
+
+
+def test_the_independence_check_tells_errors_that_come_together_from_independent_ones():
+    """Two factors wrong on 10% of 200 steps each: on the same steps, on disjoint steps, or
+    independently drawn; the action wrong on the first 20 steps."""
+    n = 200
+    true = {"light": np.zeros(n, int), "door": np.zeros(n, int), "action": np.zeros(n, int)}
+    wrong = {"together": (np.arange(20), np.arange(20)),
+             "apart": (np.arange(20), np.arange(20, 40))}
+    for case, (light, door) in wrong.items():
+        pred = {k: v.copy() for k, v in true.items()}
+        pred["light"][light] = 1
+        pred["door"][door] = 2
+        pred["action"][:20] = 1
+        cal = calibrate(true, pred, task=TOY)
+        # what the factored model implies: one minus the product of the accuracies, 0.9 x 0.9
+        assert cal.independent_state_error_rate == pytest.approx(0.19)
+        assert cal.state_error_rate == pytest.approx(0.10 if case == "together" else 0.20)
+        # the action errs on the steps the state does (on 20 of them)
+        assert cal.pair_error_rate == pytest.approx(cal.state_error_rate)
+        assert cal.independent_pair_error_rate == pytest.approx(
+            1 - (1 - cal.state_error_rate) * 0.9)
+    cal = calibrate(*toy_data(3, 20000), task=TOY)  # independent errors: the two agree
+    assert cal.independent_state_error_rate == pytest.approx(cal.state_error_rate, abs=0.01)
+    assert cal.independent_pair_error_rate == pytest.approx(cal.pair_error_rate, abs=0.01)
