@@ -13,7 +13,8 @@ The data always come from the domain's true expert (its ``beta``). The learners 
 with another beta: a :data:`learner setting <SweepConfig.learners>` is a number (the beta
 itself), a factor of the domain's beta written ``"x0.5"``, or ``"paper"`` (the paper's beta 0.03
 with the domain's prior). Learners without a ``beta`` (HiddenDataEM, MaxEnt IRL) are built the
-same way and simply have nothing to change; every method is run at every setting.
+same way and simply have nothing to change: their fit is made once per batch and stands for
+every setting (each row names its setting and beta, as if fitted for it).
 
 The forward-backward kernels (``SweepConfig.backend``: numpy or numba) are how a trial is
 computed, not what: they go to the learners that have a ``backend`` parameter
@@ -308,24 +309,81 @@ def run_trials(
         must be able to ship both to its workers.
 
     A trial's result depends only on the trial (its seeds come from its fields), never on the
-    executor or on the order of completion; only ``seconds`` differs from run to run. When the
-    caller stops iterating early, trials not yet started are cancelled.
+    executor or on the order of completion; only ``seconds`` differs from run to run. Trials
+    that differ only in a learner setting their method does not use share one fit (see
+    :func:`_shared_fits`), yielded for each of them. When the caller stops iterating early,
+    trials not yet started are cancelled.
     """
     trials = list(trials)
+    shared = _shared_fits(trials)
+
+    def each(i: int, result: TrialResult) -> Iterator[tuple[int, TrialResult]]:
+        for j in shared[i]:
+            yield j, result if j == i else _as_setting(result, trials[j])
+
     if executor is None and workers <= 1:
-        yield from enumerate(map(run_trial, trials))
+        for i in shared:
+            yield from each(i, run_trial(trials[i]))
         return
     pool = executor if executor is not None else ProcessPoolExecutor(max_workers=workers)
     futures = {}
     try:
-        futures = {pool.submit(run_trial, t): i for i, t in enumerate(trials)}
+        futures = {pool.submit(run_trial, trials[i]): i for i in shared}
         for future in as_completed(futures):
-            yield futures[future], future.result()
+            yield from each(futures[future], future.result())
     finally:
         for future in futures:
             future.cancel()
         if executor is None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _shared_fits(trials: Sequence[Trial]) -> dict[int, list[int]]:
+    """The trials to run, each with the trials its fit stands for: ``{i: [i, j, ...]}`` in
+    trial order. Trials that differ only in the learner setting share one fit when their
+    method's estimator does not depend on the learner's beta (:func:`_ignores_beta`:
+    HiddenDataEM and MaxEnt IRL have none), since the data and the fit are then the same."""
+    groups: dict[Trial, list[int]] = {}
+    free: dict[tuple, bool] = {}  # per call: a learner may be registered again, differently
+    several = len({t.learner for t in trials}) > 1
+    for i, trial in enumerate(trials):
+        kind = (trial.domain, trial.noise, trial.method)
+        if kind not in free:
+            free[kind] = several and _ignores_beta(*kind)
+        key = dataclasses.replace(trial, learner="") if free[kind] else trial
+        groups.setdefault(key, []).append(i)
+    return {members[0]: members for members in groups.values()}
+
+
+def _ignores_beta(domain: str, noise: float, method: str) -> bool:
+    """Whether ``method``'s estimator is built the same for two learner betas (the only thing
+    a learner setting changes, :func:`learner_domain`): the same parameters (objects by
+    identity and values by equality). False for an estimator without ``get_params``."""
+    told = DOMAINS[domain](noise=noise)
+    built = [make_estimator(method, dataclasses.replace(told, beta=beta), seed=0)
+             for beta in (told.beta, 2.0 * told.beta)]
+    if not all(callable(getattr(e, "get_params", None)) for e in built):
+        return False  # nothing to compare: fitted at every setting
+    a, b = (e.get_params() for e in built)
+    return a.keys() == b.keys() and all(_same_param(a[k], b[k]) for k in a)
+
+
+def _same_param(x, y) -> bool:
+    if x is y:
+        return True
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        return isinstance(x, np.ndarray) and isinstance(y, np.ndarray) \
+            and x.shape == y.shape and bool(np.array_equal(x, y))
+    try:
+        return bool(x == y)
+    except (TypeError, ValueError):  # an object whose == is not a truth value
+        return False
+
+
+def _as_setting(result: TrialResult, trial: Trial) -> TrialResult:
+    """``result``, a shared fit's, as ``trial``'s: its learner setting and that beta."""
+    told = learner_domain(DOMAINS[trial.domain](noise=trial.noise), trial.learner)
+    return dataclasses.replace(result, learner=trial.learner, learner_beta=float(told.beta))
 
 
 def run_sweep(

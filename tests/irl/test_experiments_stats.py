@@ -185,6 +185,42 @@ def test_every_method_is_run_at_every_learner_setting():
     assert (a.ile, a.exact_policy) == (b.ile, b.exact_policy)
 
 
+def test_a_fit_that_no_learner_setting_changes_is_made_once_and_stands_for_each(monkeypatch):
+    import irl.experiments as experiments
+
+    trials = [Trial("sorting", method, 0.2, 0.3, batch=0, trajectories=2, length=8, seed=0,
+                    learner=learner)
+              for learner in ("x1", "x0.25", "paper") for method in ("maxent", "mmap-birl")]
+    ran = []
+    monkeypatch.setattr(experiments, "run_trial", lambda t: ran.append(t) or run_trial(t))
+    results = dict(experiments.run_trials(trials))
+    # maxent has no beta: fitted once; mmap-birl at every setting
+    assert [(t.method, t.learner) for t in ran] == [
+        ("maxent", "x1"), ("mmap-birl", "x1"), ("mmap-birl", "x0.25"), ("mmap-birl", "paper")]
+    assert sorted(results) == list(range(len(trials)))
+    for i, trial in enumerate(trials):
+        alone = run_trial(trial)  # what fitting it for itself gives
+        assert dataclasses.replace(results[i], seconds=0.0) == \
+            dataclasses.replace(alone, seconds=0.0), (trial.method, trial.learner)
+    assert [results[i].learner_beta for i in (0, 2, 4)] == [1.5, 0.375, PAPER_BETA]
+
+
+def test_a_learner_without_get_params_is_fitted_at_every_setting(monkeypatch):
+    import irl.experiments as experiments
+
+    spec = register_learner(LearnerSpec(
+        "fixed-plain", "The true weights, whatever the beta.",
+        lambda domain, *, seed=None: _Fixed(domain.true_theta)))
+    ran = []
+    monkeypatch.setattr(experiments, "run_trial", lambda t: ran.append(t) or run_trial(t))
+    try:
+        trials = [Trial("sorting", "fixed-plain", 0.0, 0.3, 0, 1, 4, 0, learner=learner)
+                  for learner in ("x1", "x2")]
+        assert len(list(experiments.run_trials(trials))) == len(ran) == 2
+    finally:
+        assert unregister_learner("fixed-plain") is spec
+
+
 class _Fixed:
     """A learner that returns fixed weights (to check the scoring, not a method)."""
 
