@@ -102,9 +102,8 @@ def main() -> None:
         frames = list(session.frames())
         video = write_video(out / "video" / f"{path.stem}.mp4", (f.color for f in frames),
                             fps=FPS)
-        views = {f.step: f.inspection for f in frames if f.inspection is not None}
         face = write_video(out / "video" / f"{path.stem}_inspection.mp4",
-                           (views[f.step] for f in frames), fps=FPS)
+                           (f.inspection for f in frames), fps=FPS)  # a view every frame
         for mode, seconds, second in (("video_clock", 2.0, face), ("video_perceived", None, face),
                                       ("video_alone_clock", 2.0, None)):
             target = out / mode / f"{path.stem}.mcap"

@@ -275,3 +275,41 @@ def learning_curve_figure(objective: Sequence[float], method: str, path: Path) -
     ax.set_title(method)
     ax.grid(alpha=0.3)
     return _save(fig, path, plt)
+
+
+def precision_recall_figure(report: dict, folder: Path) -> list[Path]:
+    """The inspection's precision-recall curves (``onionsort eval-perception``): one PNG per
+    source (``inspection_pr_robot.png``, ``inspection_pr_human.png``), a curve per difficulty
+    level for each fusion rule, the operating point at the report's threshold marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    for source in ("robot", "human"):
+        levels = {lv: rows[source] for lv, rows in report["levels"].items() if source in rows}
+        if not levels:
+            continue
+        rules = sorted({r for row in levels.values() for r in row["fused"]})
+        fig, axes = plt.subplots(1, len(rules), figsize=(4.6 * len(rules), 4.0), squeeze=False)
+        for ax, rule in zip(axes[0], rules, strict=True):
+            for level, row in levels.items():
+                fused = row["fused"].get(rule)
+                if fused is None:
+                    continue
+                curve = fused["pr_curve"]
+                line, = ax.plot(curve["recall"], curve["precision"], ".-", ms=3,
+                                label=f"{level} ({fused['onions']} onions)")
+                ax.plot([fused["recall"]], [fused["precision"]], "o", ms=8, mfc="none",
+                        color=line.get_color())
+            ax.set_xlim(0, 1.02)
+            ax.set_ylim(0, 1.02)
+            ax.set_xlabel("recall (blemished onions called blemished)")
+            ax.set_ylabel("precision")
+            ax.set_title(f"{source}'s inspection, fused by {rule}\n"
+                         f"(circle: threshold {report['threshold']:.2f})", fontsize=9)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, loc="lower left")
+        written.append(_save(fig, Path(folder) / f"inspection_pr_{source}.png", plt))
+    return written

@@ -55,14 +55,17 @@ def postprocess(logits: torch.Tensor, ltrb: torch.Tensor, points: torch.Tensor,
 class Detector:
     """The trained network with its configuration; call :meth:`detect` on images."""
 
-    def __init__(self, net: DetectorNet) -> None:
-        self.net = net.eval()
+    def __init__(self, net: DetectorNet, device: str | torch.device = "cpu") -> None:
+        self.device = torch.device(device)
+        self.net = net.to(self.device).eval()
         self.config = net.config
         self.points, _ = grid_points(self.config.height, self.config.width)
+        self.points = self.points.to(self.device)
 
     @classmethod
-    def load(cls, path: Path | str) -> Detector:
-        """Load weights saved by :meth:`save` (or the ``model`` of a training checkpoint)."""
+    def load(cls, path: Path | str, device: str | torch.device = "cpu") -> Detector:
+        """Load weights saved by :meth:`save` (or the ``model`` of a training checkpoint) onto
+        ``device``."""
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no detector checkpoint at {path}")
@@ -74,7 +77,7 @@ class Detector:
             raise ValueError(f"{path} is not a detector checkpoint (no config and model)")
         net = DetectorNet(DetectorConfig(**ckpt["config"]))
         net.load_state_dict(ckpt["model"])
-        return cls(net)
+        return cls(net, device)
 
     def save(self, path: Path | str) -> Path:
         """Write the weights and configuration (atomically)."""
@@ -95,13 +98,14 @@ class Detector:
             canvas, lb = letterbox(img, self.config.width, self.config.height)
             canvases.append(canvas)
             boxes.append(lb)
-        x = torch.from_numpy(np.stack(canvases)).permute(0, 3, 1, 2).float() / 255.0
-        logits, ltrb = self.net(x)
+        x = torch.from_numpy(np.stack(canvases)).permute(0, 3, 1, 2).to(self.device)
+        logits, ltrb = self.net(x.float() / 255.0)
         out = []
         for (b, s, c), lb, img in zip(postprocess(logits, ltrb, self.points, self.config,
                                                   score_threshold), boxes, images,
                                       strict=True):
             h, w = img.shape[:2]
+            b, s, c = b.cpu(), s.cpu(), c.cpu()
             bb = lb.to_image(b.numpy()) if len(b) else np.zeros((0, 4))
             bb[:, [0, 2]] = bb[:, [0, 2]].clip(0, w)
             bb[:, [1, 3]] = bb[:, [1, 3]].clip(0, h)
@@ -112,6 +116,7 @@ class Detector:
 def save_weights(net: DetectorNet, path: Path | str) -> Path:
     path = Path(path)
     tmp = path.with_name(path.name + ".partial")
-    torch.save({"config": net.config.to_dict(), "model": net.state_dict()}, tmp)
+    state = {k: v.detach().cpu() for k, v in net.state_dict().items()}
+    torch.save({"config": net.config.to_dict(), "model": state}, tmp)
     tmp.replace(path)
     return path

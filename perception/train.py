@@ -61,11 +61,11 @@ class TrainConfig:
             raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")
 
 
-def _batch(samples: list[Sample]):
+def _batch(samples: list[Sample], device: torch.device | None = None):
     x = torch.from_numpy(np.stack([s.image for s in samples])).permute(0, 3, 1, 2).float()
-    targets = [(torch.from_numpy(s.boxes).float(), torch.from_numpy(s.classes).long())
-               for s in samples]
-    return x / 255.0, targets
+    targets = [(torch.from_numpy(s.boxes).float().to(device),
+                torch.from_numpy(s.classes).long().to(device)) for s in samples]
+    return (x / 255.0).to(device), targets
 
 
 @torch.no_grad()
@@ -73,17 +73,23 @@ def evaluate_detector(net: DetectorNet, samples: list[Sample], batch_size: int =
                       ) -> dict[str, float]:
     """mAP of ``net`` on canvas samples."""
     net.eval()
+    device = next(net.parameters()).device
     points, _ = grid_points(net.config.height, net.config.width)
+    points = points.to(device)
     gts, dts = [], []
     for i in range(0, len(samples), batch_size):
         chunk = samples[i:i + batch_size]
-        x, _ = _batch(chunk)
+        x, _ = _batch(chunk, device)
         logits, ltrb = net(x)
         for s, (b, sc, c) in zip(chunk, postprocess(logits, ltrb, points, net.config,
                                                     EVAL_SCORE_THRESHOLD), strict=True):
             gts.append((s.boxes, s.classes))
-            dts.append((b.numpy(), sc.numpy(), c.numpy()))
+            dts.append((b.cpu().numpy(), sc.cpu().numpy(), c.cpu().numpy()))
     return mean_average_precision(gts, dts)
+
+
+def _cpu(state: dict) -> dict:
+    return {k: v.detach().cpu() for k, v in state.items()}
 
 
 def _schedule(step: int, total: int, warmup: int) -> float:
@@ -95,7 +101,8 @@ def _schedule(step: int, total: int, warmup: int) -> float:
 def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
                    test: Sequence[LabelledImage], config: TrainConfig, out: Path | str,
                    net_config: DetectorConfig | None = None, *, resume: bool = False,
-                   on_epoch: Callable[[dict], None] | None = None) -> dict:
+                   on_epoch: Callable[[dict], None] | None = None,
+                   device: str | torch.device = "cpu", init: Path | str | None = None) -> dict:
     """Train on ``train``; keep the best epoch on ``val``; report val and test mAP.
 
     Parameters
@@ -115,6 +122,12 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
         Called after each epoch with its history record (``epoch``, ``train_loss``, val mAP),
         e.g. to draw a progress bar; ``epoch`` counts from 0 (from the resumed epoch on
         ``resume``).
+    device : str or torch.device
+        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
+        the CPU in float32.
+    init : path, optional
+        A detector checkpoint (:meth:`perception.Detector.save`) to start from instead of
+        random weights: fine-tuning (its configuration must be ``net_config``).
 
     Returns
     -------
@@ -134,7 +147,17 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     rng = np.random.default_rng(config.seed)
     train_samples = to_samples(train, net_config.width, net_config.height)
     val_samples = to_samples(val, net_config.width, net_config.height)
+    device = torch.device(device)
+    amp = device.type == "cuda"
+    scaler = torch.amp.GradScaler("cuda", enabled=amp)
     net = DetectorNet(net_config)
+    if init is not None:
+        start_from = Detector.load(init).net
+        if start_from.config != net_config:
+            raise ValueError(f"cannot start from {init}: its network is {start_from.config}, "
+                             f"not {net_config}")
+        net.load_state_dict(start_from.state_dict())
+    net = net.to(device)
     ema = copy.deepcopy(net).eval()
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     n_epoch = min(config.images_per_epoch, len(train_samples))
@@ -143,7 +166,7 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: _schedule(k, total, warmup))
     start, history, best = 0, [], -1.0
     if resume:
-        ckpt = torch.load(last, map_location="cpu", weights_only=False)
+        ckpt = torch.load(last, map_location=device, weights_only=False)
         if ckpt["train_config"] != asdict(config) or ckpt["config"] != net_config.to_dict():
             raise ValueError(f"cannot resume from {last}: it was trained with "
                              f"{ckpt['train_config']}, {ckpt['config']}")
@@ -156,6 +179,7 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
         start, history, best = ckpt["epoch"] + 1, ckpt["history"], ckpt["best"]
         logger.info("resuming from epoch %d of %d", start, config.epochs)
     points, strides = grid_points(net_config.height, net_config.width)
+    points, strides = points.to(device), strides.to(device)
     step = start * per_epoch
     for epoch in range(start, config.epochs):
         net.train()
@@ -163,13 +187,16 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
         losses = []
         for i in range(0, len(order), config.batch_size):
             x, targets = _batch([augment(train_samples[j], rng)
-                                 for j in order[i:i + config.batch_size]])
-            logits, ltrb = net(x)
-            loss, _ = detection_loss(logits, ltrb, points, strides, targets)
+                                 for j in order[i:i + config.batch_size]], device)
+            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
+                logits, ltrb = net(x)
+            loss, _ = detection_loss(logits.float(), ltrb.float(), points, strides, targets)
             opt.zero_grad()
-            loss.backward()
+            scaler.scale(loss).backward()
+            scaler.unscale_(opt)
             torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
-            opt.step()
+            scaler.step(opt)
+            scaler.update()
             sched.step()
             step += 1
             decay = config.ema_decay * (1 - math.exp(-step / 200))
@@ -191,14 +218,14 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
             best = metrics["map50_95"]
             save_weights(ema, out / "detector.pt")
         tmp = last.with_name(last.name + ".partial")
-        torch.save({"model": net.state_dict(), "ema": ema.state_dict(),
+        torch.save({"model": _cpu(net.state_dict()), "ema": _cpu(ema.state_dict()),
                     "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                     "epoch": epoch, "history": history, "best": best,
                     "config": net_config.to_dict(), "train_config": asdict(config),
                     "torch_rng": torch.get_rng_state(), "numpy_rng": rng.bit_generator.state},
                    tmp)
         tmp.replace(last)
-    best_net = Detector.load(out / "detector.pt").net
+    best_net = Detector.load(out / "detector.pt", device=device).net
     test_samples = to_samples(test, net_config.width, net_config.height)
     result = {"val": evaluate_detector(best_net, val_samples),
               "test": evaluate_detector(best_net, test_samples) if test_samples else None,

@@ -23,10 +23,15 @@ task for datasets that predate the field).
 
 ``dataset.json`` lists its ``views``: ``camera`` (the main RGB-D camera) and ``inspection`` (the
 close view where the sorter, or the robot, looks at the onion in hand; boxes there are in that
-view's pixels). Inspection records have a ``source``: ``human`` (from a session, with the
-step's labels) or ``robot`` (the Sawyer holding an onion of a line-up up to the same camera, so
-the detector learns what the robot will see). The detector trains on both views; the state
-classifier on the camera view.
+view's pixels; one with every frame of a session). Inspection records have a ``source``:
+``human`` (from a session, with the step's labels) or ``robot`` (the Sawyer showing an onion of
+a line-up to its inspection camera from several sides: ``lineup``, ``index`` of the onion in
+it, ``view`` of the robot's views of it). Besides ``boxes`` and ``classes`` they hold, per box,
+``visible_pixels``, ``onions`` (the onion's id, human views) and ``rot_pixels`` (how many of its
+pixels show rot, not under the hand: the inspection classifier's labels, where the dataset
+measured them), and every record names its ``difficulty`` level. The detector trains on both
+views, the inspection classifier on the inspection views, the state classifier on the camera
+view.
 """
 
 from __future__ import annotations
@@ -65,15 +70,25 @@ def _check_task(task: TaskDescription) -> TaskDescription:
 
 
 def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera",
-                 task: TaskDescription = SORTING_TASK) -> dict:
+                 task: TaskDescription = SORTING_TASK, difficulty: str | None = None) -> dict:
     """The JSON record of one frame in ``view`` (see the module docstring); the state's
     factors are those of ``task``."""
-    boxes, classes = [], []
+    boxes, classes, rot = [], [], []
     onions = frame.onions if view == "camera" else frame.inspection_onions
     for onion in onions:
         if onion.box is not None and onion.visible_pixels >= MIN_VISIBLE_PIXELS:
             boxes.append([int(v) for v in onion.box])
             classes.append(int(onion.blemished))
+            rot.append(getattr(onion, "rot_pixels", None))
+            rot[-1] = None if rot[-1] is None else int(rot[-1])
+    extra = {} if difficulty is None else {"difficulty": difficulty}
+    if view == "inspection":
+        extra["visible_pixels"] = [int(o.visible_pixels) for o in onions
+                                   if o.box is not None and o.visible_pixels >= MIN_VISIBLE_PIXELS]
+        extra["onions"] = [int(o.onion_id) for o in onions
+                           if o.box is not None and o.visible_pixels >= MIN_VISIBLE_PIXELS]
+        if any(r is not None for r in rot):
+            extra["rot_pixels"] = rot
     factors = task.decode(int(frame.step.state))
     images = ({"color": f"color/{name}.png", "depth": f"depth/{name}.png"} if view == "camera"
               else {"color": f"inspection/{name}.png"})
@@ -91,6 +106,7 @@ def frame_record(frame: TruthFrame, session: int, name: str, view: str = "camera
         "step": int(frame.step.step),
         "session": int(session),
         "frame": int(frame.index),
+        **extra,
     }
 
 
@@ -119,7 +135,10 @@ class DatasetWriter:
             for sub in ("color", "depth", "inspection"):
                 (self.root / split / sub).mkdir(parents=True, exist_ok=True)
 
-    def add(self, split: str, frame: TruthFrame, session: int) -> None:
+    def add(self, split: str, frame: TruthFrame, session: int,
+            difficulty: str | None = None) -> None:
+        """Add a frame of ``session`` (and its inspection view) to ``split``; ``difficulty``
+        names the session's perception difficulty in its records."""
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
         records = self._records[split, "camera"]
@@ -128,32 +147,42 @@ class DatasetWriter:
         _write_rgb(folder / "color" / f"{name}.png", frame.color)
         depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
         _write_png(folder / "depth" / f"{name}.png", depth_mm)
-        records.append(frame_record(frame, session, name, task=self.task))
+        records.append(frame_record(frame, session, name, task=self.task,
+                                    difficulty=difficulty))
         if frame.inspection is not None:
             close = self._records[split, "inspection"]
             name = f"{len(close):06d}"
             _write_rgb(folder / "inspection" / f"{name}.png", frame.inspection)
             close.append(frame_record(frame, session, name, view="inspection",
-                                      task=self.task))
+                                      task=self.task, difficulty=difficulty))
 
-    def add_robot_view(self, split: str, rgb: np.ndarray,
-                       labels: list[tuple[tuple[int, int, int, int], bool, int]],
-                       lineup: int, index: int) -> None:
+    def add_robot_view(self, split: str, rgb: np.ndarray, labels, lineup: int, index: int,
+                       view: int = 0, difficulty: str | None = None) -> None:
         """Add an inspection view rendered at the robot's station (Sawyer holding an onion).
 
-        ``labels`` are ``(box, blemished, visible_pixels)``; the record has ``source: "robot"``,
-        ``lineup`` and ``index`` and no state (the robot's views are for the detector only).
+        ``labels`` are ``(box, blemished, visible_pixels[, rot_pixels])`` of each onion in it
+        (:class:`robot.station.InspectionLabel`); the record has ``source: "robot"``,
+        ``lineup``, ``index`` (the onion's place in the line-up), ``view`` (which of the
+        robot's views of it) and ``difficulty``, and no state (the robot's views are for the
+        detector and the inspection classifier only).
         """
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
         records = self._records[split, "inspection"]
         name = f"{len(records):06d}"
         _write_rgb(self.root / split / "inspection" / f"{name}.png", rgb)
-        kept = [(b, c) for b, c, n in labels if n >= MIN_VISIBLE_PIXELS]
-        records.append({"color": f"inspection/{name}.png", "source": "robot",
-                        "boxes": [[int(v) for v in b] for b, _ in kept],
-                        "classes": [int(c) for _, c in kept], "lineup": int(lineup),
-                        "index": int(index)})
+        kept = [tuple(label) for label in labels if label[2] >= MIN_VISIBLE_PIXELS]
+        record = {"color": f"inspection/{name}.png", "source": "robot",
+                  "boxes": [[int(v) for v in k[0]] for k in kept],
+                  "classes": [int(k[1]) for k in kept],
+                  "visible_pixels": [int(k[2]) for k in kept],
+                  "lineup": int(lineup), "index": int(index), "view": int(view)}
+        if any(len(k) > 3 and k[3] is not None for k in kept):
+            record["rot_pixels"] = [None if len(k) < 4 or k[3] is None else int(k[3])
+                                    for k in kept]
+        if difficulty is not None:
+            record["difficulty"] = difficulty
+        records.append(record)
 
     def flush(self, split: str | None = None) -> None:
         for s in SPLITS if split is None else (split,):
@@ -255,12 +284,17 @@ def split_names(split: str) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class DatasetStep:
     """One complete step of a dataset session: its frames (phase order), the inspection view
-    of its first frame (None where there was none) and the first frame's record (labels)."""
+    of each of them (None where a frame has none) and the first frame's record (labels)."""
 
     colors: list[np.ndarray]
     depths: list[np.ndarray]
-    inspection: np.ndarray | None
+    views: list[np.ndarray | None]
     record: dict
+
+    @property
+    def inspection(self) -> np.ndarray | None:
+        """The inspection view of the step's first frame (None if it has none)."""
+        return self.views[0] if self.views else None
 
 
 def read_steps(root: Path | str, split: str, frames_per_step: int) -> list[list[DatasetStep]]:
@@ -283,6 +317,6 @@ def read_steps(root: Path | str, split: str, frames_per_step: int) -> list[list[
             first = frames[0].record
             sessions.setdefault(session, []).append(DatasetStep(
                 [f.color for f in frames], [f.depth for f in frames],
-                views.get((session, first["frame"])), first))
+                [views.get((session, f.record["frame"])) for f in frames], first))
         out.extend(sessions[k] for k in sorted(sessions))
     return out

@@ -67,13 +67,16 @@ _JSON_SCHEMAS = {
     PerceptionTopic.STATE: ("onionsort.PerceivedStep", {
         "type": "object",
         "description": "Perceived step: estimates of the state factors and the action with "
-                       "class probabilities, the occluded call, and the pair observation "
-                       "s * A + a (null where occluded).",
+                       "class probabilities, the occluded call, the pair observation "
+                       "s * A + a (null where occluded), the call on the onion seen in the "
+                       "step's inspection views (inspected) and the fused probability behind "
+                       "the prediction factor (p_blemished; null while no view showed it).",
         "properties": {
             "step": _INT, "frame": _INT, "occluded": _BOOL, "p_occluded": _NUM, "onion": _INT,
             "end_effector": _INT, "action": _INT, "prediction": _INT, "state": _INT,
             "observation": {"type": ["integer", "null"]},
             "inspected": {"type": ["integer", "null"]},
+            "p_blemished": {"type": ["number", "null"]},
             "probs": {"type": "object"},
         },
         "required": ["step", "occluded", "observation"],

@@ -201,12 +201,16 @@ EVALUATION_JSON_SCHEMAS: dict[str, tuple[str, dict]] = {
         "description": "One step of a robot's sorting run: in state it took action and "
                        "reached next_state (flat indices of the session's task, with their "
                        "names); the onion in focus afterwards, the class the robot perceived "
-                       "if this step inspected it, and the onion's fate (bin or line) if this "
-                       "step decided it. What the robot knows; no ground truth.",
+                       "if this step inspected it (with the fused probability that it is "
+                       "blemished and each view's, null where a view showed no onion), and the "
+                       "onion's fate (bin or line) if this step decided it. What the robot "
+                       "knows; no ground truth.",
         "properties": {
             "step": _INT, "frame": _INT, "state": _INT, "state_name": _STR, "action": _INT,
             "action_name": _STR, "next_state": _INT, "next_state_name": _STR,
             "onion": _INT_OR_NULL, "perceived": _STR_OR_NULL, "fate": _STR_OR_NULL,
+            "p_blemished": _NUM,
+            "view_p_blemished": {"type": "array", "items": {"type": ["number", "null"]}},
         },
         "required": ["step", "state", "action", "next_state"],
     }),

@@ -90,7 +90,9 @@ class SortingDecision(Protocol):
     the line-up index of the onion in focus after the step, ``blemished`` its true class;
     ``perceived`` the classifier's answer (a value index of the task's ``prediction`` factor)
     if the step inspected it; ``fate`` (``"bin"`` or ``"line"``) if the step decided it;
-    ``tp`` .. ``recall`` running over the onions decided so far.
+    ``tp`` .. ``recall`` running over the onions decided so far. A decision may also carry
+    ``p_blemished`` and ``view_p_blemished`` (the inspection's fused and per-view
+    probabilities); they are written where present.
     """
 
     @property
@@ -364,7 +366,8 @@ class SessionWriter:
             "action": int(decision.action), "action_name": _action_name(task, decision.action),
             "next_state": int(decision.next_state),
             "next_state_name": task.state_name(int(decision.next_state)),
-            "onion": onion, "perceived": perceived, "fate": fate}, time_ns, step)
+            "onion": onion, "perceived": perceived, "fate": fate,
+            **_inspection_fields(decision)}, time_ns, step)
         if self.ground_truth:
             counts = {k: int(getattr(decision, k)) for k in ("tp", "fp", "tn", "fn")}
             blemished = None if decision.blemished is None else bool(decision.blemished)
@@ -528,3 +531,14 @@ class SessionWriter:
             {"onion_id": o.onion_id, "blemished": o.blemished, "in_focus": o.in_focus,
              "position": [round(float(x), 5) for x in o.position]}
             for o in frame.onions]}, t, i)
+
+
+def _inspection_fields(decision) -> dict:
+    """The inspection's probabilities a decision carries, if any: ``p_blemished`` (fused) and
+    ``view_p_blemished`` (per view, None where no onion was found)."""
+    p_bad = getattr(decision, "p_blemished", None)
+    if p_bad is None:
+        return {}
+    per_view = getattr(decision, "view_p_blemished", ()) or ()
+    return {"p_blemished": round(float(p_bad), 5),
+            "view_p_blemished": [None if v is None else round(float(v), 5) for v in per_view]}

@@ -17,7 +17,9 @@ __all__ = [
     "CameraSpec",
     "Lighting",
     "boxes_from_segmentation",
+    "frustum_planes",
     "intrinsics",
+    "links_outside",
     "occluded_fraction",
     "render",
     "sample_lighting",
@@ -82,31 +84,80 @@ def intrinsics(spec: CameraSpec) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CameraImage:
-    """One rendered view: ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 m, ``seg`` (H, W)."""
+    """One rendered view: ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 m, ``seg`` (H, W);
+    ``covered`` (H, W) bool, where a hand drawn over the picture after rendering hides what
+    ``seg`` says is there (None: nothing hidden)."""
 
     rgb: np.ndarray = field(repr=False)
     depth: np.ndarray = field(repr=False)
     seg: np.ndarray = field(repr=False)
+    covered: np.ndarray | None = field(default=None, repr=False)
 
 
-def render(client: int, spec: CameraSpec, lighting: Lighting = Lighting()) -> CameraImage:
-    """Render ``spec``'s view in physics client ``client`` with the TinyRenderer."""
+def render(client: int, spec: CameraSpec, lighting: Lighting = Lighting(), *,
+           cull: tuple[int, ...] = ()) -> CameraImage:
+    """Render ``spec``'s view in physics client ``client`` with the TinyRenderer.
+
+    ``cull`` names bodies whose links lying wholly outside the view are left out of the
+    rendering (:func:`links_outside`): the TinyRenderer transforms every triangle of every
+    body whatever the camera sees, and a robot's meshes are most of the scene's triangles. The
+    picture is the same (a test renders both).
+    """
     view = p.computeViewMatrix(spec.eye, spec.target, spec.up, physicsClientId=client)
     proj = p.computeProjectionMatrixFOV(
         spec.fov_deg, spec.width / spec.height, spec.near, spec.far, physicsClientId=client
     )
-    w, h, rgba, zbuf, seg = p.getCameraImage(
-        spec.width, spec.height, view, proj,
-        renderer=p.ER_TINY_RENDERER, shadow=0,
-        lightDirection=lighting.direction, lightColor=lighting.color,
-        lightAmbientCoeff=lighting.ambient, lightDiffuseCoeff=lighting.diffuse,
-        lightSpecularCoeff=lighting.specular,
-        physicsClientId=client,
-    )
+    hidden = [hide for body in cull for hide in links_outside(client, spec, body)]
+    try:
+        for body, link, _ in hidden:
+            p.changeVisualShape(body, link, rgbaColor=[1, 1, 1, 0], physicsClientId=client)
+        w, h, rgba, zbuf, seg = p.getCameraImage(
+            spec.width, spec.height, view, proj,
+            renderer=p.ER_TINY_RENDERER, shadow=0,
+            lightDirection=lighting.direction, lightColor=lighting.color,
+            lightAmbientCoeff=lighting.ambient, lightDiffuseCoeff=lighting.diffuse,
+            lightSpecularCoeff=lighting.specular,
+            physicsClientId=client,
+        )
+    finally:
+        for body, link, color in hidden:
+            p.changeVisualShape(body, link, rgbaColor=list(color), physicsClientId=client)
     rgb = np.asarray(rgba, np.uint8).reshape(h, w, 4)[..., :3].copy()
     zbuf = np.asarray(zbuf, np.float32).reshape(h, w)
     depth = (spec.far * spec.near / (spec.far - (spec.far - spec.near) * zbuf)).astype(np.float32)
     return CameraImage(rgb=rgb, depth=depth, seg=np.asarray(seg, np.int32).reshape(h, w))
+
+
+def frustum_planes(spec: CameraSpec) -> np.ndarray:
+    """The six planes (6, 4) of ``spec``'s view frustum in the world: a point ``x`` (3,) is in
+    view where ``planes @ [x, 1] >= 0`` for all six."""
+    view = np.array(p.computeViewMatrix(spec.eye, spec.target, spec.up)).reshape(4, 4).T
+    proj = np.array(p.computeProjectionMatrixFOV(
+        spec.fov_deg, spec.width / spec.height, spec.near, spec.far)).reshape(4, 4).T
+    m = proj @ view
+    return np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2],
+                     m[3] - m[2]])
+
+
+def links_outside(client: int, spec: CameraSpec, body: int
+                  ) -> list[tuple[int, int, tuple[float, ...]]]:
+    """``(body, link, rgba)`` of each link of ``body`` that ``spec`` cannot see: its bounding
+    box lies wholly on the outer side of one of the view's planes. Only links with one visual
+    shape count (their colour can be put back as it was)."""
+    planes = frustum_planes(spec)
+    shapes: dict[int, list] = {}
+    for data in p.getVisualShapeData(body, physicsClientId=client):
+        shapes.setdefault(int(data[1]), []).append(tuple(data[7]))
+    out = []
+    for link, colors in shapes.items():
+        if len(colors) != 1 or colors[0][3] == 0:
+            continue
+        lo, hi = (np.asarray(c) for c in p.getAABB(body, link, physicsClientId=client))
+        corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        if np.any(np.all(corners @ planes.T < 0, axis=0)):
+            out.append((body, link, colors[0]))
+    return out
 
 
 def boxes_from_segmentation(

@@ -244,11 +244,19 @@ class ImageEffects:
 
     def hand(self, rgb: np.ndarray, box, color) -> np.ndarray:
         """The inspection view ``rgb`` with the hand over the onion in ``box``, by chance."""
+        return self.hand_and_cover(rgb, box, color)[0]
+
+    def hand_and_cover(self, rgb: np.ndarray, box, color
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`hand`, and the pixels (H, W) bool the hand covers (None if it covers
+        none): what the labels of a view's visible blemishes leave out."""
         d = self.difficulty
         if box is None or not d.hand_cover or self.rng.random() >= d.hand_cover_rate:
-            return rgb
+            return rgb, None
         share = d.hand_cover * self.rng.uniform(0.4, 1.0)
-        return hand_patch(rgb, box, share, self.rng.uniform(0, 2 * np.pi), color)
+        angle = self.rng.uniform(0, 2 * np.pi)
+        return (hand_patch(rgb, box, share, angle, color),
+                hand_patch(np.zeros(rgb.shape[:2], np.uint8), box, share, angle, 255) > 0)
 
 
 def _line_kernel(length: float, angle: float) -> np.ndarray:
@@ -277,7 +285,7 @@ def hand_patch(rgb: np.ndarray, box, share: float, angle: float, color) -> np.nd
     ax, ay = max(1, round(w * scale)), max(1, round(h * scale))
     ex, ey = cx + 0.5 * w * np.cos(angle), cy + 0.5 * h * np.sin(angle)
     out = np.ascontiguousarray(rgb.copy())
-    shade = [float(v) for v in np.clip(np.asarray(color, float), 0, 255)]
+    shade = [float(v) for v in np.clip(np.asarray(color, float).reshape(-1), 0, 255)]
     cv2.ellipse(out, (round(ex), round(ey)), (ax, ay), float(np.degrees(angle)),
                 0, 360, shade, -1, cv2.LINE_AA)
     return out

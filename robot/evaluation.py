@@ -44,7 +44,13 @@ from irl.domains.onion_sorting import (
 )
 from robot.difficulty import Difficulty
 from robot.labels import OnionLabel
-from robot.station import STEP_DURATION_S, Classifier, SawyerStation, StationStep
+from robot.station import (
+    INSPECTION_VIEWS,
+    STEP_DURATION_S,
+    Classifier,
+    SawyerStation,
+    StationStep,
+)
 from robot.world import WorldState
 
 __all__ = [
@@ -78,6 +84,8 @@ class OnionOutcome:
         Where it ended; undecided onions count as ``"line"``.
     decided : bool
         False if the episode ended before the robot released it for good (or claimed it).
+    p_blemished : float or None
+        The inspection's probability that it is blemished, where the classifier gave one.
     """
 
     index: int
@@ -85,11 +93,13 @@ class OnionOutcome:
     perceived: Prediction | None
     fate: Fate
     decided: bool = True
+    p_blemished: float | None = None
 
     def to_dict(self) -> dict:
         return {
             "index": self.index, "blemished": self.blemished,
             "perceived": None if self.perceived is None else self.perceived.name.lower(),
+            "p_blemished": None if self.p_blemished is None else round(self.p_blemished, 5),
             "fate": self.fate, "decided": self.decided,
         }
 
@@ -181,7 +191,13 @@ class EvaluationStep(_PrecisionRecall):
     depth : ndarray of shape (H, W) or None
         float32 depth in metres of the main camera (when rendering).
     inspection : ndarray of shape (h, w, 3) or None
-        uint8 RGB of the inspection view, if this action inspected the onion.
+        uint8 RGB of the first inspection view, if this action inspected the onion.
+    views : tuple of ndarray of shape (h, w, 3)
+        Every inspection view of the onion, if this action inspected it.
+    p_blemished : float or None
+        The classifier's fused probability that the onion is blemished, where it gave one.
+    view_p_blemished : tuple of (float or None)
+        Each view's, where it gave them.
     q : ndarray of shape (7,)
         The Sawyer's joint positions after the action.
     time_s : float
@@ -212,6 +228,9 @@ class EvaluationStep(_PrecisionRecall):
     time_s: float = 0.0
     onions: tuple[OnionLabel, ...] = field(default=(), repr=False)
     world: WorldState | None = field(default=None, repr=False)
+    views: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    p_blemished: float | None = None
+    view_p_blemished: tuple[float | None, ...] = field(default=(), repr=False)
 
 
 @dataclass(frozen=True)
@@ -292,6 +311,7 @@ def evaluate_policy(
     on_step: Callable[[EvaluationStep], None] | None = None,
     difficulty: Difficulty | str = "clean",
     on_start: Callable[[StationView], None] | None = None,
+    inspection_views: int = INSPECTION_VIEWS,
 ) -> SortingResult:
     """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
 
@@ -305,8 +325,9 @@ def evaluate_policy(
         Seeds the line-up and the scene; a run is reproducible from it (and a deterministic
         ``classify``).
     classify : callable or "ground-truth"
-        ``classify(rgb) -> Prediction`` on the inspection view (h, w, 3) uint8, or
-        ``"ground-truth"`` for perfect perception.
+        ``classify(views) -> Prediction or Verdict`` on the onion's inspection views (each
+        (h, w, 3) uint8; :data:`robot.station.Classifier`), or ``"ground-truth"`` for perfect
+        perception.
     max_steps_per_onion : int
         The episode's step budget is ``n_onions * max_steps_per_onion`` actions.
     render : bool
@@ -322,6 +343,8 @@ def evaluate_policy(
     on_start : callable, optional
         Called once with a :class:`StationView` of the station before the first action (its
         image drawn with noise of its own, so it changes no later render).
+    inspection_views : int
+        Views the robot takes of every onion it inspects (:func:`robot.station.inspection_poses`).
 
     Returns
     -------
@@ -344,7 +367,7 @@ def evaluate_policy(
     budget = n_onions * max_steps_per_onion
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
                        move_steps=move_steps, render_every_step=render,
-                       difficulty=difficulty) as station:
+                       difficulty=difficulty, inspection_views=inspection_views) as station:
         tally = SortingTally(station.blemished)
         if on_start is not None:
             image = station.render(initial=True) if render else None
@@ -367,7 +390,9 @@ def evaluate_policy(
                     perceived=done.perceived, fate=fate, **tally.counts,
                     color=None if done.image is None else done.image.rgb,
                     depth=None if done.image is None else done.image.depth,
-                    inspection=done.inspection, q=done.q,
+                    inspection=done.inspection, views=done.views,
+                    p_blemished=done.p_blemished, view_p_blemished=done.view_p_blemished,
+                    q=done.q,
                     time_s=(n_steps + 1) * STEP_DURATION_S,
                     onions=station.onion_labels(None if done.image is None else done.image.seg),
                     world=station.world_state(),
@@ -403,6 +428,8 @@ class SortingTally:
             raise ValueError(f"blemished must be a non-empty 1-D array of classes; got shape "
                              f"{self._blemished.shape}")
         self.fates: list[Fate | None] = [None] * len(self._blemished)
+        #: the inspection's latest probability that each inspected onion is blemished
+        self.p_blemished: dict[int, float] = {}
         self.counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
 
     def is_blemished(self, index: int) -> bool:
@@ -415,7 +442,10 @@ class SortingTally:
         return all(f is not None for f in self.fates)
 
     def record(self, done: StationStep) -> Fate | None:
-        """Count the fate ``done`` gave the onion in focus; return it (None if it gave none)."""
+        """Count the fate ``done`` gave the onion in focus, and keep the probability its
+        inspection gave; return the fate (None if it gave none)."""
+        if done.p_blemished is not None:
+            self.p_blemished[done.onion] = done.p_blemished
         fate = _fate(done.action, done.next_state) if done.changed else None
         if fate is not None:
             self.fates[done.onion] = fate
@@ -426,6 +456,7 @@ class SortingTally:
         """The episode's :class:`SortingResult` after ``n_steps`` actions; onions still
         undecided count as left on the line. ``perceived`` (n_onions,) is what the robot
         perceived of each onion (None if never inspected)."""
+        p_blemished = self.p_blemished
         n_onions = len(self.fates)
         if len(perceived) != n_onions:
             raise ValueError(f"perceived must hold one entry per onion ({n_onions}); got "
@@ -436,7 +467,8 @@ class SortingTally:
                         "on the line)", n_steps, undecided, n_onions)
         outcomes = tuple(
             OnionOutcome(index=i, blemished=self.is_blemished(i), perceived=perceived[i],
-                         fate=self.fates[i] or "line", decided=self.fates[i] is not None)
+                         fate=self.fates[i] or "line", decided=self.fates[i] is not None,
+                         p_blemished=p_blemished.get(i))
             for i in range(n_onions)
         )
         final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}

@@ -62,7 +62,7 @@ from irl.domains.onion_sorting import (
 from robot.camera import CameraSpec
 from robot.difficulty import Difficulty, resolve_difficulty
 from robot.evaluation import SortingTally
-from robot.station import GROUND_TRUTH, Classifier, SawyerStation
+from robot.station import GROUND_TRUTH, INSPECTION_VIEWS, Classifier, SawyerStation
 
 __all__ = ["SortingEnv", "sorting_reward"]
 
@@ -137,7 +137,8 @@ class SortingEnv(gymnasium.Env):
         Line-up size and how many of its onions are blemished (as ``onionsort evaluate``:
         50 and 30).
     classify : callable or "ground-truth"
-        ``classify(rgb) -> Prediction`` on the inspection view, or perfect perception.
+        ``classify(views) -> Prediction or Verdict`` on the onion's inspection views
+        (:data:`robot.station.Classifier`), or perfect perception.
     difficulty : Difficulty or str
         Perception difficulty of the station (:mod:`robot.difficulty`).
     max_steps_per_onion : int
@@ -150,6 +151,8 @@ class SortingEnv(gymnasium.Env):
         The main camera, whose images are observed (the station's default if None).
     render_mode : {"rgb_array"} or None
         ``render()`` returns the last observed image.
+    inspection_views : int
+        Views the robot takes of every onion it inspects.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -167,6 +170,7 @@ class SortingEnv(gymnasium.Env):
         reward_model: str | Path | None = None,
         camera: CameraSpec | None = None,
         render_mode: str | None = None,
+        inspection_views: int = INSPECTION_VIEWS,
     ) -> None:
         self.n_onions = _check_int("n_onions", n_onions, 1)
         self.n_blemished = _check_int("n_blemished", n_blemished, 0)
@@ -176,10 +180,10 @@ class SortingEnv(gymnasium.Env):
         self.max_steps_per_onion = _check_int("max_steps_per_onion", max_steps_per_onion, 1)
         self.move_steps = _check_int("move_steps", move_steps, 2)
         if isinstance(classify, str) and classify != GROUND_TRUTH:
-            raise ValueError(f"classify must be a callable rgb -> Prediction or "
+            raise ValueError(f"classify must be a callable views -> Prediction or "
                              f"{GROUND_TRUTH!r}; got {classify!r}")
         if not isinstance(classify, str) and not callable(classify):
-            raise TypeError(f"classify must be a callable rgb -> Prediction or "
+            raise TypeError(f"classify must be a callable views -> Prediction or "
                             f"{GROUND_TRUTH!r}; got {type(classify).__name__}")
         if camera is not None and not isinstance(camera, CameraSpec):
             raise TypeError(f"camera must be a CameraSpec or None; got {type(camera).__name__}")
@@ -187,6 +191,7 @@ class SortingEnv(gymnasium.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
                              f"None; got {render_mode!r}")
         self.classify = classify
+        self.inspection_views = _check_int("inspection_views", inspection_views, 1)
         self.difficulty = resolve_difficulty(difficulty)
         self.camera = CameraSpec() if camera is None else camera
         self.render_mode = render_mode
@@ -218,7 +223,8 @@ class SortingEnv(gymnasium.Env):
         station = SawyerStation(self.classify, n_onions=self.n_onions,
                                 n_blemished=self.n_blemished, seed=station_seed,
                                 move_steps=self.move_steps, render_every_step=True,
-                                camera=self.camera, difficulty=self.difficulty)
+                                camera=self.camera, difficulty=self.difficulty,
+                                inspection_views=self.inspection_views)
         self._station = station.__enter__()
         self._tally = SortingTally(station.blemished)
         self._n_steps, self._over = 0, False

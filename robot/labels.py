@@ -46,6 +46,9 @@ class OnionLabel:
         max), from the segmentation buffer; None when not visible.
     visible_pixels : int
         Number of its visible pixels.
+    rot_pixels : int or None
+        How many of them show rot, not hidden by a hand (:mod:`robot.blemishes`); None where
+        not measured.
     """
 
     onion_id: int
@@ -54,6 +57,7 @@ class OnionLabel:
     in_focus: bool = False
     box: tuple[int, int, int, int] | None = None
     visible_pixels: int = 0
+    rot_pixels: int | None = None
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OnionAppearance", "onion_texture", "sample_appearance", "save_texture"]
+__all__ = ["OnionAppearance", "blemish_mask", "onion_texture", "sample_appearance",
+           "save_texture"]
 
 #: Skin colours (RGB, 0-255) the hue is drawn around: golden, brown, red onion.
 _SKINS = np.array([[196, 150, 72], [170, 112, 58], [150, 60, 70]], float)
@@ -65,19 +66,11 @@ def _blob(shape: tuple[int, int], center: np.ndarray, radius: float, rng) -> np.
     return np.clip(1.5 - r, 0.0, 1.0)
 
 
-def onion_texture(appearance: OnionAppearance, size: int = 128, *, subtlety: float = 0.0,
-                  one_sided: float = 0.0) -> np.ndarray:
-    """The onion's texture, shape (size, size, 3), uint8 RGB.
-
-    Veins run along ``u`` (around the onion); a blemished onion gets 5-9 dark rot patches of
-    varied size and darkness, spread so that some show from any side (the camera sees one
-    hemisphere, and a sorter one view of it).
-
-    ``subtlety`` in [0, 1] (:attr:`robot.difficulty.Difficulty.blemish_subtlety`) keeps fewer,
-    smaller and fainter patches: at 1, a fifth of them (at least one), 40 % of the size and
-    35 % of the darkness. ``one_sided`` is the probability (drawn from the texture's seed) that
-    every patch lies on one third of the circumference. At 0 and 0 the texture is unchanged.
-    """
+def _patches(appearance: OnionAppearance, size: int, subtlety: float, one_sided: float):
+    """The texture's veined skin (size, size, 3) float and its rot patches, each ``(mask
+    (size, size) in [0, 1], darkness, kept)``: every patch is drawn (so the random stream is
+    the same at every difficulty), the subtle ones fainter and smaller, and only ``kept``
+    ones are painted."""
     if size < 16:
         raise ValueError(f"size must be >= 16; got {size}")
     if not 0.0 <= subtlety <= 1.0 or not 0.0 <= one_sided <= 1.0:
@@ -87,9 +80,9 @@ def onion_texture(appearance: OnionAppearance, size: int = 128, *, subtlety: flo
     v, u = np.mgrid[0:size, 0:size] / size
     veins = 0.08 * np.sin(2 * np.pi * (u * rng.integers(8, 16) + 0.3 * np.sin(2 * np.pi * v)))
     shade = 1.0 + veins[..., None] + rng.normal(0.0, 0.04, (size, size, 1))
-    tex = appearance.skin[None, None, :] * shade
+    skin = appearance.skin[None, None, :] * shade
+    patches = []
     if appearance.blemished:
-        rot = np.array([45.0, 32.0, 20.0])
         n = int(rng.integers(5, 10))
         keep, sector, start = n, 1.0, 0.0
         if subtlety or one_sided:
@@ -104,9 +97,42 @@ def onion_texture(appearance: OnionAppearance, size: int = 128, *, subtlety: flo
             radius = rng.uniform(0.1, 0.2) * size * (1.0 - 0.6 * subtlety)
             mask = _blob((size, size), center, radius, rng)
             darkness = rng.uniform(0.75, 0.95) * (1.0 - 0.65 * subtlety)
-            if k < keep:
-                tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
+            patches.append((mask, darkness, k < keep))
+    return skin, patches
+
+
+def onion_texture(appearance: OnionAppearance, size: int = 128, *, subtlety: float = 0.0,
+                  one_sided: float = 0.0) -> np.ndarray:
+    """The onion's texture, shape (size, size, 3), uint8 RGB.
+
+    Veins run along ``u`` (around the onion); a blemished onion gets 5-9 dark rot patches of
+    varied size and darkness, spread so that some show from any side (the camera sees one
+    hemisphere, and a sorter one view of it).
+
+    ``subtlety`` in [0, 1] (:attr:`robot.difficulty.Difficulty.blemish_subtlety`) keeps fewer,
+    smaller and fainter patches: at 1, a fifth of them (at least one), 40 % of the size and
+    35 % of the darkness. ``one_sided`` is the probability (drawn from the texture's seed) that
+    every patch lies on one third of the circumference. At 0 and 0 the texture is unchanged.
+    """
+    tex, patches = _patches(appearance, size, subtlety, one_sided)
+    rot = np.array([45.0, 32.0, 20.0])
+    for mask, darkness, kept in patches:
+        if kept:
+            tex = tex * (1 - darkness * mask[..., None]) + rot * darkness * mask[..., None]
     return np.clip(tex, 0, 255).astype(np.uint8)
+
+
+def blemish_mask(appearance: OnionAppearance, size: int = 128, *, subtlety: float = 0.0,
+                 one_sided: float = 0.0) -> np.ndarray:
+    """Where :func:`onion_texture` (same arguments) painted rot: (size, size) bool, the texels
+    that at least one painted patch darkens at half its strength or more (none for a good
+    onion). Rendered in place of the texture, it shows which pixels of a view see rot."""
+    _, patches = _patches(appearance, size, subtlety, one_sided)
+    out = np.zeros((size, size), bool)
+    for mask, _, kept in patches:
+        if kept:
+            out |= mask >= 0.5
+    return out
 
 
 def save_texture(texture: np.ndarray, path: Path) -> Path:

@@ -170,6 +170,21 @@ class Sawyer:
         pos, orn = p.multiplyTransforms(ee_pos.tolist(), ee_orn.tolist(), *self._carried)
         p.resetBasePositionAndOrientation(self.grasped, pos, orn, physicsClientId=self.client)
 
+    def flange_holding_at(self, position, orientation) -> np.ndarray:
+        """Where the flange (3,) must be, turned to ``orientation`` (quaternion), for the body
+        it holds kinematically to be at ``position`` (3,).
+
+        Raises
+        ------
+        RuntimeError
+            If the arm holds nothing kinematically.
+        """
+        if self._carried is None:
+            raise RuntimeError("the Sawyer holds no body kinematically")
+        rel_pos, _ = self._carried
+        offset, _ = p.multiplyTransforms([0, 0, 0], list(orientation), rel_pos, [0, 0, 0, 1])
+        return np.asarray(position, float) - np.array(offset)
+
     def release(self) -> None:
         """Switch the suction off."""
         if self._grasp is not None:

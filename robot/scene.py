@@ -154,6 +154,7 @@ class OnionPool:
             raise ValueError(f"blemish_rate must be in [0, 1]; got {blemish_rate}")
         self.client, self.rng = client, rng
         self.onions: list[Onion] = []
+        self.textures: dict[int, int] = {}  # body -> its texture's PyBullet id
         self.bin_order: list[int] = []
         xs = np.linspace(-BELT_HALF_LENGTH + 0.1, BELT_HALF_LENGTH - 0.1, n_onions)
         xs = xs + rng.uniform(-0.05, 0.05, n_onions)
@@ -170,16 +171,18 @@ class OnionPool:
                 body = p.createMultiBody(0, -1, vis, basePosition=pos.tolist(),
                                          physicsClientId=client)
                 p.changeVisualShape(body, -1, textureUniqueId=texture, physicsClientId=client)
+                self.textures[body] = texture
                 self.onions.append(Onion(i, body, look, pos))
 
     @property
     def body_ids(self) -> list[int]:
         return [o.body for o in self.onions]
 
-    def move(self, onion: Onion, position: np.ndarray) -> None:
-        """Put ``onion`` at ``position`` (3,)."""
+    def move(self, onion: Onion, position: np.ndarray, yaw: float = 0.0) -> None:
+        """Put ``onion`` at ``position`` (3,), turned by ``yaw`` radians about the vertical."""
         onion.position = np.asarray(position, float).copy()
-        p.resetBasePositionAndOrientation(onion.body, onion.position.tolist(), [0, 0, 0, 1],
+        turn = [0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2))]
+        p.resetBasePositionAndOrientation(onion.body, onion.position.tolist(), turn,
                                           physicsClientId=self.client)
 
     def advance(self, distance: float, stop: tuple[Onion, float] | None = None) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import pybullet as p
@@ -51,6 +51,10 @@ from robot.world import WorldFrame, WorldProbe, WorldState, camera_pose
 
 __all__ = ["INSPECTION_CAMERA", "SessionConfig", "SortingSession", "expert_model"]
 
+#: How far the sorter turns the onion in hand (about the vertical, radians) while lifting it
+#: to the face to inspect it, as a person looks at more than one side.
+_INSPECT_TURN = np.pi
+
 logger = logging.getLogger(__name__)
 
 INSPECTION_CAMERA = CameraSpec(
@@ -83,10 +87,14 @@ class SessionConfig:
     texture_size : int
         Side of each onion texture in pixels.
     camera, inspection : CameraSpec
-        The main RGB-D camera facing the sorter, and the inspection view.
+        The main RGB-D camera facing the sorter, and the inspection view (rendered with every
+        frame).
     difficulty : Difficulty or str
         Perception difficulty (:mod:`robot.difficulty`): a :class:`Difficulty` or the name of
         one of :data:`robot.difficulty.DIFFICULTY_LEVELS`; ``"clean"`` renders today's world.
+    label_blemishes : bool
+        Measure the rot each onion shows in the inspection view (one more render of it per
+        frame; :attr:`robot.labels.OnionLabel.rot_pixels`), for datasets.
     """
 
     n_steps: int = 20
@@ -100,6 +108,7 @@ class SessionConfig:
     camera: CameraSpec = field(default_factory=CameraSpec)
     inspection: CameraSpec = INSPECTION_CAMERA
     difficulty: Difficulty = DIFFICULTY_LEVELS["clean"]
+    label_blemishes: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "difficulty", resolve_difficulty(self.difficulty))
@@ -198,6 +207,16 @@ class SortingSession:
                               blemish_subtlety=d.blemish_subtlety,
                               one_sided_blemish=d.one_sided_blemish)
         self.effects = ImageEffects(d, self._difficulty_rng)
+        self._blemish_probe = None
+        if self.config.label_blemishes:
+            from robot.blemishes import BlemishProbe
+
+            self._blemish_probe = BlemishProbe(self.client)
+            for o in self.pool.onions:
+                self._blemish_probe.add(o.body, self.pool.textures[o.body], o.appearance,
+                                        self.config.texture_size,
+                                        subtlety=d.blemish_subtlety,
+                                        one_sided=d.one_sided_blemish)
         self.sorter = HumanSorter(self.client, rng)
         self.gate = StopGate(self.client)
         cam = self.config.camera
@@ -287,9 +306,16 @@ class SortingSession:
             close = render(self.client, self.config.inspection, self.lighting)
             inspection_onions = tuple(o for o in self._onion_labels(close.seg) if o.box)
             focus = [o.box for o in inspection_onions if o.in_focus]
-            inspection = self.effects.color(
-                self.effects.hand(close.rgb, focus[0] if focus else None, self.sorter.skin),
-                time_s)
+            rgb, covered = self.effects.hand_and_cover(close.rgb, focus[0] if focus else None,
+                                                       self.sorter.skin)
+            inspection = self.effects.color(rgb, time_s)
+            if self._blemish_probe is not None:
+                bodies = {o.onion_id: self.pool.onions[o.onion_id].body
+                          for o in inspection_onions}
+                rot = self._blemish_probe.rot_pixels(self.config.inspection,
+                                                     bodies.values(), covered)
+                inspection_onions = tuple(replace(o, rot_pixels=rot[bodies[
+                    o.onion_id]]) for o in inspection_onions)
         return WorldFrame(
             index=index, step=label, phase=phase, time_s=time_s,
             color=self.effects.color(image.rgb, time_s, moving=phase > 0),
@@ -321,6 +347,7 @@ class SortingSession:
         cfg = self.config
         dt = cfg.step_duration_s / cfg.frames_per_step
         s = decode_state(int(self._policy_rng.choice(N_STATES, p=self.initial)))
+        self._held_turn = 0.0  # how far the sorter has turned the onion in hand (radians)
         self._setup(s)
         index = 0
         for t in range(cfg.n_steps):
@@ -353,15 +380,20 @@ class SortingSession:
                 self.gate.set(self._pinned(s if k == 0 else s_next))
                 if a == SortAction.PICK and s_next != s and phase >= 0.5:
                     self.focus.place = "held"
+                if a == SortAction.INSPECT and s_next != s:
+                    self._held_turn = _INSPECT_TURN * phase  # turned in hand on the way up
                 if self.focus.place == "held":
-                    self.pool.move(self.focus, self._held_position(self.focus))
+                    self.pool.move(self.focus, self._held_position(self.focus),
+                                   yaw=self._held_turn)
                 if k == cfg.frames_per_step:
                     break  # the step's end is the next step's first frame
                 self.walker.walk((k + 0.5) / cfg.frames_per_step if crossing else None)
                 yield self._render(index, label, k, (t + phase) * cfg.step_duration_s,
-                                   with_inspection=k == 0)
+                                   with_inspection=True)
                 index += 1
             self._finish_step(a, s_next)
+            if self.focus.place != "held":
+                self._held_turn = 0.0
             s = s_next
         self.walker.walk(None)
 

@@ -1,18 +1,22 @@
 """The Sawyer sorting station: the robot executes sorting actions on a line-up of onions.
 
 The workcell is the human sessions' (:func:`robot.scene.build_workcell`, the :class:`StopGate`,
-the main :class:`~robot.camera.CameraSpec` and the inspection view
-:data:`robot.simulation.INSPECTION_CAMERA`), with the Sawyer standing where the sorter stood,
-facing the belt. Each :class:`~irl.domains.onion_sorting.SortAction` is a motion primitive:
+the main :class:`~robot.camera.CameraSpec`), with the Sawyer standing where the sorter stood,
+facing the belt. It inspects at the sorter's inspection spot, through a camera of its own
+(:data:`ROBOT_INSPECTION_CAMERA`: the spot as the sorter's camera sees it, at twice the
+resolution, as a real cell would fit its inspection station with a sharper camera than the one
+that watches the person; the difficulty's image effects apply to it as to every camera).
+Each :class:`~irl.domains.onion_sorting.SortAction` is a motion primitive:
 
 - CLAIM raises the gate and runs the belt until the next onion of the line-up waits at the
   pick spot (an indexing belt: it runs only while the station claims; onions placed back
   downstream ride away with it and leave the belt at its end);
 - PICK moves above the waiting onion, descends, switches the suction on, lowers the gate and
   lifts the onion to the hover pose;
-- INSPECT holds the onion up in front of the inspection camera, renders that view and asks the
-  classifier for the onion's class (if the classifier abstains, the wrist turns the onion to
-  show another side and asks again);
+- INSPECT holds the onion up in front of the inspection camera and shows it from every side:
+  the wrist turns it through ``inspection_views`` evenly spaced angles, every other view tilted
+  so that its underside faces the camera (:func:`inspection_poses`); the classifier reads the
+  views together and answers the onion's class (it may abstain only if no view shows the onion);
 - PLACE_ON_CONVEYOR sets the onion on the belt downstream of the gate, where it rides away (or,
   if it was never inspected, back at the gate, where it waits to be picked again), and returns
   above the pick spot;
@@ -42,7 +46,7 @@ import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NamedTuple, Protocol
 
 import numpy as np
 import pybullet as p
@@ -70,10 +74,10 @@ from robot.difficulty import (
     difficulty_rng,
     resolve_difficulty,
 )
+from robot.inspection_poses import INSPECTION_TILT, INSPECTION_VIEWS, inspection_poses
 from robot.labels import OnionLabel
 from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
 from robot.scene import GATE_X, StopGate, build_workcell, connect
-from robot.simulation import INSPECTION_CAMERA
 from robot.state_map import (
     BELT_HALF_LENGTH,
     BELT_TOP,
@@ -87,24 +91,56 @@ from robot.world import Pose, RobotState, WorldProbe, WorldState, camera_pose, r
 
 __all__ = [
     "GROUND_TRUTH",
+    "INSPECTION_TILT",
+    "INSPECTION_VIEWS",
     "ROBOT_BASE",
     "ROBOT_BASE_YAW",
+    "ROBOT_INSPECTION_CAMERA",
     "ROBOT_TARGETS",
     "SAWYER_JOINTS",
     "START_STATE",
     "STEP_DURATION_S",
     "Classifier",
+    "InspectionLabel",
     "SawyerStation",
     "StationStep",
+    "Verdict",
+    "inspection_poses",
     "make_lineup",
     "station_robot",
 ]
 
 logger = logging.getLogger(__name__)
 
-Classifier = Callable[[np.ndarray], Prediction]
-"""``classify(rgb) -> Prediction``: GOOD or BAD from the inspection view ``rgb`` (h, w, 3), or
-UNKNOWN to abstain."""
+class InspectionLabel(NamedTuple):
+    """The ground truth of one onion in an inspection view: its box ``(x_min, y_min, x_max,
+    y_max)`` (exclusive max), its class, its visible pixels, and how many of them show rot
+    (None where not measured)."""
+
+    box: tuple[int, int, int, int]
+    blemished: bool
+    visible_pixels: int
+    rot_pixels: int | None = None
+
+
+class Verdict(Protocol):
+    """What a classifier may answer instead of a bare :class:`Prediction`: the class, with the
+    probability behind it (``perception.InspectionVerdict`` is one)."""
+
+    @property
+    def prediction(self) -> int: ...
+
+    @property
+    def p_blemished(self) -> float | None: ...
+
+    @property
+    def view_p_blemished(self) -> tuple[float | None, ...]: ...
+
+
+Classifier = Callable[[list[np.ndarray]], "Prediction | Verdict"]
+"""``classify(views) -> Prediction or Verdict``: the held onion's class from all its inspection
+views (each (h, w, 3) uint8 RGB, in the order of :func:`inspection_poses`): GOOD or BAD, or
+UNKNOWN to abstain (no view shows an onion)."""
 
 GROUND_TRUTH: Literal["ground-truth"] = "ground-truth"
 """Pass as ``classify`` to perceive every inspected onion's true class (perfect perception)."""
@@ -144,15 +180,28 @@ _GATE_FACE = GATE_X - 0.02  # upstream face of the raised stop gate
 _PLACE_X = GATE_X + 0.12  # where the robot sets inspected onions back on the belt
 _PARKED = (0.0, 0.0, -10.0)  # bodies off the belt (not yet arrived, or ridden away)
 _SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions after a move
-_INSPECT_YAWS = (0.0, -2 * np.pi / 3, -4 * np.pi / 3)  # wrist turns while the classifier abstains
 _BIN_SLOTS = 9  # onions per layer in the bin (3 x 3)
 _BIN_LAYERS = 4
 _GRIPPER_RGB = (72.0, 72.0, 78.0)  # the suction gripper's grey, drawn over a held onion
 
 
-def _down(yaw: float) -> tuple[float, ...]:
-    """Quaternion (x, y, z, w) of the flange pointing down, turned by ``yaw`` about z."""
-    return tuple(p.getQuaternionFromEuler([np.pi, 0.0, -yaw]))
+ROBOT_INSPECTION_CAMERA = CameraSpec(
+    width=320, height=240, fov_deg=38.0, eye=(0.02, 0.08, 1.50), target=(0.02, 0.32, 1.45),
+    frame_id="inspection",
+)
+"""The Sawyer's inspection camera: the sorter's inspection spot (:data:`INSPECTION_CAMERA`'s
+pose) at twice its resolution, 320x240 over a 38-degree field of view, so that a held onion
+(6.4-9 cm across, 18 cm away) fills about 200 pixels of it instead of 50."""
+
+def _down(yaw: float, tilt: float = 0.0) -> tuple[float, ...]:
+    """Quaternion (x, y, z, w) of the flange pointing down, turned by ``yaw`` about z, then
+    tilted by ``tilt`` about x so that what hangs from it swings towards -y (the inspection
+    camera)."""
+    down = p.getQuaternionFromEuler([np.pi, 0.0, -yaw])
+    if not tilt:
+        return tuple(down)
+    turn = p.getQuaternionFromEuler([-tilt, 0.0, 0.0])
+    return tuple(p.multiplyTransforms([0, 0, 0], turn, [0, 0, 0], down)[1])
 
 
 def station_robot(positions: np.ndarray | None = None) -> RobotState:
@@ -213,7 +262,13 @@ class StationStep:
     perceived : Prediction or None
         The classifier's answer, if this action inspected an onion.
     inspection : ndarray of shape (h, w, 3) or None
-        uint8 RGB of the inspection view, if this action inspected an onion.
+        uint8 RGB of the first inspection view, if this action inspected an onion.
+    views : tuple of ndarray of shape (h, w, 3)
+        Every inspection view of the onion (empty if this action inspected none).
+    p_blemished : float or None
+        The classifier's probability that the onion is blemished, where it gave one.
+    view_p_blemished : tuple of (float or None)
+        Its probability from each view alone, where it gave them (None: no onion found).
     image : CameraImage or None
         The main camera after the action, if the station renders every step.
     q : ndarray of shape (7,)
@@ -231,6 +286,9 @@ class StationStep:
     image: CameraImage | None = field(default=None, repr=False)
     q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
     reach_error: float = 0.0
+    views: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    p_blemished: float | None = None
+    view_p_blemished: tuple[float | None, ...] = field(default=(), repr=False)
 
     @property
     def changed(self) -> bool:
@@ -246,10 +304,10 @@ class SawyerStation:
     Parameters
     ----------
     classify : callable or "ground-truth"
-        ``classify(rgb) -> Prediction`` from the inspection view (h, w, 3) uint8: GOOD, BAD, or
-        UNKNOWN to abstain (the robot then shows it other sides of the onion, and counts an
-        onion it never classifies as GOOD); :data:`GROUND_TRUTH` perceives each onion's true
-        class.
+        ``classify(views) -> Prediction or Verdict`` from the onion's inspection views (each
+        (h, w, 3) uint8): GOOD, BAD, or UNKNOWN to abstain (an onion it never classifies counts
+        as GOOD); :data:`GROUND_TRUTH` perceives each onion's true class (the views are still
+        taken).
     n_onions : int
         Onions in the line-up.
     n_blemished : int
@@ -261,7 +319,12 @@ class SawyerStation:
     render_every_step : bool
         Render the main camera after every action (:attr:`StationStep.image`).
     camera, inspection : CameraSpec
-        The main camera and the inspection view.
+        The main camera and the inspection camera (:data:`ROBOT_INSPECTION_CAMERA`).
+    inspection_views : int
+        Views of every inspected onion (:func:`inspection_poses`).
+    label_blemishes : bool
+        Measure the rot each inspection view shows, for :meth:`inspection_labels` (one more
+        render per view; for datasets).
     difficulty : Difficulty or str
         Perception difficulty (:mod:`robot.difficulty`), or a level's name: the onions'
         blemishes, and the image effects and the gripper covering part of the onion on the
@@ -290,8 +353,10 @@ class SawyerStation:
         move_steps: int = 120,
         render_every_step: bool = False,
         camera: CameraSpec | None = None,
-        inspection: CameraSpec = INSPECTION_CAMERA,
+        inspection: CameraSpec = ROBOT_INSPECTION_CAMERA,
         difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
+        inspection_views: int = INSPECTION_VIEWS,
+        label_blemishes: bool = False,
     ) -> None:
         if isinstance(classify, str):
             if classify != GROUND_TRUTH:
@@ -307,6 +372,9 @@ class SawyerStation:
         if isinstance(move_steps, bool) or not isinstance(move_steps, int | np.integer) \
                 or move_steps < 2:
             raise ValueError(f"move_steps must be an int >= 2; got {move_steps!r}")
+        self.poses = inspection_poses(inspection_views)
+        self.label_blemishes = bool(label_blemishes)
+        self._blemish_probe = None
         seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
         self.difficulty = resolve_difficulty(difficulty)
         self._difficulty_seq = seq
@@ -343,6 +411,10 @@ class SawyerStation:
             self.arm = Sawyer(self.client, base_position=ROBOT_BASE, base_yaw=ROBOT_BASE_YAW)
             self._q_rest = self.arm.inverse_kinematics(ROBOT_TARGETS[Location.CONVEYOR])
             self.arm.reset(self._q_rest)
+            if self.label_blemishes:
+                from robot.blemishes import BlemishProbe
+
+                self._blemish_probe = BlemishProbe(self.client)
             self._onions = self._make_onions()
             bodies = {f"workcell/{name}": body for name, body in self.workcell.items()}
             bodies["gate"] = self.gate.body
@@ -354,6 +426,9 @@ class SawyerStation:
             self.__exit__(None, None, None)
             raise
         self.focus, self.n_claimed = None, 0
+        # the last inspection's views as rendered and, with label_blemishes, their labels
+        self.last_views: list[CameraImage] = []
+        self.last_labels: list[list[InspectionLabel]] = []
         self._travel = -_SPACING  # belt travel; onion k waits at the gate at travel k*_SPACING
         self._in_bin = 0
         self._arrange_belt()
@@ -421,6 +496,10 @@ class SawyerStation:
                                          physicsClientId=self.client)
                 p.changeVisualShape(body, -1, textureUniqueId=texture,
                                     physicsClientId=self.client)
+                if self._blemish_probe is not None:
+                    self._blemish_probe.add(body, texture, look, 64,
+                                            subtlety=self.difficulty.blemish_subtlety,
+                                            one_sided=self.difficulty.one_sided_blemish)
                 # queued so that at belt travel i * _SPACING it touches the raised gate (the
                 # belt starts at travel -_SPACING)
                 stop_x = _GATE_FACE - look.radius - 0.002
@@ -525,31 +604,35 @@ class SawyerStation:
     def render_inspection(self) -> CameraImage:
         """The inspection view now, as the classifier reads it: with the difficulty's image
         effects and, by chance, the gripper over part of the held onion."""
-        image = render(self._require_client(), self.inspection, self.lighting)
+        image = render(self._require_client(), self.inspection, self.lighting,
+                       cull=(self.arm.body,))
         if self.difficulty.is_clean:
             return image
         box = None
         if self.focus is not None:
             boxes = boxes_from_segmentation(image.seg, [self._onions[self.focus].body])
             box = next(iter(boxes.values()))[:4] if boxes else None
-        rgb = self.inspection_effects.hand(image.rgb, box, _GRIPPER_RGB)
+        rgb, covered = self.inspection_effects.hand_and_cover(image.rgb, box, _GRIPPER_RGB)
         return CameraImage(rgb=self.inspection_effects.color(rgb, self._clock), depth=image.depth,
-                           seg=image.seg)
+                           seg=image.seg, covered=covered)
 
-    def inspection_labels(self, image: CameraImage | None = None
-                          ) -> list[tuple[tuple[int, int, int, int], bool, int]]:
-        """``(box, blemished, visible_pixels)`` of each onion in the inspection view.
+    def inspection_labels(self, image: CameraImage | None = None) -> list[InspectionLabel]:
+        """The ground truth of each onion in the inspection view ``image`` (rendered now if
+        None), for training perception on what the robot will see.
 
-        Boxes are ``(x_min, y_min, x_max, y_max)`` pixels (exclusive max) from the segmentation
-        of ``image`` (rendered now if None): the ground truth of the robot's inspection views,
-        for training the detector on what the robot will see.
+        Boxes are ``(x_min, y_min, x_max, y_max)`` pixels (exclusive max) from the
+        segmentation. With ``label_blemishes`` each label counts the onion's pixels that show
+        rot (:class:`robot.blemishes.BlemishProbe`, measured now: call it with the world as it
+        was when ``image`` was rendered), leaving out those the gripper covers.
         """
         if image is None:
             image = render(self._require_client(), self.inspection, self.lighting)
         boxes = boxes_from_segmentation(image.seg, [o.body for o in self._onions])
         by_body = {o.body: o for o in self._onions}
-        return [(tuple(b[:4]), by_body[body].appearance.blemished, b[4])
-                for body, b in boxes.items()]
+        rot = ({} if self._blemish_probe is None else
+               self._blemish_probe.rot_pixels(self.inspection, boxes, image.covered))
+        return [InspectionLabel(tuple(b[:4]), by_body[body].appearance.blemished, b[4],
+                                rot.get(body)) for body, b in boxes.items()]
 
     # -- motion primitives -------------------------------------------------------------------
     def _solve(self, target: np.ndarray, orientation: tuple[float, ...] | None = None,
@@ -617,46 +700,54 @@ class SawyerStation:
         errs.append(self._move(ROBOT_TARGETS[Location.HOVER]))
         return errs
 
-    def _classify(self, onion: _LineUpOnion, rgb: np.ndarray) -> Prediction | None:
-        """The classifier's answer on ``rgb``; None if it abstains (UNKNOWN)."""
+    def _classify(self, onion: _LineUpOnion, views: list[np.ndarray]
+                  ) -> tuple[Prediction | None, float | None, tuple[float | None, ...]]:
+        """The classifier's answer on ``views`` (None if it abstains: UNKNOWN), with the
+        probability that the onion is blemished and that of each view, where it gives them."""
         if self.classify == GROUND_TRUTH:
-            return Prediction.BAD if onion.appearance.blemished else Prediction.GOOD
-        raw = self.classify(rgb)
+            truth = Prediction.BAD if onion.appearance.blemished else Prediction.GOOD
+            return truth, float(onion.appearance.blemished), ()
+        raw = self.classify(views)
+        p_bad, per_view = None, ()
+        if hasattr(raw, "prediction"):
+            p_bad = getattr(raw, "p_blemished", None)
+            per_view = tuple(getattr(raw, "view_p_blemished", ()))
+            raw = raw.prediction
         try:
             answer = Prediction(int(raw))
         except (TypeError, ValueError):
             raise ValueError(f"classify must return a Prediction (GOOD, BAD, or UNKNOWN to "
-                             f"abstain); got {raw!r}") from None
-        return None if answer == Prediction.UNKNOWN else answer
+                             f"abstain) or a verdict with one; got {raw!r}") from None
+        return (None if answer == Prediction.UNKNOWN else answer,
+                None if p_bad is None else float(p_bad), per_view)
 
-    def _inspect(self, onion: _LineUpOnion) -> tuple[list[float], Prediction | None,
-                                                      np.ndarray | None]:
-        """Hold the onion up to the inspection camera and classify it.
+    def _inspect(self, onion: _LineUpOnion) -> tuple[list[float], list[CameraImage]]:
+        """Hold the onion up to the inspection camera and show it from every side.
 
-        While the classifier abstains (answers UNKNOWN, e.g. it found no onion), the wrist
-        turns the onion to show another side, up to ``len(_INSPECT_YAWS)`` views; an onion
-        still unclassified then counts as GOOD (it is not discarded without evidence), with a
-        warning.
+        The onion arrives at the inspection pose, then the wrist turns (and tilts) it through
+        :attr:`poses` about its own centre, rendering the inspection camera at each, and
+        brings it back to the inspection pose. Returns the motions' errors and the views (none
+        if the onion was inspected before: it is only held up again).
         """
         target = ROBOT_TARGETS[Location.FACE]
         errs = [self._move(target)]
         if onion.perceived is not None:
-            return errs, None, None
-        answer, rgb = None, None
-        for k, yaw in enumerate(_INSPECT_YAWS):
+            return errs, []
+        centre = self.position(onion.index)
+        views: list[CameraImage] = []
+        self.last_labels = []
+        for k, (yaw, tilt) in enumerate(self.poses):
             if k:
-                errs.append(self._move(target, self.move_steps // 2, orientation=_down(yaw),
+                turn = _down(yaw, tilt)
+                errs.append(self._move(self.arm.flange_holding_at(centre, turn),
+                                       self.move_steps // 2, orientation=turn,
                                        seed=self.arm.q))
-            rgb = self.render_inspection().rgb
-            answer = self._classify(onion, rgb)
-            if answer is not None:
-                break
-        if answer is None:
-            logger.warning("the classifier abstained on onion %d in all %d views; it counts "
-                           "as GOOD", onion.index, len(_INSPECT_YAWS))
-            answer = Prediction.GOOD
-        onion.perceived = answer
-        return errs, answer, rgb
+            views.append(self.render_inspection())
+            if self.label_blemishes:
+                self.last_labels.append(self.inspection_labels(views[-1]))
+        if len(self.poses) > 1:
+            errs.append(self._move(target, self.move_steps // 2, seed=self.arm.q))
+        return errs, views
 
     def _place_on_conveyor(self, onion: _LineUpOnion) -> list[float]:
         inspected = onion.perceived is not None
@@ -712,7 +803,7 @@ class SawyerStation:
         self._clock += STEP_DURATION_S
         applies = next_state(s, a, blemished=False) != s or next_state(s, a, blemished=True) != s
         errs: list[float] = []
-        perceived, inspection = None, None
+        perceived, views, p_bad, per_view = None, (), None, ()
         if applies:
             onion = None if self.focus is None else self._onions[self.focus]
             if a == SortAction.CLAIM:
@@ -720,7 +811,16 @@ class SawyerStation:
             elif a == SortAction.PICK:
                 errs = self._pick(onion)
             elif a == SortAction.INSPECT:
-                errs, perceived, inspection = self._inspect(onion)
+                errs, shown = self._inspect(onion)
+                if shown:
+                    views = tuple(v.rgb for v in shown)
+                    perceived, p_bad, per_view = self._classify(onion, list(views))
+                    if perceived is None:
+                        logger.warning("the classifier abstained on onion %d in all %d views; "
+                                       "it counts as GOOD", onion.index, len(views))
+                        perceived = Prediction.GOOD
+                    onion.perceived = perceived
+                    self.last_views = shown
             elif a == SortAction.PLACE_ON_CONVEYOR:
                 errs = self._place_on_conveyor(onion)
             else:
@@ -735,42 +835,37 @@ class SawyerStation:
         logger.debug("%s: %s -> %s", a.name, s, seen)
         return StationStep(
             state=s, action=a, next_state=seen, onion=self.focus, perceived=perceived,
-            inspection=inspection, image=self.render() if self.render_every_step else None,
-            q=self.arm.q, reach_error=max(errs, default=0.0),
+            inspection=views[0] if views else None,
+            image=self.render() if self.render_every_step else None,
+            q=self.arm.q, reach_error=max(errs, default=0.0), views=views, p_blemished=p_bad,
+            view_p_blemished=per_view,
         )
 
 
 def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
                            difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
-                           ) -> Iterator[tuple[int, np.ndarray, list]]:
+                           inspection_views: int = INSPECTION_VIEWS,
+                           camera: CameraSpec = ROBOT_INSPECTION_CAMERA,
+                           ) -> Iterator[tuple[int, int, np.ndarray, list]]:
     """The Sawyer's inspection views of a line-up, with their ground-truth boxes.
 
-    The expert's greedy policy runs the line-up with a classifier that abstains, so the wrist
-    shows each onion from every side it turns to (:data:`_INSPECT_YAWS`). Yields ``(onion
-    index, rgb (h, w, 3) uint8, labels)`` with labels as :meth:`SawyerStation.inspection_labels`;
-    ``difficulty`` as for :class:`SawyerStation`.
+    The expert's greedy policy runs the line-up, the robot showing each onion from
+    ``inspection_views`` sides (:func:`inspection_poses`) to ``camera``, and a classifier that
+    knows the truth. Yields ``(onion index, view index, rgb (h, w, 3) uint8, labels)``, the
+    labels :class:`InspectionLabel` with the rot each view shows; ``difficulty`` as for
+    :class:`SawyerStation`.
     """
     from irl.domains.onion_sorting import encode_state, onion_sorting
 
     actions = onion_sorting().expert_policy().argmax(axis=1)
-    views: list[tuple[int, np.ndarray, list]] = []
-    holder: list[SawyerStation] = []
-
-    def abstain(rgb: np.ndarray) -> Prediction:
-        views.append((holder[0].focus, rgb, holder[0].inspection_labels()))
-        return Prediction.UNKNOWN
-
-    with SawyerStation(abstain, n_onions=n_onions, n_blemished=n_onions // 2,
-                       seed=seed, difficulty=difficulty) as station:
-        holder.append(station)
-        logger.disabled = True  # the classifier abstains on purpose: no warning per onion
-        try:
-            for _ in range(n_onions * 6):
-                if all(station.place_of(i) in ("bin", "belt", "gone")
-                       for i in range(n_onions)):
-                    break
-                station.step(int(actions[encode_state(station.state)]))
-                yield from views
-                views.clear()
-        finally:
-            logger.disabled = False
+    with SawyerStation(GROUND_TRUTH, n_onions=n_onions, n_blemished=n_onions // 2, seed=seed,
+                       difficulty=difficulty, inspection=camera,
+                       inspection_views=inspection_views, label_blemishes=True) as station:
+        for _ in range(n_onions * 6):
+            if all(station.place_of(i) in ("bin", "belt", "gone") for i in range(n_onions)):
+                break
+            done = station.step(int(actions[encode_state(station.state)]))
+            if done.views:
+                for k, (image, labels) in enumerate(zip(station.last_views, station.last_labels,
+                                                        strict=True)):
+                    yield done.onion, k, image.rgb, labels

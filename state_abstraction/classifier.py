@@ -162,8 +162,9 @@ class StateClassifier(nn.Module):
         """Class probabilities per head, ``{head: [n, n_classes]}``, of steps ``x``."""
         self.eval()
         x = torch.as_tensor(x)
-        chunks = [{k: torch.softmax(v, dim=1).numpy()
-                   for k, v in self(x[i:i + batch_size].float()).items()}
+        device = next(self.parameters()).device
+        chunks = [{k: torch.softmax(v.float(), dim=1).cpu().numpy()
+                   for k, v in self(x[i:i + batch_size].float().to(device)).items()}
                   for i in range(0, len(x), batch_size)]
         return {k: np.concatenate([c[k] for c in chunks]) for k in HEADS}
 
@@ -171,13 +172,14 @@ class StateClassifier(nn.Module):
         """Write the configuration and weights to ``path`` (through a temporary name)."""
         path = Path(path)
         tmp = path.with_name(path.name + ".partial")
-        torch.save({"config": asdict(self.config), "state_dict": self.state_dict()}, tmp)
+        state = {k: v.detach().cpu() for k, v in self.state_dict().items()}
+        torch.save({"config": asdict(self.config), "state_dict": state}, tmp)
         tmp.replace(path)
         return path
 
     @classmethod
-    def load(cls, path: Path | str) -> StateClassifier:
-        """The classifier saved at ``path``, in eval mode."""
+    def load(cls, path: Path | str, device: str | torch.device = "cpu") -> StateClassifier:
+        """The classifier saved at ``path``, in eval mode, on ``device``."""
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"no state-classifier checkpoint at {path}")
@@ -188,7 +190,7 @@ class StateClassifier(nn.Module):
             model.load_state_dict(ckpt["state_dict"])
         except Exception as exc:  # not a checkpoint, truncated, or another model's weights
             raise ValueError(f"{path} is not a state-classifier checkpoint ({exc})") from None
-        return model.eval()
+        return model.to(device).eval()
 
 
 def frame_input(color: np.ndarray, depth: np.ndarray | None, config: ClassifierConfig
@@ -357,8 +359,8 @@ def _val_score(model: StateClassifier, x: torch.Tensor, y: dict, dropout: float
 
 def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
                      test: Sequence[LabelledStep], config: ClassifierConfig,
-                     out: Path | str, *, on_epoch: Callable[[dict], None] | None = None
-                     ) -> dict:
+                     out: Path | str, *, on_epoch: Callable[[dict], None] | None = None,
+                     device: str | torch.device = "cpu") -> dict:
     """Train on ``train``, keep the best epoch on ``val``, report metrics on ``test``.
 
     Each training step's depth is zeroed with probability ``config.depth_dropout``. The best
@@ -375,6 +377,9 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     on_epoch : callable, optional
         Called after each epoch with its history record (``epoch``, ``train_loss``, val
         metrics), e.g. to draw a progress bar.
+    device : str or torch.device
+        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
+        the CPU in float32.
 
     Returns
     -------
@@ -389,7 +394,10 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     drop_gen = torch.Generator().manual_seed(config.seed + 1)
     x_tr, y_tr = steps_to_tensors(train, config)
     x_va, y_va = steps_to_tensors(val, config)
-    model = StateClassifier(config)
+    device = torch.device(device)
+    amp = device.type == "cuda"
+    scaler = torch.amp.GradScaler("cuda", enabled=amp)
+    model = StateClassifier(config).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * ((len(x_tr) + config.batch_size - 1) // config.batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=steps)
@@ -401,10 +409,14 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
         for i in range(0, len(order), config.batch_size):
             idx = order[i:i + config.batch_size]
             x, _ = drop_depth(x_tr[idx].float(), config.depth_dropout, drop_gen)
-            loss = _loss(model(x), {k: v[idx] for k, v in y_tr.items()})
+            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
+                logits = model(x.to(device))
+            loss = _loss({k: v.float() for k, v in logits.items()},
+                         {k: v[idx].to(device) for k, v in y_tr.items()})
             opt.zero_grad()
-            loss.backward()
-            opt.step()
+            scaler.scale(loss).backward()
+            scaler.step(opt)
+            scaler.update()
             sched.step()
             total += loss.item() * len(idx)
         score, val_metrics = _val_score(model, x_va, y_va, config.depth_dropout)
@@ -415,7 +427,7 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
         if score > best:
             best = score
             model.save(out / "state_classifier.pt")
-    model = StateClassifier.load(out / "state_classifier.pt")
+    model = StateClassifier.load(out / "state_classifier.pt", device=device)
     metrics: dict[str, Any] = {}
     if len(test):
         report = evaluate_steps(model, test)

@@ -8,13 +8,14 @@ For each step the state classifier reads the onion and end-effector locations, t
 a claimed onion waits at the gate, and whether the camera was occluded
 (:mod:`state_abstraction.classifier`). The third state factor, the sorter's prediction, is not in
 the main camera's picture: it is what the sorter learned by looking at the onion. It comes from
-the detector's class of the onion in the inspection view, remembered until a new onion is taken
-up (:func:`track_predictions`). The inspection view is a separate camera that the passer-by does
-not block, so an inspection is seen even during an occluded step.
+the inspection views of the step's frames: an inspection model (:class:`InspectionReader`, for
+instance ``perception.Inspector``) gives each view the probability that the onion in it is
+blemished, and the views of the onion in focus are fused as they come, the memory starting over
+when a new onion is taken up (:func:`track_predictions`). The inspection view is a separate
+camera that the passer-by does not block, so an inspection is seen even during an occluded step.
 
-The detector is passed in as a callable (``detect(images) -> detections``, each with ``classes``
-and ``scores`` arrays, e.g. :meth:`perception.Detector.detect`), so this package does not depend
-on the detector's.
+The inspection model is passed in, so this package does not depend on the detector's or the
+inspection classifier's.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -35,20 +37,35 @@ from state_abstraction.classifier import (
 
 __all__ = [
     "OCCLUDED_THRESHOLD",
+    "PREDICTION_THRESHOLD",
+    "InspectionReader",
     "PerceivedStep",
-    "inspected_class",
     "perceive_steps",
     "track_predictions",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: Minimum detector score for an onion in the inspection view to count as seen.
-INSPECTION_SCORE = 0.2
+PREDICTION_THRESHOLD = 0.5
+"""The sorter is taken to have seen a blemish when the fused probability reaches this: the most
+likely class (the learner's observation, not a decision with costs)."""
 # OCCLUDED_THRESHOLD (imported above, defined in the classifier so that its evaluation uses the
 # same call): a step is called occluded when ``P(occluded) >= OCCLUDED_THRESHOLD``, 0.2. Below
 # 0.5 on purpose: a missed occlusion feeds the learner a garbage observation, a false alarm
 # only drops one (MMAP-BIRL marginalizes it).
+
+
+class InspectionReader(Protocol):
+    """What perception needs of an inspection model."""
+
+    def view_probabilities(self, views: list[np.ndarray]) -> list[float | None]:
+        """Per view (H, W, 3) uint8: the probability that its onion is blemished, None where
+        no onion is seen."""
+        ...
+
+    def fuse(self, view_p: Sequence[float]) -> float:
+        """One probability from those of several views of one onion."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -66,8 +83,11 @@ class PerceivedStep:
     onion, end_effector, action, prediction : int
         The estimates (argmax; the prediction from :func:`track_predictions`).
     inspected : int or None
-        The detector's class (0 good, 1 blemished) of an onion seen in the inspection view on
-        this step, None if none was seen.
+        The call (0 good, 1 blemished) on the onion seen in the inspection views of this
+        step's frames, fused, None if none showed one.
+    p_blemished : float or None
+        The fused probability, over every view of the onion in focus seen so far, that it is
+        blemished: what ``prediction`` is called from (None while none was seen).
     """
 
     step: int
@@ -79,6 +99,7 @@ class PerceivedStep:
     action: int
     prediction: int
     inspected: int | None = None
+    p_blemished: float | None = None
 
     @property
     def state(self) -> int:
@@ -96,61 +117,74 @@ class PerceivedStep:
         return {
             "step": self.step, "occluded": self.occluded, "p_occluded": self.p_occluded,
             "onion": self.onion, "end_effector": self.end_effector, "action": self.action,
-            "prediction": self.prediction, "inspected": self.inspected, "state": self.state,
+            "prediction": self.prediction, "inspected": self.inspected,
+            "p_blemished": None if self.p_blemished is None else round(self.p_blemished, 5),
+            "state": self.state,
             "observation": self.observation,
             "probs": {k: [round(float(v), 5) for v in p] for k, p in self.probs.items()},
         }
 
 
 def track_predictions(onion: Sequence[int], waiting: Sequence[bool],
-                      occluded: Sequence[bool], inspected: Sequence[int | None]) -> list[int]:
-    """The prediction factor of each step, from what was seen so far.
+                      occluded: Sequence[bool], at_rest: Sequence[Sequence[float]],
+                      later: Sequence[Sequence[float]] | None = None,
+                      fuse: Callable[[Sequence[float]], float] | None = None,
+                      ) -> tuple[list[int], list[float | None]]:
+    """The prediction factor of each step, from the views of the onion in focus seen so far.
 
-    The memory is reset to UNKNOWN when a new onion is taken up: a claimed onion waits at the
-    gate, or the onion is just picked (HOVER); it becomes the detector's class when the
-    inspection view shows an onion. Occluded steps keep the memory but still read the
-    inspection view.
+    The memory starts over (UNKNOWN) when a new onion is taken up: a claimed onion waits at the
+    gate, or the onion is just picked (HOVER). A view of the step's first frame (the state at
+    rest) counts from that step on; a view of a later frame of the step, from the next step on
+    (the step's state is the one at its start). Occluded steps keep the memory but still read
+    the inspection views.
 
     Parameters
     ----------
     onion : sequence of int, length T
         Perceived onion location per step (ignored where occluded).
     waiting, occluded : sequence of bool, length T
-    inspected : sequence of (int or None), length T
-        Detector class (0 good, 1 blemished) of an onion in the step's inspection view.
+    at_rest, later : sequence of sequences of float, length T
+        Per step, the probabilities that the onion is blemished from its first frame's
+        inspection view and from its later frames' (empty where no onion was seen; ``later``
+        None: no later views).
+    fuse : callable, optional
+        ``fuse(probabilities) -> probability`` of the views of one onion (default: the mean).
 
     Returns
     -------
-    list of int, length T
-        :class:`~irl.domains.onion_sorting.Prediction` values.
+    predictions : list of int, length T
+        :class:`~irl.domains.onion_sorting.Prediction` values: BAD where the fused probability
+        reaches :data:`PREDICTION_THRESHOLD`.
+    p_blemished : list of (float or None), length T
+        The fused probability behind each (None while no view was seen).
     """
     n = len(onion)
-    if not (len(waiting) == len(occluded) == len(inspected) == n):
-        raise ValueError(f"onion, waiting, occluded and inspected must have equal lengths; got "
-                         f"{n}, {len(waiting)}, {len(occluded)}, {len(inspected)}")
-    memory, out = Prediction.UNKNOWN, []
+    later = [()] * n if later is None else later
+    if not (len(waiting) == len(occluded) == len(at_rest) == len(later) == n):
+        raise ValueError(f"onion, waiting, occluded, at_rest and later must have equal lengths; "
+                         f"got {n}, {len(waiting)}, {len(occluded)}, {len(at_rest)}, "
+                         f"{len(later)}")
+    fuse = (lambda p: float(np.mean(p))) if fuse is None else fuse
+    seen: list[float] = []
+    predictions, probabilities = [], []
     for t in range(n):
         if not occluded[t] and (waiting[t] or onion[t] == Location.HOVER):
-            memory = Prediction.UNKNOWN
-        if inspected[t] is not None:
-            memory = Prediction.BAD if inspected[t] == 1 else Prediction.GOOD
-        out.append(int(memory))
-    return out
-
-
-def inspected_class(detections, min_score: float = INSPECTION_SCORE) -> int | None:
-    """The class of the best-scoring detection at or above ``min_score``, else None."""
-    scores = np.asarray(detections.scores)
-    if scores.size == 0 or scores.max() < min_score:
-        return None
-    return int(np.asarray(detections.classes)[int(scores.argmax())])
+            seen = []
+        seen.extend(at_rest[t])
+        p_bad = fuse(seen) if seen else None
+        predictions.append(int(Prediction.UNKNOWN if p_bad is None else
+                               Prediction.BAD if p_bad >= PREDICTION_THRESHOLD
+                               else Prediction.GOOD))
+        probabilities.append(p_bad)
+        seen.extend(later[t])
+    return predictions, probabilities
 
 
 def perceive_steps(
     classifier: StateClassifier,
     steps: Sequence[tuple[Sequence[np.ndarray], Sequence[np.ndarray | None] | None,
-                          np.ndarray | None]],
-    detect: Callable[[list[np.ndarray]], list] | None,
+                          Sequence[np.ndarray | None] | np.ndarray | None]],
+    inspection: InspectionReader | None,
     *, first_step: int = 0,
 ) -> list[PerceivedStep]:
     """Perceive consecutive steps of one session.
@@ -158,16 +192,17 @@ def perceive_steps(
     Parameters
     ----------
     classifier : StateClassifier
-    steps : sequence of (colors, depths, inspection)
+    steps : sequence of (colors, depths, views)
         Per step, in order: its frames' colour images (H, W, 3) uint8 RGB and depths (H, W)
-        metres, in time order, and the inspection view (h, w, 3) of its first frame (or None).
-        ``depths`` may be None, or hold None for a frame, where there is no depth (a plain
-        video): the classifier then reads that depth channel as zeros
+        metres, in time order, and the inspection views of its frames (h, w, 3), in the same
+        order, None for a frame without one (a single array: the first frame's only; None:
+        no view). ``depths`` may be None, or hold None for a frame, where there is no depth
+        (a plain video): the classifier then reads that depth channel as zeros
         (:func:`~state_abstraction.classifier.step_input`), as a model trained with
         ``depth_dropout > 0`` has learned to (a warning is logged for one trained without).
-    detect : callable or None
-        The detector, ``detect(list of images) -> list of detections``; None treats every
-        inspection view as empty (every prediction stays UNKNOWN).
+    inspection : InspectionReader or None
+        Reads the inspection views; None treats every view as empty (every prediction stays
+        UNKNOWN).
     first_step : int
         Index of the first step (steps are numbered consecutively).
     """
@@ -180,14 +215,26 @@ def perceive_steps(
                        no_depth, len(steps))
     x = np.stack([step_input(c, d, classifier.config) for c, d, _ in steps])
     probs = classifier.predict(x)
-    views = [(t, v) for t, (_, _, v) in enumerate(steps) if v is not None]
-    inspected: list[int | None] = [None] * len(steps)
-    if detect is not None and views:
-        for (t, _), det in zip(views, detect([v for _, v in views]), strict=True):
-            inspected[t] = inspected_class(det)
+    # every inspection view, as (step, frame within it, image)
+    views = []
+    for t, (_, _, v) in enumerate(steps):
+        frames = [v] if isinstance(v, np.ndarray) else ([] if v is None else list(v))
+        views.extend((t, k, img) for k, img in enumerate(frames) if img is not None)
+    at_rest: list[list[float]] = [[] for _ in steps]
+    later: list[list[float]] = [[] for _ in steps]
+    if inspection is not None and views:
+        for (t, k, _), p in zip(views, inspection.view_probabilities([img for *_, img in views]),
+                                strict=True):
+            if p is not None:
+                (at_rest if k == 0 else later)[t].append(float(p))
+    fuse = None if inspection is None else inspection.fuse
     best = {k: probs[k].argmax(axis=1) for k in FACTOR_HEADS}
     occluded = probs["occluded"][:, 1] >= OCCLUDED_THRESHOLD
-    predictions = track_predictions(best["onion"], best["waiting"] == 1, occluded, inspected)
+    predictions, p_bad = track_predictions(best["onion"], best["waiting"] == 1, occluded,
+                                           at_rest, later, fuse)
+    inspected = [None if not (a or b) else
+                 int((fuse or (lambda p: float(np.mean(p))))(a + b) >= PREDICTION_THRESHOLD)
+                 for a, b in zip(at_rest, later, strict=True)]
     return [
         PerceivedStep(
             step=first_step + t, occluded=bool(occluded[t]),
@@ -195,6 +242,7 @@ def perceive_steps(
             probs={k: probs[k][t] for k in probs},
             onion=int(best["onion"][t]), end_effector=int(best["end_effector"][t]),
             action=int(best["action"][t]), prediction=predictions[t], inspected=inspected[t],
+            p_blemished=p_bad[t],
         )
         for t in range(len(steps))
     ]

@@ -143,6 +143,7 @@ CASES = [
      ["--val and --test must be", "0.6, 0.6"]),
     (["dataset", "--difficulty", "nope", "--out", "{d}/x"], ["unknown level", "'nope'"]),
     (["dataset", "--robot-onions", "-1", "--out", "{d}/x"], ["robot_onions must be >= 0", "-1"]),
+    (["dataset", "--robot-views", "0", "--out", "{d}/x"], ["robot_views must be >= 1", "got 0"]),
     # train
     (["train"], ["required", "MODEL"]),
     (["train", "state-classifier", "--data", "{d}/data_none", "--out", "{d}/x"],
@@ -197,6 +198,29 @@ CASES = [
     (["evaluate", "{d}/run_shape"], ["the policy must give one action", "shape (2,)"]),
     (["evaluate", "{d}/run_nomodel", "--onions", "0"], ["onions must be >= 1", "got 0"]),
     (["evaluate", "{d}/run_nomodel", "--blemished", "80"], ["blemished must be in", "got 80"]),
+    (["evaluate", "--policy", "expert"], ["--policy expert needs --out DIR"]),
+    (["evaluate", "{d}/run_nomodel", "--policy", "expert", "--out", "{d}/x"],
+     ["--policy expert", "takes no RUN_DIR", "run_nomodel"]),
+    (["evaluate"], ["learned policy needs its run folder", "--policy expert"]),
+    (["evaluate", "--policy", "expert", "--out", "{d}/x", "--device", "tpu"],
+     ["--device", "invalid choice", "'tpu'", "'cuda'"]),
+    (["evaluate", "--policy", "expert", "--out", "{d}/x", "--inspection-views", "0"],
+     ["inspection_views must be >= 1", "got 0"]),
+    (["evaluate", "--policy", "expert", "--out", "{d}/x", "--miss-cost", "-1"],
+     ["miss_cost must be >= 0", "got -1"]),
+    (["evaluate", "--policy", "expert", "--out", "{d}/x", "--fusion", "max"],
+     ["--fusion", "invalid choice", "'max'"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x"],
+     ["data_bad/dataset.json", "not JSON"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--level-weights",
+      "muddy=2"], ["--level-weights", "unknown level 'muddy'"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--fusion", "mean"],
+     ["--fusion", "invalid choice", "'mean'"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--visibility", "1.5"],
+     ["visibility must be in (0, 1]", "got 1.5"]),
+    (["perceive", "{d}/unperceived.mcap", "--device", "gpu"],
+     ["--device", "invalid choice", "'gpu'"]),
+    (["eval-perception", "--data", "{d}/data_bad", "--views", "0"], ["views must be >= 1"]),
     # demo
     (["demo", "--quick", "--out", "{d}/afile/demo"], ["afile/demo", "cannot be created"]),
     (["demo", "--quick", "--out", "{d}/half"],
@@ -379,7 +403,7 @@ _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-percep
                     "calibrate": ["calibrate", "eval-perception"]}
 _SHARED = {"base", "models", "__init__", "_args"}
 #: Which commands run a stage module's refusals (``calibrate.py``'s come from calibrate alone).
-_CALLER_COMMANDS = {**_MODULE_COMMANDS, "calibrate": ["calibrate"]}
+_CALLER_COMMANDS = {**_MODULE_COMMANDS, "calibrate": ["calibrate"], "inspection": ["train"]}
 
 
 def _parsers() -> dict[str, set[str]]:
@@ -520,3 +544,16 @@ def test_shared_refusals_are_raised_only_by_commands_that_have_their_flag():
                     wrong.append(f"{path.name} calls {name}, whose message names "
                                  f"{sorted(missing)}, which `onionsort {command}` lacks")
     assert not wrong, "\n".join(wrong)
+
+
+def test_cuda_asked_for_where_there_is_none_is_one_line(fx, capsys):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a CUDA device")
+    for argv in (["evaluate", "--policy", "expert", "--out", f"{fx}/x", "--device", "cuda"],
+                 ["perceive", f"{fx}/unperceived.mcap", "--device", "cuda"],
+                 ["train", "inspection", "--data", f"{fx}/data_none", "--out", f"{fx}/x",
+                  "--device", "cuda"]):
+        code, err = _run_in_process(argv, capsys)
+        _one_clear_line(code, err, ["device 'cuda' is not available", "--device cpu or auto"])

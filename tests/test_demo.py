@@ -116,14 +116,13 @@ def test_quick_demo_runs_end_to_end(tmp_path, capsys):
 
     # the Sawyer sorted with the policy of model.json: sorting again with it, seed and models
     # as the demo did, gives the same onions the same fates
-    from onionsort.stages.evaluate import inspection_classifier
     from onionsort.stages.models import PerceptionModels
     from robot.evaluation import evaluate_policy
 
     model = json.loads((out / "mmap-birl" / "model.json").read_text())
     again = evaluate_policy(np.array(model["policy_indices"]), n_onions=size["onions"],
                             n_blemished=size["blemished"], seed=results["seed"],
-                            classify=inspection_classifier(PerceptionModels.load().detector))
+                            classify=PerceptionModels.load().inspector())
     evaluation = json.loads((out / "mmap-birl" / "evaluation.json").read_text())
     assert [o.to_dict() for o in again.onions] == evaluation["onions"]
 

@@ -2,6 +2,7 @@
 folders are clear errors."""
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -55,7 +56,7 @@ def test_run_folders_without_a_valid_model_are_refused(tmp_path, capsys):
 
 
 class _CountingDetector:
-    """Calls the onion in every image blemished (class 1), counting the images it is run on."""
+    """Finds an onion in every image, counting the images it is run on."""
 
     def __init__(self) -> None:
         self.images = 0
@@ -68,10 +69,27 @@ class _CountingDetector:
                            classes=np.array([1])) for _ in images]
 
 
+def _fake_models(detector):
+    """Models whose inspection runs ``detector`` and an untrained classifier."""
+    import torch
+
+    from perception.inspection import (
+        InspectionClassifier,
+        InspectionNet,
+        InspectionNetConfig,
+        Inspector,
+    )
+
+    torch.manual_seed(0)
+    classifier = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)))
+    return SimpleNamespace(
+        detector=detector,
+        inspector=lambda rule=None, threshold=0.5: Inspector(detector, classifier, rule=rule,
+                                                             threshold=threshold))
+
+
 def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_again(
         tmp_path):
-    from types import SimpleNamespace
-
     from onionsort.stages import EvaluateConfig, evaluate
 
     expert = onion_sorting().expert_policy().argmax(axis=1)
@@ -80,8 +98,43 @@ def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_
         (tmp_path / str(logged)).mkdir()
         run = _run_dir(tmp_path / str(logged), expert)
         detector = _CountingDetector()
-        result, _ = evaluate(EvaluateConfig(run=run, onions=3, blemished=1, rerun=logged,
-                                            mcap=False), SimpleNamespace(detector=detector))
-        assert (result.tp, result.fp) == (1, 2)  # every onion called blemished, one truly is
+        evaluate(EvaluateConfig(run=run, onions=3, blemished=1, rerun=logged, mcap=False,
+                                inspection_views=2), _fake_models(detector))
         calls[logged] = detector.images
-    assert calls[True] == calls[False] == 3  # one view per onion, classified once
+    assert calls[True] == calls[False] == 3 * 2  # two views per onion, each found once
+
+
+def test_the_experts_policy_runs_without_a_learning_run(tmp_path, capsys):
+    # perception measured apart from learning: the shipped models inspect, on the CPU
+    out = tmp_path / "eyes"
+    assert main(["evaluate", "--policy", "expert", "--onions", "3", "--blemished", "2",
+                 "--inspection-views", "2", "--difficulty", "paper", "--device", "cpu",
+                 "--no-rerun", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "expert: 3 onions (2 blemished), paper camera, inspection by 2 views" in said
+    saved = json.loads((out / "evaluation.json").read_text())
+    assert saved["policy"] == "expert" and saved["inspection_views"] == 2
+    assert saved["threshold"] == 0.5 and saved["fusion"] in ("log-odds", "noisy-or")
+    assert len(saved["onions"]) == 3 and (out / "evaluation.mcap").is_file()
+    for onion in saved["onions"]:  # every inspected onion carries the probability behind it
+        assert (onion["perceived"] is None) == (onion["p_blemished"] is None)
+        if onion["p_blemished"] is not None:
+            assert (onion["perceived"] == "bad") == (onion["p_blemished"] >= 0.5)
+    from recordings import open_session
+
+    decisions = open_session(out / "evaluation.mcap").decisions.values()
+    inspected = [d for d in decisions if d["perceived"] is not None]
+    assert inspected and all(len(d["view_p_blemished"]) == 2 for d in inspected)
+
+
+def test_the_threshold_follows_the_costs_given(tmp_path):
+    from onionsort.stages import EvaluateConfig, evaluate
+
+    run = _run_dir(tmp_path, onion_sorting().expert_policy().argmax(axis=1))
+    _, summary = evaluate(EvaluateConfig(run=run, onions=2, blemished=1, rerun=False,
+                                         mcap=False, miss_cost=3.0, waste_cost=1.0,
+                                         inspection_views=1),
+                          _fake_models(_CountingDetector()))
+    assert summary["threshold"] == 0.25
+    for onion in summary["onions"]:
+        assert (onion["perceived"] == "bad") == (onion["p_blemished"] >= 0.25)

@@ -56,7 +56,7 @@ def test_readme_gymnasium_example_matches_evaluate(capsys):
     exec(compile(example, "README.md", "exec"), scope)
     counts = [int(x) for x in capsys.readouterr().out.split()[-4:]]
     result = evaluate_policy(onion_sorting().expert_policy(), n_onions=6, n_blemished=3, seed=0,
-                             classify=scope["inspection_classifier"](scope["detector"]))
+                             classify=scope["inspector"])
     assert counts == [result.tp, result.fp, result.tn, result.fn]
 
 

@@ -15,10 +15,17 @@ METRICS = {
     "detector mAP@0.5": lambda r: r["map50"],
     "onion location, unoccluded steps": lambda r: r["accuracy"]["onion"],
     "end-effector location": lambda r: r["accuracy"]["end_effector"],
-    "inspection call (the detector's good/blemished call on each inspected onion)":
-        lambda r: r["inspection_call"]["all"]["accuracy"],
+    "inspection: the robot's fused call on each onion":
+        lambda r: _robot_call(r)["accuracy"],
+    "inspection: one view's rot call": lambda r: r["inspection_classifier"]["levels"]["clean"][
+        "robot"]["rot_accuracy"],
     "occluded steps: recall": lambda r: r["occlusion_recall"],
 }
+
+
+def _robot_call(result: dict) -> dict:
+    inspection = result["inspection_classifier"]
+    return inspection["levels"]["clean"]["robot"]["fused"][inspection["rule"]]
 
 
 def readme_floors() -> dict[str, float]:

@@ -62,6 +62,7 @@ __all__ = [
     "SortingState",
     "decode_state",
     "encode_state",
+    "misplacement_costs",
     "next_state",
     "onion_sorting",
     "sorting_features",
@@ -268,6 +269,32 @@ def transition_table_markdown() -> str:
 #: picking. Their direction fixes the greedy policy; with beta = 1.5 the Boltzmann sorter takes
 #: its greedy action about 85% of the time (only beta * theta is identifiable).
 TRUE_THETA = np.array([4.0, -4.0, -4.0, 4.0, 2.0, 2.0])
+
+
+def misplacement_costs(theta: np.ndarray | None = None) -> tuple[float, float]:
+    """What misplacing an onion costs under the reward weights ``theta`` (6,) (the expert's,
+    :data:`TRUE_THETA`, by default): ``(miss, waste)``, the reward lost by leaving a blemished
+    onion on the line instead of binning it, ``theta[bad_in_bin] - theta[bad_on_conveyor]``,
+    and by binning a good one instead of keeping it, ``theta[good_on_conveyor] -
+    theta[good_in_bin]``. Either placement ends the onion's turn the same way (the next step
+    claims another), so these are the differences of the two actions' values too.
+
+    Raises
+    ------
+    ValueError
+        If ``theta`` does not have one weight per feature, or a cost is negative (such a reward
+        prefers the misplacement).
+    """
+    th = TRUE_THETA if theta is None else np.asarray(theta, float)
+    if th.shape != (len(FeatureName),) or not np.all(np.isfinite(th)):
+        raise ValueError(f"theta must hold {len(FeatureName)} finite weights; got shape "
+                         f"{np.shape(th)}")
+    miss = float(th[FeatureName.BAD_IN_BIN] - th[FeatureName.BAD_ON_CONVEYOR])
+    waste = float(th[FeatureName.GOOD_ON_CONVEYOR] - th[FeatureName.GOOD_IN_BIN])
+    if miss < 0 or waste < 0:
+        raise ValueError(f"theta prefers misplacing onions (miss cost {miss}, waste cost "
+                         f"{waste}); the costs must be >= 0")
+    return miss, waste
 
 
 def factor_confusion(n: int, error: float) -> np.ndarray:

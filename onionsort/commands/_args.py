@@ -33,6 +33,40 @@ def add_connect_argument(parser: argparse.ArgumentParser, *,
                              "`rerun`)")
 
 
+#: :data:`perception.fusion.FUSION_RULES`, repeated so that building the parser does not import
+#: torch (a test checks they agree)
+FUSION_RULES = ("noisy-or", "log-odds")
+
+
+def add_device_argument(parser: argparse.ArgumentParser) -> None:
+    """``--device {auto,cpu,cuda}``: where torch runs the perception models."""
+    from onionsort.stages.base import DEVICES
+
+    parser.add_argument("--device", choices=DEVICES, default="auto",
+                        help="where torch runs: auto (CUDA when present, else the CPU; "
+                             "default), cpu or cuda")
+
+
+def add_inspection_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--inspection-views``, ``--miss-cost``, ``--waste-cost`` and ``--fusion``: how the
+    Sawyer inspects an onion and decides."""
+    from robot.inspection_poses import INSPECTION_VIEWS
+
+    parser.add_argument("--inspection-views", type=int, default=INSPECTION_VIEWS,
+                        help="views the Sawyer takes of every onion, turning and tilting it "
+                             f"({INSPECTION_VIEWS})")
+    parser.add_argument("--miss-cost", type=float, default=None,
+                        help="cost of a blemished onion left on the line (default: from the "
+                             "task's reward, 8)")
+    parser.add_argument("--waste-cost", type=float, default=None,
+                        help="cost of a good onion in the bin (default: from the task's "
+                             "reward, 8); the robot bins an onion when P(blemished) >= "
+                             "waste / (waste + miss)")
+    parser.add_argument("--fusion", choices=FUSION_RULES, default=None,
+                        help="how the views are fused (default: the inspection classifier's "
+                             "own rule)")
+
+
 def add_backend_argument(parser: argparse.ArgumentParser) -> None:
     """``--backend {numpy,numba}``: the forward-backward kernels of the learners that run it."""
     from irl.inference import BACKENDS

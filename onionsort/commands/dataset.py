@@ -26,8 +26,10 @@ def register(subparsers) -> None:
     parser.add_argument("--val", type=float, default=0.15, help="share of sessions for val")
     parser.add_argument("--test", type=float, default=0.15, help="share of sessions for test")
     parser.add_argument("--robot-onions", type=int, default=120,
-                        help="onions the Sawyer holds up to the inspection camera, 3 views each, "
-                             "in line-ups of 10 split like the sessions (120; 0 for none)")
+                        help="onions the Sawyer holds up to its inspection camera, in line-ups "
+                             "of 10 split like the sessions (120; 0 for none)")
+    parser.add_argument("--robot-views", type=int, default=8,
+                        help="views the Sawyer takes of each of them (8)")
     from robot.difficulty import DIFFICULTY_LEVELS
 
     parser.add_argument("--difficulty", type=_levels, default="clean",
@@ -56,7 +58,8 @@ def run(args) -> int:
     summary = make_dataset(DatasetConfig(
         out=args.out, frames=args.frames, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
-        val=args.val, test=args.test, robot_onions=args.robot_onions, difficulty=args.difficulty))
+        val=args.val, test=args.test, robot_onions=args.robot_onions, difficulty=args.difficulty,
+        robot_views=args.robot_views))
     sessions = ", ".join(f"{s}: {n} sessions" for s, n in summary.sessions.items())
     print(f"wrote {summary.frames} frames ({sessions}) to {args.out}")
     if summary.robot_views:

@@ -3,7 +3,9 @@
 Records 12 sessions of a person sorting onions while a passer-by blocks the camera, perceives
 them with the shipped models, calibrates the observation model on fresh held-out frames, learns
 the sorter's reward with MMAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions with each
-learned policy and prints the paper's Table 1 beside ours. ``--quick`` runs it small.
+learned policy (its inspection as ``onionsort evaluate``'s: ``--inspection-views``,
+``--miss-cost``, ``--waste-cost``, ``--fusion``) and prints the paper's Table 1 beside ours.
+``--quick`` runs it small.
 ``--resume`` continues an interrupted demo in its --out from the last finished stage (same
 results as an uninterrupted run); ``--connect URL`` streams the Rerun recordings to a viewer on
 another machine as well.
@@ -23,6 +25,8 @@ from pathlib import Path
 from onionsort.commands._args import (
     add_backend_argument,
     add_connect_argument,
+    add_device_argument,
+    add_inspection_arguments,
     add_models_argument,
     subcommand,
 )
@@ -47,6 +51,8 @@ def register(subparsers) -> None:
                         help="continue the interrupted demo in --out: skip its finished stages")
     add_connect_argument(parser, what="the recordings of record, learn and evaluate")
     add_backend_argument(parser)
+    add_inspection_arguments(parser)
+    add_device_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -57,7 +63,10 @@ def run(args) -> int:
     results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
                               models=args.models, sessions=args.sessions, repeats=args.repeats,
                               difficulty=args.difficulty, connect=args.connect,
-                              resume=args.resume, backend=args.backend))
+                              resume=args.resume, backend=args.backend,
+                              inspection_views=args.inspection_views,
+                              miss_cost=args.miss_cost, waste_cost=args.waste_cost,
+                              fusion=args.fusion, device=args.device))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

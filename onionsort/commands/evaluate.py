@@ -1,18 +1,30 @@
-"""``onionsort evaluate``: the Sawyer executes a learned policy; count how well it sorts.
+"""``onionsort evaluate``: the Sawyer executes a policy; count how well it sorts.
 
-Loads the greedy policy of ``onionsort learn``'s run folder and lets the Sawyer sort a line-up
-of onions in PyBullet, inspection by the detector. Reports TP (blemished in bin), FP (good in
-bin), TN (good left on the line), FN (blemished left on the line), precision and recall, and
-writes ``RUN_DIR/evaluation.json``, ``RUN_DIR/evaluation.rrd`` (Rerun: the cameras, decisions,
-counts, and the work cell and the Sawyer in 3D) and ``RUN_DIR/evaluation.mcap`` (the run as a
-session for Foxglove, ``rerun mcap convert`` or ``recordings.open_session``: cameras, inspection
-views, ``/tf``, ``/joint_states``, ``/scene``, each step's decision and the running
-TP/FP/TN/FN).
+Loads the greedy policy of ``onionsort learn``'s run folder (or, with ``--policy expert``, the
+task's own: perception measured apart from learning) and lets the Sawyer sort a line-up of
+onions in PyBullet. At inspection it turns and tilts each onion before its camera
+(``--inspection-views``); the detector finds the onion in each view, the inspection classifier
+reads it, the views are fused, and the onion is binned when the fused probability of a blemish
+reaches ``waste / (waste + miss)`` (``--miss-cost``, ``--waste-cost``: by default the task's
+reward's, 0.5). Reports TP (blemished in bin), FP (good in bin), TN (good left on the line), FN
+(blemished left on the line), precision and recall, and writes ``evaluation.json``,
+``evaluation.rrd`` (Rerun: the cameras, every inspection view, decisions, counts, and the work
+cell and the Sawyer in 3D) and ``evaluation.mcap`` (the run as a session for Foxglove, ``rerun
+mcap convert`` or ``recordings.open_session``: cameras, inspection views, ``/tf``,
+``/joint_states``, ``/scene``, each step's decision and the running TP/FP/TN/FN) into RUN_DIR,
+or ``--out DIR``.
+
+With ``--ground-truth-inspection`` the robot knows each onion's class (learning measured apart
+from perception); with ``--policy expert`` it sorts by the task's policy (perception measured
+apart from learning): together they split any loss in two.
 
 Examples
 --------
     onionsort evaluate runs/learn-mmap --onions 50 --blemished 30 --seed 0
+    onionsort evaluate --policy expert --onions 60 --blemished 30 --difficulty paper \\
+        --out runs/eyes-paper
     onionsort evaluate runs/learn-mmap --ground-truth-inspection --json
+    onionsort evaluate runs/learn-mmap --inspection-views 6 --miss-cost 3 --waste-cost 1
     onionsort evaluate runs/learn-mmap --no-rerun --no-mcap   # evaluation.json only
 """
 
@@ -21,13 +33,26 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from onionsort.commands._args import add_connect_argument, add_models_argument, subcommand
+from onionsort.commands._args import (
+    add_connect_argument,
+    add_device_argument,
+    add_inspection_arguments,
+    add_models_argument,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "evaluate", __doc__,
                         "the Sawyer sorts onions with a learned policy: precision and recall")
-    parser.add_argument("run", type=Path, metavar="RUN_DIR", help="folder of `onionsort learn`")
+    parser.add_argument("run", type=Path, metavar="RUN_DIR", nargs="?", default=None,
+                        help="folder of `onionsort learn` (not with --policy expert)")
+    parser.add_argument("--policy", choices=("learned", "expert"), default="learned",
+                        help="the run's learned policy (default), or the task's own: the "
+                             "robot's perception measured apart from learning")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="folder for the outputs (default: RUN_DIR; needed with "
+                             "--policy expert)")
     parser.add_argument("--onions", type=int, default=50, help="onions on the line (50)")
     parser.add_argument("--blemished", type=int, default=30, help="how many are blemished (30)")
     parser.add_argument("--seed", type=int, default=0)
@@ -43,25 +68,36 @@ def register(subparsers) -> None:
 
     parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
                         help="perception difficulty of the world (clean)")
+    add_inspection_arguments(parser)
+    add_device_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
     from onionsort.stages import EvaluateConfig, evaluate
 
-    result, out = evaluate(EvaluateConfig(
+    if args.policy == "expert" and args.run is not None:
+        raise ValueError(f"--policy expert sorts by the task's own policy; it takes no RUN_DIR "
+                         f"(got {args.run}); give --out DIR")
+    config = EvaluateConfig(
         run=args.run, onions=args.onions, blemished=args.blemished, seed=args.seed,
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
         rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap,
-        connect=args.connect))
+        connect=args.connect, policy=args.policy, out=args.out,
+        inspection_views=args.inspection_views, miss_cost=args.miss_cost,
+        waste_cost=args.waste_cost, fusion=args.fusion, device=args.device)
+    result, out = evaluate(config)
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall")}))
         return 0
+    how = ("ground truth" if args.ground_truth_inspection else
+           f"{out['inspection_views']} views fused by {out['fusion']}, binned from "
+           f"P(blemished) >= {out['threshold']:.2f}")
     print(f"{out['method']}: {args.onions} onions ({args.blemished} blemished), "
-          f"inspection by the {out['inspection']}")
+          f"{args.difficulty} camera, inspection by {how}")
     print(result.table())
     written = ["evaluation.json", *(["evaluation.rrd"] if not args.no_rerun else []),
                *(["evaluation.mcap"] if not args.no_mcap else [])]
-    print(f"wrote {', '.join(str(args.run / name) for name in written)}")
+    print(f"wrote {', '.join(str(config.folder / name) for name in written)}")
     return 0

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_models_argument, subcommand
+from onionsort.commands._args import add_device_argument, add_models_argument, subcommand
 
 
 def register(subparsers) -> None:
@@ -23,6 +23,7 @@ def register(subparsers) -> None:
     parser.add_argument("--replace", action="store_true",
                         help="perceive sessions that already hold perception topics again")
     add_models_argument(parser)
+    add_device_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -30,7 +31,7 @@ def run(args) -> int:
     from onionsort.stages import PerceiveConfig, perceive
 
     done = perceive(PerceiveConfig(sessions=tuple(args.sessions), models=args.models,
-                                   replace=args.replace))
+                                   replace=args.replace, device=args.device))
     for s in done:
         mode = "RGB-D" if s.depth else "colour only"
         print(f"{s.path}: {s.n_steps} steps, {s.n_occluded} called occluded ({mode})")

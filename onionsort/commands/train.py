@@ -6,6 +6,7 @@ Examples
     onionsort train state-classifier --data runs/data --out runs/perception
     onionsort train detector --data runs/data --out runs/perception
     onionsort train detector --data runs/data --out runs/perception --resume
+    onionsort train inspection --data runs/data --out runs/perception
 """
 
 from __future__ import annotations
@@ -13,11 +14,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from onionsort.commands._args import add_device_argument
+
 __all__ = ["register"]
 
 
 def register(subparsers) -> None:
     """Add the ``train`` subcommand and its models."""
+    from onionsort.commands._args import FUSION_RULES
+
     parser = subparsers.add_parser(
         "train", help="train perception models", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -26,17 +31,42 @@ def register(subparsers) -> None:
     sc = models.add_parser("state-classifier",
                            help="the SA-Net-style classifier: onion/hand location, occluded")
     det = models.add_parser("detector", help="the YOLO-style onion detector (good / blemished)")
-    for p, epochs, batch_size in ((sc, 12, 32), (det, 24, 16)):
-        p.add_argument("--data", type=Path, required=True, help="dataset folder")
+    ins = models.add_parser("inspection",
+                            help="the inspection classifier: does a view of the held onion "
+                                 "show rot")
+    for p, epochs, batch_size in ((sc, 12, 32), (det, 24, 16), (ins, 30, 128)):
+        if p is ins:
+            p.add_argument("--data", type=Path, required=True, action="append",
+                           help="dataset folder (repeat it to pool several)")
+        else:
+            p.add_argument("--data", type=Path, required=True, help="dataset folder")
         p.add_argument("--out", type=Path, required=True, help="run folder for the checkpoints")
         p.add_argument("--epochs", type=int, default=epochs)
         p.add_argument("--batch-size", type=int, default=batch_size)
         p.add_argument("--seed", type=int, default=0)
+        add_device_argument(p)
+    ins.add_argument("--detector", type=Path, default=None,
+                     help="folder of the detector.pt that finds the onion in the validation "
+                          "views (default: the shipped one)")
+    ins.add_argument("--level-weights", type=_level_weights, default={},
+                     help="weights of difficulty levels, e.g. clean=2,hard=1 (each 1 by "
+                          "default)")
+    ins.add_argument("--fusion", choices=FUSION_RULES, default=None,
+                     help="the classifier's fusion rule (default: the one of lower log-loss on "
+                          "the validation onions)")
+    ins.add_argument("--visibility", type=float, default=None,
+                     help="the chance that a view of a blemished onion shows its rot, as "
+                          "noisy-or fusion assumes it (default: the share measured on the "
+                          "training views)")
+    ins.set_defaults(func=run_inspection)
     sc.add_argument("--depth-dropout", type=float, default=0.5,
                     help="probability that a training step's depth is zeroed, so the model "
                          "also reads steps without depth (0.5)")
     sc.set_defaults(func=run_state_classifier)
     det.add_argument("--images-per-epoch", type=int, default=1600)
+    det.add_argument("--init", type=Path, default=None,
+                     help="a detector.pt to fine-tune instead of training from scratch")
+    det.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (0.002)")
     det.add_argument("--resume", action="store_true",
                      help="continue the run in --out from its last checkpoint")
     det.set_defaults(func=run_detector)
@@ -47,7 +77,7 @@ def run_state_classifier(args: argparse.Namespace) -> int:
 
     metrics = train_state_classifier(ClassifierTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, batch_size=args.batch_size,
-        seed=args.seed, depth_dropout=args.depth_dropout))
+        seed=args.seed, depth_dropout=args.depth_dropout, device=args.device))
     for key, label in (("test", ""), ("test_without_depth", " without depth")):
         if metrics.get(key):
             print(f"state classifier, test split{label}: "
@@ -61,8 +91,48 @@ def run_detector(args: argparse.Namespace) -> int:
 
     test = train_detector(DetectorTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, images_per_epoch=args.images_per_epoch,
-        batch_size=args.batch_size, seed=args.seed, resume=args.resume))["test"]
+        batch_size=args.batch_size, seed=args.seed, resume=args.resume,
+        device=args.device, init=args.init, lr=args.lr))["test"]
     print(f"detector, test split: mAP@0.5 {test['map50']:.3f}, mAP@0.5:0.95 "
           f"{test['map50_95']:.3f}")
     print(f"wrote {args.out / 'detector.pt'}")
+    return 0
+
+
+def _level_weights(text: str) -> dict[str, float]:
+    """``level=weight`` pairs joined by commas, for argparse ``type=``."""
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    out = {}
+    for part in filter(None, (x.strip() for x in text.split(","))):
+        level, _, weight = part.partition("=")
+        if level not in DIFFICULTY_LEVELS:
+            raise argparse.ArgumentTypeError(
+                f"unknown level {level!r} in {text!r}; the levels are "
+                f"{', '.join(DIFFICULTY_LEVELS)}")
+        try:
+            out[level] = float(weight)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected level=weight pairs, e.g. clean=2; got {part!r}") from None
+        if not out[level] > 0:
+            raise argparse.ArgumentTypeError(f"a level's weight must be > 0; got {part!r}")
+    return out
+
+
+def run_inspection(args: argparse.Namespace) -> int:
+    from onionsort.stages.inspection import InspectionTrainStageConfig, train_inspection_stage
+
+    metrics = train_inspection_stage(InspectionTrainStageConfig(
+        data=tuple(args.data), out=args.out, epochs=args.epochs, batch_size=args.batch_size,
+        seed=args.seed, detector=args.detector, level_weights=args.level_weights,
+        device=args.device, fusion=args.fusion,
+        visibility=args.visibility))
+    val = metrics["val"]
+    print(f"inspection classifier, val split: rot call accuracy {val['accuracy']:.3f} on "
+          f"{val['n']} views, temperature {metrics['temperature']:.3f}")
+    for rule, m in metrics["rules"].items():
+        print(f"  fused by {rule}: accuracy {m['accuracy']:.3f}, log-loss {m['log_loss']:.3f} "
+              f"on {m['n_onions']} onions")
+    print(f"fusion rule: {metrics['rule']}; wrote {args.out / 'inspection_classifier.pt'}")
     return 0

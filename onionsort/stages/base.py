@@ -17,8 +17,11 @@ import logging
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["check_difficulty", "check_output_folder", "log_config", "output_folder",
-           "refuse_existing", "write_json"]
+__all__ = ["DEVICES", "check_device", "check_difficulty", "check_output_folder", "log_config",
+           "output_folder", "refuse_existing", "resolve_device", "write_json"]
+
+#: Where torch runs: ``auto`` takes CUDA when a device is present, else the CPU.
+DEVICES = ("auto", "cpu", "cuda")
 
 logger = logging.getLogger(__name__)
 
@@ -108,3 +111,31 @@ def check_difficulty(level: str) -> str:
         raise TypeError(f"difficulty must be a level name; got {type(level).__name__}")
     resolve_difficulty(level)
     return level
+
+
+def check_device(device: str) -> str:
+    """``device`` if it is one of :data:`DEVICES`; a ``ValueError`` naming them otherwise."""
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {', '.join(DEVICES)}; got {device!r}")
+    return device
+
+
+def resolve_device(device: str = "auto"):
+    """The ``torch.device`` that ``device`` names: ``auto`` is CUDA when
+    ``torch.cuda.is_available()``, else the CPU.
+
+    Raises
+    ------
+    ValueError
+        If ``device`` is not one of :data:`DEVICES`, or is ``cuda`` where no CUDA device is
+        available.
+    """
+    import torch
+
+    check_device(device)
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' is not available here (torch finds no CUDA device); "
+                         "use --device cpu or auto")
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    return torch.device(device)

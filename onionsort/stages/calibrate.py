@@ -25,7 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import log_config, output_folder, refuse_existing
+from onionsort.stages.base import (
+    check_device,
+    check_output_folder,
+    log_config,
+    output_folder,
+    refuse_existing,
+)
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 
 __all__ = [
@@ -35,7 +41,6 @@ __all__ = [
     "dataset_identity",
     "detector_map",
     "eval_perception",
-    "inspection_calls",
     "measure_perception",
 ]
 
@@ -64,6 +69,8 @@ class CalibrateConfig:
         Measure with the inspection view or without it.
     overwrite : bool
         Replace a ``calibration.json`` already in ``out``.
+    device : str
+        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
     """
 
     data: Path
@@ -74,21 +81,34 @@ class CalibrateConfig:
     depth: bool = True
     inspection: bool = True
     overwrite: bool = False
+    device: str = "auto"
 
     def __post_init__(self) -> None:
+        check_device(self.device)
         if self.smoothing < 0:
             raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
 
 
 @dataclass(frozen=True)
 class PerceptionEvalConfig:
-    """A dataset split to measure the detector and the state classifier on."""
+    """A dataset split to measure the perception models on: the detector, the state
+    classifier and the inspection. ``views`` fuses the robot's first ``views`` views of each
+    onion (all the dataset holds: None); ``plots`` is a folder for the inspection's
+    precision-recall curves (None: none drawn)."""
 
     data: Path
     split: str = "test"
     models: Path | None = None
     depth: bool = True
     inspection: bool = True
+    device: str = "auto"
+    views: int | None = None
+    plots: Path | None = None
+
+    def __post_init__(self) -> None:
+        check_device(self.device)
+        if self.views is not None and self.views < 1:
+            raise ValueError(f"views must be >= 1; got {self.views}")
 
 
 def measure_perception(models: PerceptionModels, root: Path | str, split: str = "test", *,
@@ -112,7 +132,7 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
     truly_occluded, called_occluded, inspected_before = [], [], []
     for steps in read_steps(root, split, models.frames_per_step):
         perceived = models.perceive([(s.colors, s.depths if depth else None,
-                                      s.inspection if inspection else None) for s in steps])
+                                      s.views if inspection else None) for s in steps])
         seen_inspection = False
         for step, seen in zip(steps, perceived, strict=True):
             seen_inspection |= seen.inspected is not None
@@ -154,13 +174,7 @@ def _mean_or_none(values: np.ndarray, where: np.ndarray) -> float | None:
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
                  batch_size: int = 32) -> dict[str, dict[str, float]]:
-    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``.
-
-    With an inspection view, ``"inspection_call"`` adds the accuracy of the call perception
-    makes of each inspected onion (:func:`state_abstraction.perceive.inspected_class`; no call
-    counts as wrong), per source (``human``: the sorter's inspection, ``robot``: the Sawyer's,
-    ``all``), each as ``{"n", "accuracy", "missed_blemished", "false_blemished"}``.
-    """
+    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``."""
 
     from perception.metrics import mean_average_precision
     from perception.train import EVAL_SCORE_THRESHOLD
@@ -184,27 +198,6 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     out["all"] = mean_average_precision(
         [g for v in views for g in gts[v]],
         [(d.boxes, d.scores, d.classes) for v in views for d in dts[v]])
-    if "inspection" in views:
-        out["inspection_call"] = inspection_calls(frames["inspection"], dts["inspection"])
-    return out
-
-
-def inspection_calls(frames, detections) -> dict[str, dict[str, float]]:
-    """Accuracy of the good/blemished call on inspection views that hold one onion."""
-    from state_abstraction.perceive import inspected_class
-
-    rows = [(f.record.get("source", "human"), int(f.record["classes"][0]), inspected_class(d))
-            for f, d in zip(frames, detections, strict=True) if len(f.record["classes"]) == 1]
-    out = {}
-    for source in ("human", "robot", "all"):
-        mine = [(t, c) for s, t, c in rows if source in (s, "all")]
-        if mine:
-            out[source] = {
-                "n": len(mine),
-                "accuracy": float(np.mean([t == c for t, c in mine])),
-                "missed_blemished": sum(t == 1 and c != 1 for t, c in mine),
-                "false_blemished": sum(t == 0 and c == 1 for t, c in mine),
-            }
     return out
 
 
@@ -218,7 +211,8 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
     log_config("calibrate", config)
     refuse_existing(config.out / CALIBRATION_FILE, config.overwrite)
     with output_folder(config.out) as out:
-        models = PerceptionModels.load(config.models) if models is None else models
+        models = (PerceptionModels.load(config.models, config.device) if models is None
+                  else models)
         calibration, metrics = measure_perception(models, config.data, config.split,
                                                   depth=config.depth,
                                                   inspection=config.inspection)
@@ -250,15 +244,27 @@ def dataset_identity(root: Path | str) -> dict:
 def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None
                     ) -> dict:
     """mAP of the detector and the state classifier's accuracy on a dataset split."""
+    from onionsort.stages.inspection import measure_inspection
+
     log_config("eval-perception", config)
-    models = PerceptionModels.load(config.models) if models is None else models
+    if config.plots is not None:
+        check_output_folder(config.plots, "--plots")
+    models = PerceptionModels.load(config.models, config.device) if models is None else models
     _, metrics = measure_perception(models, config.data, config.split, depth=config.depth,
                                     inspection=config.inspection)
     maps = detector_map(models, config.data, config.split)
-    return {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
-            "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
-            "occlusion_precision": metrics["occlusion_precision"],
-            "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],
-            "inspection_call": maps.pop("inspection_call", {}), "map_by_view": maps,
-            "n_steps": metrics["n_steps"], "split": config.split, "depth": config.depth,
-            "inspection": config.inspection}
+    out = {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
+           "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
+           "occlusion_precision": metrics["occlusion_precision"],
+           "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],
+           "map_by_view": maps, "n_steps": metrics["n_steps"], "split": config.split,
+           "depth": config.depth, "inspection": config.inspection}
+    if config.inspection:
+        out["inspection_classifier"] = measure_inspection(models, config.data, config.split,
+                                                          views=config.views)
+        if config.plots is not None:
+            from onionsort.plots import precision_recall_figure
+
+            out["plots"] = [str(p) for p in precision_recall_figure(
+                out["inspection_classifier"], config.plots)]
+    return out

@@ -43,8 +43,13 @@ class DatasetConfig:
     val, test : float
         Shares of sessions for the val and test splits.
     robot_onions : int
-        Onions the Sawyer holds up to the inspection camera (3 views each), in line-ups of 10
-        split like the sessions; 0 for none.
+        Onions the Sawyer holds up to its inspection camera, in line-ups of 10 split like the
+        sessions; 0 for none.
+    robot_views : int
+        Views of each of them (:func:`robot.station.inspection_poses`).
+    rot_labels : bool
+        Measure the rot each inspection view shows (the inspection classifier's labels; one
+        more render of each view). Calibration needs none.
     difficulty : str
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
         today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
@@ -61,6 +66,8 @@ class DatasetConfig:
     test: float = 0.15
     robot_onions: int = 120
     difficulty: str = "clean"
+    robot_views: int = 8
+    rot_labels: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
@@ -70,6 +77,8 @@ class DatasetConfig:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.robot_onions < 0:
             raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
+        if self.robot_views < 1:
+            raise ValueError(f"robot_views must be >= 1; got {self.robot_views}")
 
     @property
     def levels(self) -> list[str]:
@@ -118,7 +127,8 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     levels = config.levels
     session_configs = [SessionConfig(n_steps=config.steps_per_session,
                                      occlusion=config.occlusion,
-                                     frames_per_step=config.frames_per_step, difficulty=level)
+                                     frames_per_step=config.frames_per_step, difficulty=level,
+                                     label_blemishes=config.rot_labels)
                        for level in levels]
     per_session = config.steps_per_session * config.frames_per_step
     n_sessions = math.ceil(config.frames / per_session)
@@ -143,7 +153,8 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
                     for frame in session.frames():
                         if written == config.frames:
                             break
-                        writer.add(split, frame, session=k)
+                        writer.add(split, frame, session=k,
+                                   difficulty=session_config.difficulty.name)
                         written += 1
                         bar.update()
                 writer.flush(split)
@@ -173,8 +184,10 @@ def _robot_views(writer, config: DatasetConfig) -> int:
     for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
                                                  desc="robot views", unit="line-up")):
         level = config.levels[k % len(config.levels)]
-        for index, rgb, labels in robot_inspection_views(size, seed, level):
-            writer.add_robot_view(split, rgb, labels, lineup=k, index=index)
+        for index, view, rgb, labels in robot_inspection_views(
+                size, seed, level, inspection_views=config.robot_views):
+            writer.add_robot_view(split, rgb, labels, lineup=k, index=index, view=view,
+                                  difficulty=level)
             n += 1
         writer.flush(split)
     return n

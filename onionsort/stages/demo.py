@@ -53,7 +53,7 @@ from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.learn import LearnConfig, learn
-from onionsort.stages.models import PerceptionModels
+from onionsort.stages.models import PerceptionModels, sorting_threshold
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
 
@@ -86,6 +86,9 @@ class DemoConfig:
     ``backend`` picks MMAP-BIRL's forward-backward kernels (``irl.inference.BACKENDS``: numpy,
     or numba from the ``fast`` extra, equal to rounding); a demo may be resumed with the other
     (each repeat's result names the backend its model was learned with, ``backends`` all).
+    ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
+    inspection (:class:`~onionsort.stages.evaluate.EvaluateConfig`); ``device`` where torch
+    runs the perception models.
     """
 
     out: Path = Path("runs/demo")
@@ -98,11 +101,22 @@ class DemoConfig:
     connect: str | None = None
     resume: bool = False
     backend: str = "numpy"
+    inspection_views: int | None = None
+    miss_cost: float | None = None
+    waste_cost: float | None = None
+    fusion: str | None = None
+    device: str = "auto"
 
     def __post_init__(self) -> None:
         from irl.inference import check_backend
 
         check_backend(self.backend)
+        # the robot's inspection, checked as evaluate checks it (before any work starts)
+        checked = EvaluateConfig(policy="expert", out=self.out,
+                                 inspection_views=self.inspection_views,
+                                 miss_cost=self.miss_cost, waste_cost=self.waste_cost,
+                                 fusion=self.fusion, device=self.device)
+        object.__setattr__(self, "inspection_views", checked.inspection_views)
         if self.repeats < 1:
             raise ValueError(f"repeats must be >= 1; got {self.repeats}")
         if self.sessions is not None and self.sessions < 1:
@@ -138,11 +152,11 @@ def demo(config: DemoConfig) -> dict:
         logger.info("%s holds a finished demo; nothing to resume", out)
         return json.loads((out / "results.json").read_text())
     progress.start()
-    models = PerceptionModels.load(config.models)
+    models = PerceptionModels.load(config.models, config.device)
     data = out / "heldout"
     progress.run("heldout", lambda: dataclasses.asdict(make_dataset(DatasetConfig(
         out=data, frames=size["heldout"], seed=config.seed + 1000, robot_onions=0,
-        difficulty=config.difficulty))), clear=data)
+        difficulty=config.difficulty, rot_labels=False))), clear=data)
     calibration_path = out / "calibration" / "calibration.json"
 
     def calibrate_stage() -> dict:
@@ -180,6 +194,10 @@ def demo(config: DemoConfig) -> dict:
                "onions": size["onions"], "blemished": size["blemished"],
                "state_error_rate": calibration.state_error_rate,
                "pair_error_rate": calibration.pair_error_rate,
+               "inspection": {"views": config.inspection_views,
+                              "threshold": sorting_threshold(config.miss_cost,
+                                                             config.waste_cost),
+                              "fusion": config.fusion or models.inspection.rule},
                "seconds": round(time.perf_counter() - start, 1)}
     write_json(out / "results.json", results)
     return results
@@ -190,7 +208,9 @@ def _settings(config: DemoConfig, size: dict) -> dict:
     return {"seed": config.seed, "quick": config.quick,
             "models": None if config.models is None else str(config.models),
             "sessions": size["sessions"], "repeats": config.repeats,
-            "difficulty": config.difficulty}
+            "difficulty": config.difficulty, "inspection_views": config.inspection_views,
+            "miss_cost": config.miss_cost, "waste_cost": config.waste_cost,
+            "fusion": config.fusion}
 
 
 class _Progress:
@@ -306,7 +326,11 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
                                             blemished=size["blemished"], seed=seed,
                                             models=config.models,
                                             difficulty=config.difficulty,
-                                            connect=config.connect), models)
+                                            connect=config.connect,
+                                            inspection_views=config.inspection_views,
+                                            miss_cost=config.miss_cost,
+                                            waste_cost=config.waste_cost,
+                                            fusion=config.fusion), models)
         return {"tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
                 "precision": result.precision, "recall": result.recall,
                 "undecided": result.undecided}

@@ -1,22 +1,28 @@
-"""Stage ``evaluate``: the Sawyer executes a learned policy; count how well it sorts.
+"""Stage ``evaluate``: the Sawyer executes a policy; count how well it sorts.
 
-Loads the greedy policy of a learning run (``RUN/model.json``) and lets the Sawyer sort a line-up
-of onions in PyBullet: every abstract action is a real motion (IK, suction grasp), and the
-onion's class at inspection comes from the detector on the inspection view, so perception
-errors count. Reports TP (blemished in bin), FP (good in bin), TN (good left on the line), FN
-(blemished left on the line), precision and recall into ``RUN/evaluation.json``, with a Rerun
-recording of the sort (``RUN/evaluation.rrd``: the camera, the inspection views, the decisions,
-the counts, and the work cell and the Sawyer in 3D) and the run as a session
-(``RUN/evaluation.mcap``, :mod:`recordings`): one frame per action, showing the station at rest
-before it (camera, depth, ground truth, ``/tf``, ``/joint_states``, ``/scene``), the inspection
-view the classifier read, and each step's decision and running TP/FP/TN/FN
-(``/evaluation/decision``, ``/evaluation/counts``). Both files are written under temporary
-names and renamed once complete.
+Takes the greedy policy of a learning run (``RUN/model.json``) or the task's own (the expert's:
+perception measured apart from learning) and lets the Sawyer sort a line-up of onions in
+PyBullet: every abstract action is a real motion (IK, suction grasp). At inspection the Sawyer
+shows each onion to its camera from several sides; the detector finds it in each view, the
+inspection classifier reads it, the views are fused, and the onion is called blemished when the
+fused probability reaches the threshold of two costs (a blemished onion left on the line, a good
+one binned; by default the task's reward's). So perception errors count. Reports TP (blemished
+in bin), FP (good in bin), TN (good left on the line), FN (blemished left on the line),
+precision and recall into ``OUT/evaluation.json``, with a Rerun recording of the sort
+(``OUT/evaluation.rrd``: the camera, the inspection views, the decisions, the counts, and the
+work cell and the Sawyer in 3D) and the run as a session (``OUT/evaluation.mcap``,
+:mod:`recordings`): one frame per action, showing the station at rest before it (camera,
+depth, ground truth, ``/tf``, ``/joint_states``, ``/scene``), the first inspection view the
+classifier read, and each step's decision (with the inspection's probabilities) and running
+TP/FP/TN/FN (``/evaluation/decision``, ``/evaluation/counts``). ``OUT`` is the run folder
+unless another is given. Both files are written under temporary names and renamed once
+complete.
 
 Example::
 
     from onionsort.stages import EvaluateConfig, evaluate
     result, summary = evaluate(EvaluateConfig(run=Path("runs/learn-mmap")))
+    result, summary = evaluate(EvaluateConfig(policy="expert", out=Path("runs/eyes")))
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from onionsort.stages.base import (
+    check_device,
     check_difficulty,
     check_output_folder,
     log_config,
@@ -35,19 +42,22 @@ from onionsort.stages.base import (
 )
 from onionsort.stages.learn import load_policy
 
-__all__ = ["EvaluateConfig", "evaluate", "inspection_classifier"]
+__all__ = ["POLICIES", "EvaluateConfig", "evaluate"]
 
 logger = logging.getLogger(__name__)
+
+#: Whose policy the Sawyer executes: a learning run's, or the task's true (expert) policy.
+POLICIES = ("learned", "expert")
 
 
 @dataclass(frozen=True)
 class EvaluateConfig:
-    """Which run to evaluate, on how many onions.
+    """Which policy to evaluate, on how many onions, inspected how.
 
     Attributes
     ----------
-    run : Path
-        A folder written by ``learn``.
+    run : Path or None
+        A folder written by ``learn`` (the ``learned`` policy); None with ``policy="expert"``.
     onions, blemished : int
         Onions on the line, and how many of them are blemished.
     seed : int
@@ -66,9 +76,25 @@ class EvaluateConfig:
     connect : str or None
         Also stream the Rerun recording to a viewer at this gRPC URL
         (``rerun+http://HOST:PORT/proxy``).
+    policy : {"learned", "expert"}
+        The learning run's greedy policy, or the task's true one (no run needed: measures the
+        robot's perception alone).
+    out : Path or None
+        Folder for the outputs (None: ``run``; required with ``policy="expert"``).
+    inspection_views : int
+        Views the Sawyer takes of every onion (:func:`robot.station.inspection_poses`).
+    miss_cost, waste_cost : float or None
+        Cost of a blemished onion left on the line, and of a good onion binned (None: the
+        task's, from its reward); the robot bins from ``P(blemished) >= waste / (waste +
+        miss)``.
+    fusion : str or None
+        How views are fused (:data:`perception.fusion.FUSION_RULES`; None: the inspection
+        classifier's own rule).
+    device : str
+        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
     """
 
-    run: Path
+    run: Path | None = None
     onions: int = 50
     blemished: int = 30
     seed: int = 0
@@ -78,9 +104,41 @@ class EvaluateConfig:
     difficulty: str = "clean"
     mcap: bool = True
     connect: str | None = None
+    policy: str = "learned"
+    out: Path | None = None
+    inspection_views: int | None = None
+    miss_cost: float | None = None
+    waste_cost: float | None = None
+    fusion: str | None = None
+    device: str = "auto"
 
     def __post_init__(self) -> None:
+        from perception.fusion import FUSION_RULES
+        from robot.inspection_poses import INSPECTION_VIEWS
+
         check_difficulty(self.difficulty)
+        check_device(self.device)
+        if self.policy not in POLICIES:
+            raise ValueError(f"policy must be one of {', '.join(POLICIES)}; got "
+                             f"{self.policy!r}")
+        if self.policy == "learned" and self.run is None:
+            raise ValueError("a learned policy needs its run folder (RUN_DIR of `onionsort "
+                             "learn`); or evaluate the task's own with --policy expert")
+        if self.policy == "expert" and self.out is None and self.run is None:
+            raise ValueError("--policy expert needs --out DIR, the folder for its results")
+        if self.inspection_views is None:
+            object.__setattr__(self, "inspection_views", INSPECTION_VIEWS)
+        if isinstance(self.inspection_views, bool) or self.inspection_views < 1:
+            raise ValueError(f"inspection_views must be >= 1; got {self.inspection_views}")
+        for name in ("miss_cost", "waste_cost"):
+            value = getattr(self, name)
+            if value is not None and not value >= 0:
+                raise ValueError(f"{name} must be >= 0; got {value}")
+        if self.miss_cost == 0 and self.waste_cost == 0:
+            raise ValueError("miss_cost and waste_cost cannot both be 0")
+        if self.fusion is not None and self.fusion not in FUSION_RULES:
+            raise ValueError(f"fusion must be one of {', '.join(FUSION_RULES)}; got "
+                             f"{self.fusion!r}")
         if self.connect is not None:
             from recordings.rerun.common import check_viewer_url
 
@@ -91,45 +149,27 @@ class EvaluateConfig:
             raise ValueError(f"blemished must be in [0, onions={self.onions}]; got "
                              f"{self.blemished}")
 
+    @property
+    def folder(self) -> Path:
+        """Where the outputs go: ``out``, else the run folder."""
+        return Path(self.out if self.out is not None else self.run)
 
-def inspection_classifier(detector):
-    """``classify(rgb) -> prediction`` from the detector's best box in the inspection view: the
-    index of ``bad`` (class 1, blemished), ``good`` or ``unknown`` (no onion found) among the
-    values of the sorting task's ``prediction`` factor (``robot.station`` reads it as a
-    ``Prediction``)."""
-    from irl.domains.onion_sorting import SORTING_TASK
-    from state_abstraction.perceive import inspected_class
+    @property
+    def threshold(self) -> float:
+        """The fused probability of a blemish from which the robot bins an onion."""
+        from onionsort.stages.models import sorting_threshold
 
-    good, bad, unknown = (SORTING_TASK.value_index("prediction", v)
-                          for v in ("good", "bad", "unknown"))
-
-    def classify(rgb):
-        cls = inspected_class(detector.detect([rgb])[0])
-        return unknown if cls is None else (bad if cls == 1 else good)
-
-    return classify
+        return sorting_threshold(self.miss_cost, self.waste_cost)
 
 
-class _LastDetection:
-    """The detector, remembering its answer on the last single image: the Rerun log draws the
-    boxes of the inspection view the classifier has just read without running the detector on
-    it again."""
+def _policy(config: EvaluateConfig):
+    """``(actions (48,), model document)`` of the policy ``config`` evaluates."""
+    if config.policy == "expert":
+        from irl.domains.onion_sorting import onion_sorting
 
-    def __init__(self, detector) -> None:
-        self.detector = detector
-        self._image: Any = None
-        self._found: Any = None
-
-    def detect(self, images) -> list:
-        import numpy as np
-
-        if len(images) == 1 and self._image is not None \
-                and np.array_equal(np.asarray(images[0]), self._image):
-            return [self._found]
-        found = self.detector.detect(images)
-        if len(images) == 1:
-            self._image, self._found = np.array(images[0], copy=True), found[0]
-        return found
+        return (onion_sorting().expert_policy().argmax(axis=1),
+                {"method": "expert", "policy": "the task's true (expert) policy"})
+    return load_policy(config.run)
 
 
 class _SessionRecorder:
@@ -174,21 +214,24 @@ def _session_metadata(config: EvaluateConfig, doc: dict, resolved: dict) -> dict
             "method": doc.get("method"), "software": f"onionsort {__version__}",
             "versions": {"python": platform.python_version(), "numpy": np.__version__,
                          "pybullet_api": pybullet.getAPIVersion()},
-            "policy": f"greedy policy of {Path(config.run) / 'model.json'}"}
+            "policy": (doc["policy"] if config.policy == "expert"
+                       else f"greedy policy of {Path(config.run) / 'model.json'}")}
 
 
 def evaluate(config: EvaluateConfig, models=None):
-    """Evaluate a run's policy; write ``evaluation.json`` (and ``.rrd``, ``.mcap``).
+    """Evaluate a policy; write ``evaluation.json`` (and ``.rrd``, ``.mcap``) into
+    ``config.folder``.
 
     ``models`` (:class:`~onionsort.stages.models.PerceptionModels`) are used instead of loading
     ``config.models`` again, as ``demo`` does for its many evaluations.
 
-    Returns ``(result, summary)``: the :class:`robot.evaluation.EvaluationResult` and the dict
+    Returns ``(result, summary)``: the :class:`robot.evaluation.SortingResult` and the dict
     written to ``evaluation.json``.
     """
     resolved = log_config("evaluate", config)
-    actions, doc = load_policy(config.run)
-    check_output_folder(config.run, "RUN_DIR")  # it takes evaluation.json: writable?
+    actions, doc = _policy(config)
+    folder = config.folder
+    check_output_folder(folder, "--out" if config.out is not None else "RUN_DIR")
     if config.connect is not None:
         from recordings.rerun.common import reach_viewer
 
@@ -199,19 +242,24 @@ def evaluate(config: EvaluateConfig, models=None):
     from onionsort.stages.models import PerceptionModels
     from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
-    from robot.station import station_robot
+    from robot.station import ROBOT_INSPECTION_CAMERA, station_robot
     from robot.world import camera_pose
 
     torch.set_num_threads(2)
-    detector = None
+    inspector, detect = None, None
     if config.ground_truth_inspection:
         classify = "ground-truth"
     else:
-        loaded = PerceptionModels.load(config.models) if models is None else models
-        detector = _LastDetection(loaded.detector)
-        classify = inspection_classifier(detector)
+        loaded = PerceptionModels.load(config.models, config.device) if models is None \
+            else models
+        inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold)
+        classify = inspector
+
+        def detect(images):  # the boxes the inspection has just found, for the Rerun log
+            return inspector.last_detections(images) or loaded.detector.detect(images)
+
     on_step, recorder = [], None
-    session = Path(config.run) / "evaluation.mcap"
+    session = folder / "evaluation.mcap"
     partial = session.with_name(session.name + ".partial")
     try:
         with contextlib.ExitStack() as stack:
@@ -221,17 +269,17 @@ def evaluate(config: EvaluateConfig, models=None):
                 from recordings.rerun.common import rerun_targets
 
                 on_step.append(stack.enter_context(EvaluationLogger(
-                    rerun_targets(Path(config.run) / "evaluation.rrd" if config.rerun else None,
-                                  config.connect), detector=detector,
+                    rerun_targets(folder / "evaluation.rrd" if config.rerun else None,
+                                  config.connect), detector=detect,
                     camera_K=intrinsics(CameraSpec()), robot=station_robot(),
-                    camera_pose=camera_pose(CameraSpec()))).on_step)
+                    camera_pose=camera_pose(CameraSpec()),
+                    views=config.inspection_views)).on_step)
             if config.mcap:
                 from recordings import SessionWriter
-                from robot.simulation import INSPECTION_CAMERA
 
                 recorder = _SessionRecorder(stack.enter_context(SessionWriter(
                     partial, _session_metadata(config, doc, resolved), intrinsics(CameraSpec()),
-                    intrinsics(INSPECTION_CAMERA), frames_per_step=1, overwrite=True)))
+                    intrinsics(ROBOT_INSPECTION_CAMERA), frames_per_step=1, overwrite=True)))
                 on_step.append(recorder.on_step)
 
             def each_step(event) -> None:
@@ -242,14 +290,19 @@ def evaluate(config: EvaluateConfig, models=None):
                 actions, n_onions=config.onions, n_blemished=config.blemished,
                 seed=config.seed, classify=classify, render=logged or config.mcap,
                 difficulty=config.difficulty, on_step=each_step if on_step else None,
-                on_start=None if recorder is None else recorder.on_start)
+                on_start=None if recorder is None else recorder.on_start,
+                inspection_views=config.inspection_views)
         if recorder is not None:
             partial.replace(session)
     finally:
         partial.unlink(missing_ok=True)  # a run that failed leaves no session behind
-    summary = {"method": doc.get("method"), "seed": config.seed,
-               "difficulty": config.difficulty, "inspection":
-               "ground truth" if config.ground_truth_inspection else "detector",
+    summary = {"method": doc.get("method"), "policy": config.policy, "seed": config.seed,
+               "difficulty": config.difficulty,
+               "inspection": ("ground truth" if config.ground_truth_inspection else
+                              "detector + inspection classifier"),
+               "inspection_views": config.inspection_views,
+               "threshold": None if inspector is None else inspector.threshold,
+               "fusion": None if inspector is None else inspector.rule,
                **result.to_dict()}
-    write_json(Path(config.run) / "evaluation.json", summary)
+    write_json(folder / "evaluation.json", summary)
     return result, summary

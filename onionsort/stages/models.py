@@ -1,4 +1,5 @@
-"""The perception models a stage runs: the detector and the state classifier, from one folder.
+"""The perception models a stage runs: the detector, the state classifier and the inspection
+classifier, from one folder.
 
 The default models ship with the package (``onionsort/models/``); ``onionsort train`` and
 ``onionsort calibrate`` reproduce them (see the README). Every output that perception produces
@@ -12,14 +13,18 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CALIBRATION_FILE", "DEFAULT_MODELS", "PerceptionModels", "model_mismatch"]
+__all__ = ["CALIBRATION_FILE", "DEFAULT_MODELS", "INSPECTION_FILE", "PerceptionModels",
+           "model_mismatch"]
 
 DEFAULT_MODELS = Path(__file__).resolve().parent.parent / "models"
 CLASSIFIER_FILE = "state_classifier.pt"
 DETECTOR_FILE = "detector.pt"
+INSPECTION_FILE = "inspection_classifier.pt"
 CALIBRATION_FILE = "calibration.json"
 #: The keys of :meth:`PerceptionModels.describe` that identify the models.
-HASH_KEYS = ("state_classifier_sha256", "detector_sha256")
+HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
+_FILES = {"state_classifier_sha256": CLASSIFIER_FILE, "detector_sha256": DETECTOR_FILE,
+          "inspection_sha256": INSPECTION_FILE}
 
 
 def _digest(path: Path) -> str:
@@ -28,39 +33,51 @@ def _digest(path: Path) -> str:
 
 @dataclass
 class PerceptionModels:
-    """The trained detector and state classifier, loaded from one folder, with a hash of each
-    file as it was loaded."""
+    """The trained detector, state classifier and inspection classifier, loaded from one
+    folder, with a hash of each file as it was loaded."""
 
     classifier: object
     detector: object
     folder: Path
     hashes: dict[str, str] | None = None
+    inspection: object = None
+    device: str = "cpu"
 
     @classmethod
-    def load(cls, folder: Path | str | None = None) -> PerceptionModels:
-        """Load ``state_classifier.pt`` and ``detector.pt`` from ``folder`` (default: shipped).
+    def load(cls, folder: Path | str | None = None, device: str = "auto") -> PerceptionModels:
+        """Load ``state_classifier.pt``, ``detector.pt`` and ``inspection_classifier.pt``
+        from ``folder`` (default: shipped) onto ``device`` (``auto``, ``cpu`` or ``cuda``;
+        :func:`onionsort.stages.base.resolve_device`).
 
         Raises
         ------
         FileNotFoundError
             Naming the missing file and the command that trains it.
+        ValueError
+            If ``device`` is unknown or not available.
         """
         import torch
 
+        from onionsort.stages.base import resolve_device
         from perception import Detector
+        from perception.inspection import InspectionClassifier
         from state_abstraction.classifier import StateClassifier
 
+        where = resolve_device(device)
         torch.set_num_threads(2)
         folder = DEFAULT_MODELS if folder is None else Path(folder)
         for name, command in ((CLASSIFIER_FILE, "onionsort train state-classifier"),
-                              (DETECTOR_FILE, "onionsort train detector")):
+                              (DETECTOR_FILE, "onionsort train detector"),
+                              (INSPECTION_FILE, "onionsort train inspection")):
             if not (folder / name).is_file():
                 raise FileNotFoundError(f"{folder} has no {name}; train it with `{command} "
                                         f"--data DATASET --out {folder}`")
-        return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE),
-                   detector=Detector.load(folder / DETECTOR_FILE), folder=folder,
-                   hashes={"state_classifier_sha256": _digest(folder / CLASSIFIER_FILE),
-                           "detector_sha256": _digest(folder / DETECTOR_FILE)})
+        return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
+                   detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
+                   hashes={key: _digest(folder / name) for key, name in _FILES.items()},
+                   inspection=InspectionClassifier.load(folder / INSPECTION_FILE,
+                                                        device=where),
+                   device=str(where))
 
     @property
     def frames_per_step(self) -> int:
@@ -70,17 +87,44 @@ class PerceptionModels:
     def describe(self) -> dict:
         """Which models these are: their folder (``shipped`` for the package's own) and a hash
         of each file as loaded (for the records they write)."""
-        hashes = self.hashes or {"state_classifier_sha256": _digest(self.folder / CLASSIFIER_FILE),
-                                 "detector_sha256": _digest(self.folder / DETECTOR_FILE)}
+        hashes = self.hashes or {key: _digest(self.folder / name)
+                                 for key, name in _FILES.items()}
         shipped = self.folder.resolve() == DEFAULT_MODELS.resolve()
         return {"folder": "shipped" if shipped else str(self.folder), **hashes}
+
+    def inspector(self, *, rule: str | None = None, threshold: float | None = None):
+        """The inspection (:class:`perception.inspection.Inspector`): the detector finds the
+        onion, the inspection classifier reads it, views are fused by ``rule`` (the
+        classifier's own by default) and an onion called blemished from ``threshold`` (the
+        task's cost threshold by default, :func:`sorting_threshold`)."""
+        from irl.domains.onion_sorting import SORTING_TASK
+        from perception.inspection import Inspector
+
+        values = tuple(SORTING_TASK.value_index("prediction", v)
+                       for v in ("good", "bad", "unknown"))
+        return Inspector(self.detector, self.inspection,
+                         rule=self.inspection.rule if rule is None else rule,
+                         threshold=sorting_threshold() if threshold is None else threshold,
+                         values=values)
 
     def perceive(self, steps, first_step: int = 0):
         """:func:`state_abstraction.perceive.perceive_steps` with these models."""
         from state_abstraction.perceive import perceive_steps
 
-        return perceive_steps(self.classifier, steps, self.detector.detect,
-                              first_step=first_step)
+        return perceive_steps(self.classifier, steps, self.inspector(), first_step=first_step)
+
+
+def sorting_threshold(miss: float | None = None, waste: float | None = None) -> float:
+    """The probability of a blemish from which the robot bins an onion: the cost threshold
+    (:func:`perception.fusion.cost_threshold`) of ``miss`` (a blemished onion left on the line)
+    and ``waste`` (a good onion in the bin), each by default the sorting task's own, from its
+    true reward (:func:`irl.domains.onion_sorting.misplacement_costs`)."""
+    from irl.domains.onion_sorting import misplacement_costs
+    from perception.fusion import cost_threshold
+
+    task_miss, task_waste = misplacement_costs()
+    return cost_threshold(task_miss if miss is None else miss,
+                          task_waste if waste is None else waste)
 
 
 def model_mismatch(a: dict | None, b: dict | None) -> list[str]:

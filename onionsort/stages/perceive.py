@@ -1,4 +1,4 @@
-"""Stage ``perceive``: run the detector and the state classifier on recorded sessions.
+"""Stage ``perceive``: run the perception models on recorded sessions.
 
 Reads only a session's sensor side (colour, depth where there is any, the inspection view, the
 step clock) and adds the perception topics to its file (:mod:`recordings.perception`), atomically.
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.base import check_device, check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
 
 __all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
@@ -36,19 +36,24 @@ class PerceiveConfig:
     sessions : tuple of Path
         Session files (``.mcap``); each gets the perception topics in place.
     models : Path or None
-        Folder with ``state_classifier.pt`` and ``detector.pt`` (None: the shipped models).
+        Folder with ``state_classifier.pt``, ``detector.pt`` and
+        ``inspection_classifier.pt`` (None: the shipped models).
     replace : bool
         Perceive sessions that already hold perception topics again.
     batch_size : int
         Frames per detector batch.
+    device : str
+        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
     """
 
     sessions: tuple[Path, ...]
     models: Path | None = None
     replace: bool = False
     batch_size: int = 32
+    device: str = "auto"
 
     def __post_init__(self) -> None:
+        check_device(self.device)
         if not self.sessions:
             raise ValueError("sessions must name at least one session file; got none")
         missing = [str(p) for p in self.sessions if not Path(p).is_file()]
@@ -88,7 +93,7 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
 
     log_config("perceive", config)
     frames_per_step = _check_sessions(config)
-    models = PerceptionModels.load(config.models) if models is None else models
+    models = PerceptionModels.load(config.models, config.device) if models is None else models
     for path, fps in frames_per_step.items():
         if fps != models.frames_per_step:
             raise ValueError(_frame_count_error(path, fps, models.frames_per_step))
@@ -149,7 +154,7 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
     views = {f.index: f.inspection for f in frames if f.inspection_png is not None}
     perceived = models.perceive([([colors[f.index] for f in step],
                                   [f.depth for f in step] if session.has_depth else None,
-                                  views.get(step[0].index)) for step in steps])
+                                  [views.get(f.index) for f in step]) for step in steps])
     if all(s.occluded for s in perceived):
         raise ValueError(f"{path}: perception called all {len(perceived)} steps occluded; "
                          "there is no usable step (is the camera blocked?)")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.base import check_device, check_output_folder, log_config, resolve_device
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
            "train_detector", "train_state_classifier"]
@@ -56,10 +56,12 @@ class ClassifierTrainConfig:
     batch_size: int = 32
     seed: int = 0
     depth_dropout: float = 0.5
+    device: str = "auto"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
         object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
         _check_positive(self, "epochs", "batch_size")
         if not 0.0 <= self.depth_dropout <= 1.0:
             raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
@@ -68,7 +70,8 @@ class ClassifierTrainConfig:
 @dataclass(frozen=True)
 class DetectorTrainConfig:
     """``onionsort train detector``: dataset folder, run folder, hyperparameters, ``resume``
-    (continue the run in ``out`` from its last checkpoint)."""
+    (continue the run in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to
+    fine-tune instead of training from scratch) and the peak learning rate ``lr``."""
 
     data: Path
     out: Path
@@ -77,10 +80,14 @@ class DetectorTrainConfig:
     batch_size: int = 16
     seed: int = 0
     resume: bool = False
+    device: str = "auto"
+    init: Path | None = None
+    lr: float = 2e-3
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
         object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
         _check_positive(self, "epochs", "images_per_epoch", "batch_size")
 
 
@@ -143,7 +150,8 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
                              f"{model.frames} frames")
     with _EpochBar("state classifier", model.epochs) as bar:
         return train_classifier(splits["train"], splits["val"], splits["test"], model,
-                                config.out, on_epoch=bar.update)
+                                config.out, on_epoch=bar.update,
+                                device=resolve_device(config.device))
 
 
 def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
@@ -198,8 +206,11 @@ def train_detector(config: DetectorTrainConfig) -> dict:
                                      inspection_repeat=INSPECTION_REPEAT if split == "train"
                                      else 1)
               for split in ("train", "val", "test")}
+    if config.init is not None and not Path(config.init).is_file():
+        raise FileNotFoundError(f"--init {config.init}: no such detector checkpoint")
     model = TrainConfig(epochs=config.epochs, images_per_epoch=config.images_per_epoch,
-                        batch_size=config.batch_size, seed=config.seed)
+                        batch_size=config.batch_size, seed=config.seed, lr=config.lr)
     with _EpochBar("detector", model.epochs) as bar:
         return train(images["train"], images["val"], images["test"], model, config.out,
-                     resume=config.resume, on_epoch=bar.update)
+                     resume=config.resume, on_epoch=bar.update,
+                     device=resolve_device(config.device), init=config.init)

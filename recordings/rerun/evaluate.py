@@ -11,8 +11,10 @@ prefix per evaluated policy lets two share a recording)::
     <root>/camera                      Pinhole (static), when the camera's K is given
     <root>/camera/color                Image (JPEG) of the main camera, when rendering
     <root>/camera/depth                DepthImage (metres), when rendering
-    <root>/inspection                  Image of the inspection view, on steps that inspect
-    <root>/inspection/detections       Boxes2D of the detector, when a detector is given
+    <root>/inspection/view_K           Image of the robot's K-th view of the onion it inspects
+    <root>/inspection/view_K/detections  Boxes2D of the detector, when a detector is given,
+                                       labelled with the view's probability of a blemish
+    <root>/inspection/p_blemished      Scalars: the fused probability of each inspection
     <root>/decisions                   TextLog: one line per action (WARN: perception wrong)
     <root>/metrics/{precision,recall}  Scalars: running precision and recall
     <root>/counts/{tp,fp,tn,fn}        Scalars: running counts
@@ -87,7 +89,9 @@ class EvaluationEvent(SortingDecision, Protocol):
     inspected it, ``fate`` (``"bin"`` or ``"line"``) where this action decided it;
     ``tp`` .. ``recall`` are running over the decided onions. ``color`` (H, W, 3) uint8 RGB and
     ``depth`` (H, W) float metres are there when the evaluation renders, ``inspection``
-    (h, w, 3) uint8 RGB on inspecting actions; ``q`` (7,) the Sawyer's joint positions.
+    (h, w, 3) uint8 RGB on inspecting actions; ``q`` (7,) the Sawyer's joint positions. An
+    event may also carry ``views`` (every inspection view), ``p_blemished`` (the fused
+    probability) and ``view_p_blemished`` (each view's); the logger reads them if present.
     """
 
     @property
@@ -116,9 +120,11 @@ class Detection(Protocol):
 Detect = Callable[[list[np.ndarray]], Sequence[Detection]]
 
 
-def evaluation_blueprint(prefix: str = EVALUATE_ROOT) -> rrb.Blueprint:
-    """The layout: the station's camera and the inspection view, the decisions, the metrics,
-    the counts and the arm's joints."""
+def evaluation_blueprint(prefix: str = EVALUATE_ROOT, views: int = 1) -> rrb.Blueprint:
+    """The layout: the station's camera and the ``views`` inspection views, the decisions, the
+    metrics, the counts and the arm's joints."""
+    inspection = [rrb.Spatial2DView(origin=f"{prefix}/inspection/view_{k}", name=f"view {k}")
+                  for k in range(max(1, views))]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -129,7 +135,7 @@ def evaluation_blueprint(prefix: str = EVALUATE_ROOT) -> rrb.Blueprint:
                     world_view(prefix, name="Sawyer station (3D)"),
                 ),
                 rrb.Horizontal(
-                    rrb.Spatial2DView(origin=f"{prefix}/inspection", name="inspection"),
+                    rrb.Grid(*inspection, name="inspection"),
                     rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
                                       name="depth"),
                 ),
@@ -138,6 +144,8 @@ def evaluation_blueprint(prefix: str = EVALUATE_ROOT) -> rrb.Blueprint:
             rrb.Vertical(
                 rrb.TextLogView(origin=f"{prefix}/decisions", name="decisions"),
                 rrb.TimeSeriesView(origin=f"{prefix}/metrics", name="precision / recall"),
+                rrb.TimeSeriesView(origin=f"{prefix}/inspection/p_blemished",
+                                   name="P(blemished) at inspection"),
                 rrb.TimeSeriesView(origin=f"{prefix}/counts", name="TP / FP / TN / FN"),
                 rrb.TimeSeriesView(origin=f"{prefix}/mdp", name="state / action"),
                 rrb.TimeSeriesView(origin=f"{prefix}/arm", name="Sawyer joints (rad)"),
@@ -174,6 +182,8 @@ class EvaluationLogger:
     camera_pose : Pose or None
         The main camera's optical frame in the world (``robot.world.camera_pose``): places its
         frustum and image in 3D.
+    views : int
+        Inspection views per onion (the layout's grid of them).
 
     Examples
     --------
@@ -185,7 +195,7 @@ class EvaluationLogger:
                  detector: Detect | Any | None = None, *, camera_K: Any = None,
                  application_id: str = "onionsort_evaluate",
                  task: TaskDescription = SORTING_TASK, robot: Robot | None = None,
-                 camera_pose: Pose | None = None) -> None:
+                 camera_pose: Pose | None = None, views: int = 1) -> None:
         prefix = str(prefix).strip("/")
         if not prefix:
             raise ValueError(f"prefix must name an entity path; got {prefix!r}")
@@ -202,7 +212,7 @@ class EvaluationLogger:
         self.task = task
         self.detect: Detect | None = detector
         self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
-        self.rec = open_recording(application_id, target, evaluation_blueprint(prefix))
+        self.rec = open_recording(application_id, target, evaluation_blueprint(prefix, views))
         log_class_annotations(self.rec)
         self._log_series_names()
         self._world = WorldLogger(self.rec, prefix)
@@ -253,11 +263,11 @@ class EvaluationLogger:
         if event.depth is not None:
             log_camera_images(rec, p, depth=np.asarray(event.depth, np.float32),
                               depth_meter=1.0)
-        if event.inspection is not None:
-            view = np.asarray(event.inspection)
-            rec.log(f"{p}/inspection", rr.Image(view))
-            if self.detect is not None:
-                rec.log(f"{p}/inspection/detections", _boxes(self.detect([view])[0]))
+        views = tuple(getattr(event, "views", ()) or ())
+        if not views and event.inspection is not None:
+            views = (event.inspection,)
+        if views:
+            self._log_views(event, [np.asarray(v) for v in views])
         text, level = _describe(event, self.task)
         rec.log(f"{p}/decisions", rr.TextLog(text, level=level))
         world = getattr(event, "world", None)
@@ -267,6 +277,19 @@ class EvaluationLogger:
             if camera is not None and not self._camera_fixed:  # else logged static already
                 self._world.log_pose(f"{p}/camera", camera.position, camera.orientation)
         self._buffer(event)
+
+    def _log_views(self, event: EvaluationEvent, views: list[np.ndarray]) -> None:
+        p, rec = self.prefix, self.rec
+        found = self.detect(views) if self.detect is not None else [None] * len(views)
+        per_view = tuple(getattr(event, "view_p_blemished", ()) or ())
+        for k, (view, det) in enumerate(zip(views, found, strict=True)):
+            rec.log(f"{p}/inspection/view_{k}", rr.Image(view))
+            if det is not None:
+                p_view = per_view[k] if k < len(per_view) else None
+                rec.log(f"{p}/inspection/view_{k}/detections", _boxes(det, p_view))
+        p_bad = getattr(event, "p_blemished", None)
+        if p_bad is not None:
+            rec.log(f"{p}/inspection/p_blemished", rr.Scalars(float(p_bad)))
 
     def _buffer(self, event: EvaluationEvent) -> None:
         p = self.prefix
@@ -301,13 +324,18 @@ class EvaluationLogger:
             close_recording(self.rec)
 
 
-def _boxes(det: Detection) -> rr.Boxes2D:
+def _boxes(det: Detection, p_blemished: float | None = None) -> rr.Boxes2D:
+    """The detections of one view; the best box labelled with the view's probability of a
+    blemish where there is one (the others with the detector's class and score)."""
     boxes = np.asarray(det.boxes, float).reshape(-1, 4)
     classes = np.asarray(det.classes).astype(int).reshape(-1)
     scores = np.asarray(det.scores, float).reshape(-1)
+    labels = [f"{CLASS_NAMES.get(int(c), c)} {s:.2f}" for c, s in zip(classes, scores,
+                                                                       strict=True)]
+    if p_blemished is not None and len(scores):
+        labels[int(scores.argmax())] = f"P(blemished) {p_blemished:.2f}"
     return rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, class_ids=classes,
-                      labels=[f"{CLASS_NAMES.get(int(c), c)} {s:.2f}"
-                              for c, s in zip(classes, scores, strict=True)])
+                      labels=labels)
 
 
 def _describe(event: EvaluationEvent, task: TaskDescription = SORTING_TASK) -> tuple[str, str]:
@@ -325,6 +353,9 @@ def _describe(event: EvaluationEvent, task: TaskDescription = SORTING_TASK) -> t
     if event.perceived is not None:
         perceived = int(event.perceived)
         text += f" · perceived {task.value_name(_PERCEIVED_FACTOR, perceived)}"
+        p_bad = getattr(event, "p_blemished", None)
+        if p_bad is not None:
+            text += f" (P(blemished) {float(p_bad):.2f})"
         bad = task.value_index(_PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED)
         if (perceived == bad) != bool(event.blemished):
             level = rr.TextLogLevel.WARN

@@ -238,6 +238,9 @@ def _observation_text(msg: dict, values: dict[str, tuple[str, ...]] | None = Non
     inspected = msg.get("inspected")
     seen = "" if inspected is None else \
         f" · inspection saw {CLASS_NAMES.get(int(inspected), inspected)}"
+    p_bad = msg.get("p_blemished")
+    if p_bad is not None:
+        seen += f" · P(blemished) {float(p_bad):.2f}"
     return (f"#{step} observation {msg['observation']}: state {msg.get('state', '?')} "
             f"({', '.join(names)}){p_text}{seen}", rr.TextLogLevel.INFO)
 

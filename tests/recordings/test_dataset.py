@@ -54,16 +54,17 @@ def test_inspection_views_of_the_sorter_and_of_the_robot_are_labelled(dataset):
     views = [f for split in SPLITS for f in read_split(dataset, split, view="inspection")]
     human = [f for f in views if f.record["source"] == "human"]
     robot = [f for f in views if f.record["source"] == "robot"]
-    assert len(robot) == 90  # 30 onions, 3 wrist turns each
+    assert len(robot) == 30 * 8  # 30 onions, each from the robot's 8 inspection poses
+    assert sorted({f.record["view"] for f in robot}) == list(range(8))
     for f in robot:
-        assert f.color.shape == (120, 160, 3) and f.depth is None
+        assert f.color.shape == (240, 320, 3) and f.depth is None  # the robot's own camera
         assert len(f.record["boxes"]) == 1  # the onion in the gripper, seen whole
         x0, y0, x1, y1 = f.record["boxes"][0]
-        assert (x1 - x0) * (y1 - y0) > 0.05 * 160 * 120
+        assert (x1 - x0) * (y1 - y0) > 0.05 * 320 * 240
     assert {f.record["lineup"] for f in read_split(dataset, "test", view="inspection")
             if f.record["source"] == "robot"}
-    assert sum(f.record["classes"][0] for f in robot) == 45  # half of each line-up blemished
-    assert len(human) == 14 // 2  # the first frame of every step
+    assert sum(f.record["classes"][0] for f in robot) == 15 * 8  # half of each line-up blemished
+    assert len(human) == 14  # every frame: the sorter turns the onion while inspecting it
 
 
 def test_existing_dataset_is_never_overwritten(dataset, capsys):

@@ -377,7 +377,7 @@ def test_evaluation(tmp_path):
                    "mdp/state", "mdp/action", "arm/joints"):
         assert_series(s, f"evaluate/{entity}", n)
     assert {"evaluate/camera", "evaluate/camera/color", "evaluate/camera/depth",
-            "evaluate/inspection", "evaluate/inspection/detections"} <= set(s)
+            "evaluate/inspection/view_0", "evaluate/inspection/view_0/detections"} <= set(s)
     assert s["evaluate/decisions"]["rows"] == n
     assert s["/"]["static"] == {True}
     verify(out)

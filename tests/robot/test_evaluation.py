@@ -167,13 +167,13 @@ def test_rendering_the_main_camera_never_changes_what_the_inspection_sees(expert
     # every step (a Rerun log, a Gymnasium observation) sees the same inspection views
     views = {True: [], False: []}
 
-    def classify(rgb, render):
-        views[render].append(rgb.copy())
-        return Prediction.BAD if rgb.mean() > 100 else Prediction.GOOD
+    def classify(shown, render):
+        views[render].extend(v.copy() for v in shown)
+        return Prediction.BAD if shown[0].mean() > 100 else Prediction.GOOD
 
     results = {render: evaluate_policy(expert_pi, n_onions=2, n_blemished=1, seed=5,
                                        move_steps=40, difficulty="hard", render=render,
-                                       classify=lambda rgb, r=render: classify(rgb, r))
+                                       classify=lambda shown, r=render: classify(shown, r))
                for render in (True, False)}
     assert results[True] == results[False]
     assert len(views[True]) == len(views[False]) > 0

@@ -33,10 +33,11 @@ def expert_actions():
     return onion_sorting().expert_policy().argmax(axis=1)
 
 
-def hash_classifier(rgb: np.ndarray) -> Prediction:
-    """A deterministic classifier that depends on every pixel of the view: GOOD, BAD or
-    UNKNOWN (abstain), so perception errors and re-inspections depend on the seed."""
-    return Prediction(hashlib.sha256(rgb.tobytes()).digest()[0] % 3)
+def hash_classifier(views: list[np.ndarray]) -> Prediction:
+    """A deterministic classifier that depends on every pixel of the views: GOOD, BAD or
+    UNKNOWN (abstain), so perception errors and abstentions depend on the seed."""
+    digest = hashlib.sha256(b"".join(v.tobytes() for v in views)).digest()
+    return Prediction(digest[0] % 3)
 
 
 def rollout(env, actions, seed):
@@ -217,9 +218,9 @@ def test_steps_need_a_reset_and_a_valid_action():
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_rollout_matches_onionsort_evaluate_with_the_detector(tmp_path, seed):
-    """The acceptance check end to end: the shipped detector inspects, on a hard station, and
+    """The acceptance check end to end: the shipped models inspect, on a hard station, and
     ``onionsort evaluate`` records to Rerun (its default, which renders every step)."""
-    from onionsort.stages.evaluate import EvaluateConfig, evaluate, inspection_classifier
+    from onionsort.stages.evaluate import EvaluateConfig, evaluate
     from onionsort.stages.models import PerceptionModels
 
     models = PerceptionModels.load(None)
@@ -229,7 +230,7 @@ def test_the_rollout_matches_onionsort_evaluate_with_the_detector(tmp_path, seed
     expected, _ = evaluate(EvaluateConfig(run=tmp_path, onions=4, blemished=2, seed=seed,
                                           difficulty="hard"), models=models)
     env = gymnasium.make("onionsort/Sorting-v0", n_onions=4, n_blemished=2, difficulty="hard",
-                         classify=inspection_classifier(models.detector))
+                         classify=models.inspector())
     try:
         _, infos, _, _ = rollout(env, actions, seed)
     finally:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
+import pybullet as p
 import pytest
 
 from irl.domains.onion_sorting import Location, Prediction, SortAction, SortingState, next_state
@@ -14,9 +16,12 @@ from robot.scene import GATE_X
 from robot.state_map import PICK_SPOT, hand_location, in_bin, on_belt
 from robot.station import (
     GROUND_TRUTH,
+    INSPECTION_VIEWS,
     ROBOT_TARGETS,
     START_STATE,
     SawyerStation,
+    _down,
+    inspection_poses,
     make_lineup,
 )
 
@@ -24,7 +29,7 @@ C, P, I, PC, PB = SortAction  # CLAIM, PICK, INSPECT, PLACE_ON_CONVEYOR, PLACE_I
 
 
 def always(prediction: Prediction):
-    return lambda rgb: prediction
+    return lambda views: prediction
 
 
 #: (name, actions from the start, classifier): one starting state each
@@ -160,19 +165,87 @@ def test_the_inspection_view_shows_the_held_onion_large_and_centred():
         assert x0 > 0 and y0 > 0 and x1 < w and y1 < h  # whole
 
 
-def test_the_classifier_sees_the_inspection_view_and_its_answer_is_the_prediction():
+def test_the_classifier_sees_every_view_and_its_answer_is_the_prediction():
     seen = []
 
-    def classify(rgb):
-        seen.append(rgb.copy())
+    def classify(views):
+        seen.append([v.copy() for v in views])
         return Prediction.BAD
 
     with SawyerStation(classify, n_onions=2, n_blemished=0, seed=0) as st:
         for a in (C, P, I):
             done = st.step(a)
-        assert len(seen) == 1 and np.array_equal(seen[0], done.inspection)
+        assert len(seen) == 1 and len(seen[0]) == INSPECTION_VIEWS == len(done.views)
+        assert all(np.array_equal(a, b) for a, b in zip(seen[0], done.views, strict=True))
+        assert np.array_equal(done.inspection, done.views[0])
         assert done.perceived == Prediction.BAD == done.next_state.prediction
         assert not st.step(I).changed and len(seen) == 1  # a known onion is not re-inspected
+
+
+def test_the_views_show_the_onion_from_every_side_and_from_below():
+    # each view shows the held onion, whole, from another side: the turned and tilted poses
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=1,
+                       inspection_views=4) as st:
+        done = [st.step(a) for a in (C, P, I)][-1]
+        body = st._onions[st.focus].body
+        assert len(st.last_views) == 4
+        for image in st.last_views:
+            x0, y0, x1, y1, n = boxes_from_segmentation(image.seg, [body])[body]
+            h, w = image.seg.shape
+            assert n > 0.1 * h * w and x0 > 0 and y0 > 0 and x1 < w and y1 < h
+        views = [v.astype(float) for v in done.views]
+        assert all(np.abs(a - b).mean() > 2.0 for i, a in enumerate(views) for b in views[:i])
+        # and the arm is back at the inspection pose, where the state says the onion is
+        assert st.state == SortingState(Location.FACE, Location.FACE, Prediction.GOOD) \
+            or st.state == SortingState(Location.FACE, Location.FACE, Prediction.BAD)
+        assert st.step(PB).reach_error < 0.01
+
+
+def test_the_poses_spread_around_the_onion_and_nest():
+    poses = inspection_poses(8)
+    assert inspection_poses(4) == poses[:4] and inspection_poses(1) == ((0.0, 0.0),)
+    yaws = np.degrees([y for y, _ in poses]) % 360
+    np.testing.assert_allclose(sorted(yaws), np.arange(0, 360, 45), atol=1e-9)
+    assert [t > 0 for _, t in poses] == [False, True] * 4
+    for n in (2, 3, 4):  # the first n turns leave no gap wider than half a turn
+        turns = np.sort(np.degrees([y for y, _ in inspection_poses(n)]) % 360)
+        assert np.diff(np.r_[turns, turns[0] + 360]).max() <= 180 + 1e-9
+    with pytest.raises(ValueError, match="n_views"):
+        inspection_poses(0)
+    with pytest.raises(ValueError, match="tilt"):
+        inspection_poses(2, tilt=2.0)
+
+
+def test_a_verdict_carries_its_probabilities_into_the_step():
+    @dataclass(frozen=True)
+    class Verdict:
+        prediction: int
+        p_blemished: float
+        view_p_blemished: tuple
+
+    with SawyerStation(lambda views: Verdict(1, 0.8, (0.1, 0.9)), n_onions=2,
+                       n_blemished=0, seed=0, inspection_views=2) as st:
+        done = [st.step(a) for a in (C, P, I)][-1]
+        assert done.perceived == Prediction.BAD and done.p_blemished == 0.8
+        assert done.view_p_blemished == (0.1, 0.9) and len(done.views) == 2
+
+
+def test_labelled_views_count_the_rot_each_one_shows():
+    # ground truth for the inspection classifier: a good onion shows no rot in any view, a
+    # blemished one (clean world: 5-9 patches all round) shows rot in some
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=3, inspection_views=4,
+                       label_blemishes=True) as st:
+        rot = {}
+        for a in (C, P, I, PB if st.blemished[0] else PC, C, P, I):
+            done = st.step(a)
+            if done.views:
+                held = st._onions[st.focus]
+                labels = [max(labels, key=lambda lb: lb.visible_pixels)
+                          for labels in st.last_labels]
+                assert all(lb.blemished == held.appearance.blemished for lb in labels)
+                rot[bool(held.appearance.blemished)] = [lb.rot_pixels for lb in labels]
+    assert rot[False] == [0, 0, 0, 0]
+    assert max(rot[True]) > 0.01 * 10_000
 
 
 def test_rendering_every_step_returns_the_main_view():
@@ -182,27 +255,12 @@ def test_rendering_every_step_returns_the_main_view():
         assert image.rgb.shape == (240, 320, 3) and np.all(image.depth > 0)
 
 
-def test_when_the_classifier_abstains_the_robot_shows_it_another_side():
-    views = []
-
-    def hesitant(rgb):
-        views.append(rgb.copy())
-        return Prediction.UNKNOWN if len(views) == 1 else Prediction.BAD
-
-    with SawyerStation(hesitant, n_onions=2, n_blemished=0) as st:
-        done = [st.step(a) for a in (C, P, I)][-1]
-        assert len(views) == 2 and not np.array_equal(views[0], views[1])
-        assert done.perceived == Prediction.BAD and np.array_equal(done.inspection, views[1])
-        assert st.state == SortingState(Location.FACE, Location.FACE, Prediction.BAD)
-        assert st.step(PB).next_state.onion == Location.BIN  # and the motions go on
-
-
 def test_an_onion_the_classifier_never_classifies_counts_as_good(caplog):
     with SawyerStation(always(Prediction.UNKNOWN), n_onions=2, n_blemished=1, seed=0) as st:
         done = [st.step(a) for a in (C, P, I)][-1]
         assert done.perceived == Prediction.GOOD == done.next_state.prediction
         assert "abstained" in caplog.text
-        for a in (PC, C, P):  # from the turned wrist, the motions go on as usual
+        for a in (PC, C, P):  # after the turns, the motions go on as usual
             assert st.step(a).reach_error < 0.01
         assert st.state == SortingState(Location.HOVER, Location.HOVER, Prediction.UNKNOWN)
 
@@ -249,3 +307,29 @@ def test_the_line_up_has_exactly_the_blemished_count_in_a_seeded_order():
     assert len({o.texture_seed for o in a}) == 20  # every onion looks different
     with pytest.raises(ValueError, match="n_onions"):
         make_lineup(0, 0, np.random.default_rng(0))
+
+
+def test_leaving_out_the_links_the_camera_cannot_see_changes_no_pixel():
+    from robot.camera import links_outside, render
+
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=4,
+                       inspection_views=4) as st:
+        for a in (C, P):
+            st.step(a)
+        culled = links_outside(st.client, st.inspection, st.arm.body)
+        assert culled, "the inspection camera sees all of the arm?"
+        for pose, (yaw, tilt) in enumerate(st.poses):  # each inspection pose of the wrist
+            centre = st.position(st.focus)
+            turn = _down(yaw, tilt)
+            st._move(st.arm.flange_holding_at(centre, turn) if pose else ROBOT_TARGETS[
+                Location.FACE], orientation=turn)
+            full = render(st.client, st.inspection, st.lighting)
+            lean = render(st.client, st.inspection, st.lighting, cull=(st.arm.body,))
+            for name in ("rgb", "depth", "seg"):
+                assert np.array_equal(getattr(full, name), getattr(lean, name)), (pose, name)
+        # and the colours are back: the main camera sees the arm as before
+        again = render(st.client, st.camera, st.lighting)
+        assert np.array_equal(again.rgb, render(st.client, st.camera, st.lighting).rgb)
+        colours = {d[1]: d[7] for d in p.getVisualShapeData(st.arm.body,
+                                                            physicsClientId=st.client)}
+        assert all(colours[link] == rgba for _, link, rgba in culled)

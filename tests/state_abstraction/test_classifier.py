@@ -186,7 +186,7 @@ def test_the_shipped_model_reads_the_camera_factors_with_and_without_depth(fresh
         assert report["without_depth"][f"accuracy_{factor}"] >= 0.90, report
     # perception takes steps without depth as well
     plain = [(s.colors, None, s.inspection) for s in fresh_steps[:10]]
-    perceived = perceive_steps(model, plain, detect=None)
+    perceived = perceive_steps(model, plain, inspection=None)
     assert len(perceived) == 10 and all(0 <= p.onion < len(Location) for p in perceived)
 
 

@@ -11,6 +11,7 @@ from onionsort.cli import main
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.perceive import perceive_session
 from perception import Detector, DetectorConfig, DetectorNet
+from perception.inspection import InspectionClassifier, InspectionNet, InspectionNetConfig
 from recordings import open_session
 from state_abstraction.classifier import HEADS, ClassifierConfig, StateClassifier
 from state_abstraction.perceive import track_predictions
@@ -24,16 +25,31 @@ def test_predictions_come_from_inspection_and_reset_on_a_new_onion():
     onion = [C, H, F, B, C, H, F, C]
     waiting = [1, 0, 0, 0, 1, 0, 0, 0]
     occluded = [0] * 8
-    inspected = [None, None, 1, None, None, None, 0, None]
-    assert track_predictions(onion, waiting, occluded, inspected) == [U, U, X, X, U, U, G, G]
+    seen = [[], [], [0.9], [], [], [], [0.2], []]
+    predictions, p_bad = track_predictions(onion, waiting, occluded, seen)
+    assert predictions == [U, U, X, X, U, U, G, G]
+    assert p_bad == [None, None, 0.9, 0.9, None, None, 0.2, 0.2]
+
+
+def test_views_of_a_later_frame_count_from_the_next_step_and_views_are_fused():
+    # the inspection step's later frames show the onion coming up: from the next step on
+    onion = [C, H, F, B]
+    at_rest = [[], [], [0.7], []]
+    later = [[], [0.8], [], []]
+    predictions, p_bad = track_predictions(onion, [1, 0, 0, 0], [0] * 4, at_rest, later,
+                                           fuse=max)
+    assert predictions == [U, U, X, X] and p_bad == [None, None, 0.8, 0.8]
+    # a view seen while the onion is still at the gate is forgotten when it is picked
+    predictions, _ = track_predictions([C, H], [1, 0], [0, 0], [[0.9], []], None)
+    assert predictions == [X, U]
 
 
 def test_an_inspection_seen_during_an_occluded_step_still_counts():
     onion = [C, H, F, B]
-    assert track_predictions(onion, [1, 0, 0, 0], [0, 0, 1, 0], [None, None, 1, None]) == [
-        U, U, X, X]
+    predictions, _ = track_predictions(onion, [1, 0, 0, 0], [0, 0, 1, 0], [[], [], [0.7], []])
+    assert predictions == [U, U, X, X]
     with pytest.raises(ValueError, match="equal lengths"):
-        track_predictions(onion, [1], [0], [None])
+        track_predictions(onion, [1], [0], [[]])
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +61,8 @@ def random_models(tmp_path_factory):
         folder / "state_classifier.pt")
     Detector(DetectorNet(DetectorConfig(width=128, height=96, channels=4))).save(
         folder / "detector.pt")
+    InspectionClassifier(InspectionNet(InspectionNetConfig(width=4))).save(
+        folder / "inspection_classifier.pt")
     return folder
 
 
@@ -116,8 +134,12 @@ def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys)
     assert "prediction_after_first_inspection" in result
 
 
-def test_missing_models_name_the_training_command(tmp_path):
+def test_missing_models_name_the_training_command(random_models, tmp_path):
     with pytest.raises(FileNotFoundError, match="onionsort train state-classifier"):
+        PerceptionModels.load(tmp_path)
+    for name in ("state_classifier.pt", "detector.pt"):
+        (tmp_path / name).write_bytes((random_models / name).read_bytes())
+    with pytest.raises(FileNotFoundError, match="onionsort train inspection"):
         PerceptionModels.load(tmp_path)
 
 
@@ -156,29 +178,6 @@ def test_learn_from_perceived_sessions_and_its_refusals(random_models, session, 
     assert "not the onion-sorting MDP" in capsys.readouterr().err
 
 
-def test_inspection_calls_count_misses_and_no_call_as_wrong():
-    from types import SimpleNamespace as NS
-
-    from onionsort.stages.calibrate import inspection_calls
-
-    def frame(source, cls):
-        return NS(record={"source": source, "classes": [cls], "boxes": [[0, 0, 1, 1]]})
-
-    def det(cls, score):
-        return NS(scores=np.array([score]), classes=np.array([cls]))
-
-    frames = [frame("human", 1), frame("human", 0), frame("robot", 1), frame("robot", 0),
-              frame("robot", 0), NS(record={"classes": [], "boxes": []})]
-    dets = [det(0, 0.9), det(0, 0.9), det(1, 0.9), det(1, 0.05), det(1, 0.8), det(0, 0.9)]
-    calls = inspection_calls(frames, dets)
-    assert calls["human"] == {"n": 2, "accuracy": 0.5, "missed_blemished": 1,
-                              "false_blemished": 0}
-    # a score below the inspection threshold is no call: wrong, but not "called blemished"
-    assert calls["robot"] == {"n": 3, "accuracy": 1 / 3, "missed_blemished": 0,
-                              "false_blemished": 1}
-    assert calls["all"]["n"] == 5 and calls["all"]["accuracy"] == 2 / 5
-
-
 def test_prediction_after_first_inspection_leaves_out_the_steps_before_it(monkeypatch):
     from types import SimpleNamespace as NS
 
@@ -189,7 +188,7 @@ def test_prediction_after_first_inspection_leaves_out_the_steps_before_it(monkey
     truth = [1, 1, 0, 0, 0]
     seen_pred = [2, 2, 0, 0, 1]
     inspected = [None, None, 0, None, None]
-    steps = [NS(colors=None, depths=None, inspection=None,
+    steps = [NS(colors=None, depths=None, views=None,
                 record={"occluded": False, "onion": 0, "end_effector": 0, "prediction": t,
                         "action": 0}) for t in truth]
     perceived = [NS(occluded=False, onion=0, end_effector=0, prediction=p, action=0,

@@ -1,0 +1,413 @@
+"""The inspection classifier from a dataset: its crops, its training, its measurement.
+
+The library (:mod:`perception.inspection`, :mod:`perception.train_inspection`) trains on crops
+held in memory and reads no dataset; this module reads a dataset's inspection views with
+:mod:`recordings.dataset` (the sorter's, ``source: human``, and the Sawyer's, ``source: robot``,
+at every difficulty level the dataset holds), cuts the crops, weighs them, and groups the views
+of each onion so that their fused call can be measured.
+
+Weights: each (difficulty level, source, label) cell of the training and validation views
+weighs the same in all, times the level's weight (``level_weights``; 1 each by default): the
+``clean`` call learns as much as the hardest level's, and the sorter's few views as much as the
+robot's many.
+
+Example::
+
+    from onionsort.stages.inspection import InspectionTrainStageConfig, train_inspection_stage
+    metrics = train_inspection_stage(InspectionTrainStageConfig(data=Path("runs/data"),
+                                                                out=Path("runs/models")))
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import check_device, check_output_folder, log_config, write_json
+
+__all__ = ["MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
+           "inspection_views", "measure_inspection", "train_inspection_stage"]
+
+logger = logging.getLogger(__name__)
+
+MIN_CROP_PIXELS = 300
+"""A view is read only if the onion shows at least this many pixels (a rim at the edge of the
+sorter's view is no inspection)."""
+METRICS_FILE = "inspection_metrics.json"
+
+
+@dataclass
+class InspectionViews:
+    """The inspection views of a dataset split that show an onion, one row each.
+
+    ``crops`` (N, S, S, 3) uint8 (context crops of the true box, or the crops inference cuts
+    round the detector's box); ``labels`` (N,) rot in view (1, 0, -1 unclear;
+    :func:`perception.inspection.rot_label`); ``classes`` (N,) the onion's class; ``level``,
+    ``source`` (N,) str; ``onion`` (N,) a key naming the onion (the views of one onion in one
+    session or line-up share it); ``view`` (N,) the robot's view index (-1 for the sorter's);
+    ``found`` (N,) bool, whether the detector found the onion (always True for context crops).
+    """
+
+    crops: np.ndarray
+    labels: np.ndarray
+    classes: np.ndarray
+    level: np.ndarray
+    source: np.ndarray
+    onion: np.ndarray
+    view: np.ndarray
+    found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    def subset(self, mask: np.ndarray) -> InspectionViews:
+        return InspectionViews(**{k: getattr(self, k)[mask] for k in
+                                  ("crops", "labels", "classes", "level", "source", "onion",
+                                   "view", "found")})
+
+    @classmethod
+    def concat(cls, parts: list[InspectionViews]) -> InspectionViews:
+        """The rows of several sets, in order (onion keys prefixed by the set's index, so
+        that onions of two datasets never share one)."""
+        fields = ("crops", "labels", "classes", "level", "source", "view", "found")
+        out = {k: np.concatenate([getattr(p, k) for p in parts]) for k in fields}
+        out["onion"] = np.concatenate([np.char.add(f"{i}:", p.onion.astype(str))
+                                       for i, p in enumerate(parts)])
+        return cls(**out)
+
+    def weights(self, level_weights: dict[str, float] | None = None) -> np.ndarray:
+        """Each (level, source, label) cell weighs the same in all, times its level's weight
+        (:data:`level_weights`, 1 where not given)."""
+        level_weights = level_weights or {}
+        out = np.zeros(len(self))
+        cells = defaultdict(list)
+        for i, key in enumerate(zip(self.level, self.source, self.labels, strict=True)):
+            cells[key].append(i)
+        for (level, _, _), rows in cells.items():
+            out[rows] = float(level_weights.get(str(level), 1.0)) / len(rows)
+        return out * len(self) / out.sum()
+
+
+def _held_onion(record: dict) -> int | None:
+    """Index of the onion an inspection record is about: the one showing most pixels, if it
+    shows at least :data:`MIN_CROP_PIXELS`."""
+    pixels = record.get("visible_pixels")
+    boxes = record["boxes"]
+    if not boxes:
+        return None
+    if pixels is None:  # a dataset written before the field: the largest box
+        pixels = [(b[2] - b[0]) * (b[3] - b[1]) for b in boxes]
+    k = int(np.argmax(pixels))
+    return k if pixels[k] >= MIN_CROP_PIXELS else None
+
+
+def inspection_views(root: Path | str, split: str, *, detector=None,
+                     dataset_level: str | None = None, allow_empty: bool = False
+                     ) -> InspectionViews:
+    """The inspection views of ``split`` (or ``"all"``) of dataset ``root`` that show an onion.
+
+    Without ``detector``: context crops of the true boxes (for training,
+    :func:`perception.train_inspection.context_crop`). With it: the crops inference cuts round
+    the detector's best box (:meth:`perception.inspection.Inspector.boxes`), ``found`` False
+    (and a blank crop) where it finds none. ``dataset_level`` names the level of records that
+    do not name theirs (datasets written before the field). A split with no such view is an
+    error, or empty with ``allow_empty``.
+    """
+    from perception.inspection import CROP_SIZE, INSPECTION_SCORE, crop_onion, rot_label
+    from perception.train_inspection import CONTEXT_SIZE, context_crop
+    from recordings.dataset import read_metadata, read_split, split_names
+
+    meta = read_metadata(root)
+    if "inspection" not in meta.get("views", ["camera"]):
+        raise ValueError(f"{root} holds no inspection views; render a dataset with them "
+                         "(`onionsort dataset`)")
+    levels = meta.get("session_difficulty")
+    default_level = dataset_level or _dataset_level(meta)
+    rows = defaultdict(list)
+    pending: list[tuple[np.ndarray, list[float]]] = []
+
+    def flush() -> None:
+        if not pending:
+            return
+        for (image, _), det in zip(pending, detector.detect([im for im, _ in pending]),
+                                   strict=True):
+            scores = np.asarray(det.scores)
+            ok = scores.size > 0 and scores.max() >= INSPECTION_SCORE
+            rows["found"].append(ok)
+            rows["crops"].append(crop_onion(image, np.asarray(det.boxes)[int(scores.argmax())])
+                                 if ok else np.zeros((CROP_SIZE, CROP_SIZE, 3), np.uint8))
+        pending.clear()
+
+    for name in split_names(split):
+        for frame in read_split(root, name, view="inspection"):
+            rec = frame.record
+            k = _held_onion(rec)
+            if k is None:
+                continue
+            source = rec.get("source", "human")
+            level = rec.get("difficulty") or (
+                levels[rec["session"]] if levels and source == "human" else default_level)
+            rot = rec.get("rot_pixels")
+            visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
+            blemished = bool(rec["classes"][k])
+            rows["labels"].append(rot_label(None if rot is None else rot[k], visible, blemished))
+            rows["classes"].append(int(blemished))
+            rows["level"].append(level)
+            rows["source"].append(source)
+            if source == "robot":
+                rows["onion"].append(f"{name}/lineup{rec['lineup']}/{rec['index']}")
+                rows["view"].append(int(rec.get("view", 0)))
+            else:
+                onion_id = (rec.get("onions") or [k])[k]
+                rows["onion"].append(f"{name}/session{rec['session']}/{onion_id}")
+                rows["view"].append(-1)
+            if detector is None:
+                rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
+                rows["found"].append(True)
+            else:
+                pending.append((frame.color, rec["boxes"][k]))
+                if len(pending) == 32:
+                    flush()
+    if detector is not None:
+        flush()
+    if not rows["labels"] and not allow_empty:
+        raise ValueError(f"split {split!r} of {root} holds no inspection view that shows an "
+                         f"onion of {MIN_CROP_PIXELS} pixels or more")
+    size = CONTEXT_SIZE if detector is None else CROP_SIZE
+    return InspectionViews(
+        crops=np.asarray(rows["crops"], np.uint8).reshape(-1, size, size, 3),
+        **{k: np.asarray(rows[k]) for k in ("labels", "classes", "level", "source", "onion",
+                                             "view", "found")})
+
+
+def _dataset_level(meta: dict) -> str:
+    config = meta.get("config", {})
+    difficulty = config.get("difficulty", "clean")
+    if isinstance(difficulty, dict):
+        return difficulty.get("name", "custom")
+    return "mix" if isinstance(difficulty, list) else str(difficulty)
+
+
+@dataclass(frozen=True)
+class InspectionTrainStageConfig:
+    """``onionsort train inspection``: dataset folders (one or several: their splits are
+    pooled), run folder, hyperparameters.
+
+    ``detector`` is the folder of the detector that finds the onion in the validation views
+    (None: the shipped one); ``level_weights`` weighs difficulty levels (``{"clean": 2.0}``
+    counts clean views twice); ``device`` where torch trains (``auto``, ``cpu``, ``cuda``);
+    ``fusion`` fixes the classifier's fusion rule (None: the rule of lower log-loss on the
+    validation onions); ``visibility`` fixes the chance that a view of a blemished onion shows
+    its rot, as ``noisy-or`` fusion assumes it (None: the share measured on the training
+    views).
+    """
+
+    data: Path | tuple[Path, ...]
+    out: Path
+    epochs: int = 30
+    batch_size: int = 128
+    seed: int = 0
+    detector: Path | None = None
+    level_weights: dict = field(default_factory=dict)
+    device: str = "auto"
+    fusion: str | None = None
+    visibility: float | None = None
+
+    def __post_init__(self) -> None:
+        from perception.fusion import FUSION_RULES
+
+        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
+        if not data:
+            raise ValueError("data must name at least one dataset folder; got none")
+        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        if self.fusion is not None and self.fusion not in FUSION_RULES:
+            raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
+        if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
+            raise ValueError(f"visibility must be in (0, 1]; got {self.visibility}")
+        for name in ("epochs", "batch_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+        for level, weight in self.level_weights.items():
+            if not weight > 0:
+                raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")
+
+
+def _load_detector(folder: Path | None, device):
+    from onionsort.stages.models import DEFAULT_MODELS, DETECTOR_FILE
+    from perception import Detector
+
+    path = (DEFAULT_MODELS if folder is None else Path(folder)) / DETECTOR_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path.parent} has no {DETECTOR_FILE}; train it with "
+                                f"`onionsort train detector --data DATASET --out {path.parent}`")
+    return Detector.load(path, device=device)
+
+
+def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None) -> dict:
+    """Train the inspection classifier on ``config.data``'s train splits; choose its fusion
+    rule on the validation splits' onions; write ``inspection_classifier.pt`` and
+    ``inspection_metrics.json`` into ``config.out``.
+
+    Returns
+    -------
+    dict
+        The metrics written: training history, calibration, and per rule the validation
+        onions' fused log-loss and accuracy (``rules``), the ``rule`` chosen (``config.fusion``,
+        else the one of lower log-loss).
+    """
+    import torch
+
+    from onionsort.stages.base import resolve_device
+    from onionsort.stages.models import INSPECTION_FILE
+    from perception.fusion import FUSION_RULES
+    from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
+
+    log_config("train inspection", config)
+    device = resolve_device(config.device)
+    check_output_folder(config.out)
+    torch.set_num_threads(2)
+    detector = _load_detector(config.detector, device)
+    train = InspectionViews.concat([inspection_views(d, "train") for d in config.data])
+    val = InspectionViews.concat([inspection_views(d, "val", detector=detector)
+                                  for d in config.data])
+    val = val.subset(val.found)
+    logger.info("inspection views: %d train (%d show rot), %d val", len(train),
+                int((train.labels == 1).sum()), len(val))
+    train_set = CropSet(train.crops, train.labels, train.classes,
+                        train.weights(config.level_weights))
+    val_set = CropSet(val.crops, val.labels, val.classes, val.weights(config.level_weights))
+    classifier, metrics = train_inspection(
+        train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
+                                                  batch_size=config.batch_size,
+                                                  seed=config.seed),
+        device=device, on_epoch=on_epoch)
+    if config.visibility is not None:
+        classifier.visibility = float(config.visibility)
+        metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
+    rules = {rule: _fused_scores(classifier, val, rule) for rule in FUSION_RULES}
+    classifier.rule = config.fusion or min(rules, key=lambda r: rules[r]["log_loss"])
+    classifier.metadata["rules_on_val"] = rules
+    metrics.update({"rules": rules, "rule": classifier.rule,
+                    "level_weights": dict(config.level_weights), "device": str(device),
+                    "n_val": len(val), "data": [str(d) for d in config.data]})
+    classifier.save(config.out / INSPECTION_FILE)
+    write_json(config.out / METRICS_FILE, metrics)
+    return metrics
+
+
+def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray | None = None,
+           prior: float = 0.5) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per onion of ``views`` (found views only): the fused probability under ``rule``, its
+    class, and its key."""
+    if p is None:
+        p = classifier.view_probabilities(views.crops, rule)
+    groups = defaultdict(list)
+    for i, key in enumerate(views.onion):
+        if views.found[i]:
+            groups[key].append(i)
+    keys = sorted(groups)
+    fused = np.array([classifier.fuse(p[groups[k]], rule, prior) for k in keys])
+    classes = np.array([views.classes[groups[k][0]] for k in keys])
+    return fused, classes, keys
+
+
+def _fused_scores(classifier, views: InspectionViews, rule: str) -> dict:
+    """Log-loss and accuracy of the fused call on the onions of ``views``."""
+    fused, y, _ = _fused(classifier, views, rule)
+    q = np.clip(fused, 1e-6, 1 - 1e-6)
+    return {"log_loss": float(-np.mean(y * np.log(q) + (1 - y) * np.log1p(-q))),
+            "accuracy": float(np.mean((fused >= 0.5) == (y == 1))), "n_onions": len(y)}
+
+
+def measure_inspection(models, root: Path | str, split: str = "test", *,
+                       threshold: float | None = None, views: int | None = None) -> dict:
+    """The inspection on a dataset split, per difficulty level and source.
+
+    For each level: how often the detector finds the onion; the accuracy of each view alone
+    (its rot call against the rot it shows, and its class call against the onion's class);
+    and, for each fusion rule, the fused call on each onion (the robot's views of it, the first
+    ``views`` of them if given; the sorter's views of it in a session) at ``threshold`` (the
+    task's cost threshold by default): accuracy, precision, recall, expected calibration error
+    and the points of the precision-recall curve.
+    """
+    from onionsort.stages.models import sorting_threshold
+    from perception.fusion import (
+        FUSION_RULES,
+        expected_calibration_error,
+        precision_recall_curve,
+    )
+
+    threshold = sorting_threshold() if threshold is None else threshold
+    data = inspection_views(root, split, detector=models.detector, allow_empty=True)
+    if views is not None:
+        keep = (data.source != "robot") | (data.view < views)
+        data = data.subset(keep)
+    clf = models.inspection
+    z = np.zeros(len(data))
+    if data.found.any():
+        z[data.found] = clf.logits(data.crops[data.found])
+    p_rot = 1.0 / (1.0 + np.exp(-z / clf.temperature))
+    a, b = clf.platt
+    p_class = 1.0 / (1.0 + np.exp(-(a * z + b)))
+    out: dict = {"threshold": threshold, "rule": clf.rule, "levels": {}}
+    for level in sorted(set(data.level), key=_level_order):
+        at = data.level == level
+        report = {}
+        for source in ("robot", "human"):
+            mine = at & (data.source == source)
+            if not mine.any():
+                continue
+            found = mine & data.found
+            clear = found & (data.labels >= 0)
+            row = {"views": int(mine.sum()), "found": float(found.sum() / mine.sum()),
+                   "rot_accuracy": _mean((p_rot[clear] >= 0.5) == (data.labels[clear] == 1)),
+                   "rot_ece": (expected_calibration_error(p_rot[clear], data.labels[clear])
+                               if clear.any() else None),
+                   "view_accuracy": _mean((p_class[found] >= 0.5)
+                                          == (data.classes[found] == 1)),
+                   "fused": {}}
+            if source == "robot":
+                row["view_accuracy_by_view"] = {
+                    int(v): _mean((p_class[found & (data.view == v)] >= 0.5)
+                                  == (data.classes[found & (data.view == v)] == 1))
+                    for v in sorted(set(data.view[found]))}
+            subset = data.subset(mine)
+            for rule in FUSION_RULES:
+                p = (p_rot if rule == "noisy-or" else p_class)[mine]
+                fused, y, _ = _fused(clf, subset, rule, p)
+                if not len(y):
+                    continue
+                called = fused >= threshold
+                tp = int(np.sum(called & (y == 1)))
+                fp = int(np.sum(called & (y == 0)))
+                fn = int(np.sum(~called & (y == 1)))
+                precision, recall, cut = precision_recall_curve(fused, y)
+                row["fused"][rule] = {
+                    "onions": len(y), "accuracy": float(np.mean(called == (y == 1))),
+                    "precision": tp / (tp + fp) if tp + fp else 0.0,
+                    "recall": tp / (tp + fn) if tp + fn else 0.0,
+                    "ece": expected_calibration_error(fused, y),
+                    "pr_curve": {"precision": precision.round(4).tolist(),
+                                 "recall": recall.round(4).tolist(),
+                                 "threshold": cut.round(5).tolist()}}
+            report[source] = row
+        out["levels"][str(level)] = report
+    return out
+
+
+def _mean(values) -> float | None:
+    values = np.asarray(values)
+    return float(values.mean()) if values.size else None
+
+
+def _level_order(level: str) -> tuple[int, str]:
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    names = list(DIFFICULTY_LEVELS)
+    return (names.index(level) if level in names else len(names), str(level))

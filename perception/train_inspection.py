@@ -1,0 +1,280 @@
+"""Training the inspection classifier from scratch on crops of inspection views.
+
+Training samples are *context crops*: the onion's ground-truth box with more room around it
+than the network reads (:data:`CONTEXT_SCALE`), so that each epoch can cut the crop the network
+sees with a random shift and scale (:func:`context_crop`, :func:`augment`). Validation samples
+are the crops inference cuts (the detector's box, :func:`perception.inspection.crop_onion`): the
+epoch kept is the one of lowest weighted validation loss, and its temperature is fitted on them.
+
+Weights: every sample carries one (the ``train`` stage weights difficulty levels and balances
+the classes within each); the loss, the choice of epoch and the temperature all use them.
+Layouts as in :mod:`perception.inspection`.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from perception.inspection import (
+    CROP_MARGIN,
+    CROP_SIZE,
+    InspectionClassifier,
+    InspectionNet,
+    InspectionNetConfig,
+    crop_onion,
+    fit_platt,
+    fit_temperature,
+    to_tensor,
+)
+
+__all__ = ["CONTEXT_SCALE", "CropSet", "InspectionTrainConfig", "augment", "context_crop",
+           "train_inspection"]
+
+logger = logging.getLogger(__name__)
+
+CONTEXT_SCALE = 1.35
+"""A context crop spans this many times the window the network reads."""
+CONTEXT_SIZE = round(CROP_SIZE * CONTEXT_SCALE)
+
+
+@dataclass(frozen=True)
+class CropSet:
+    """Crops with their labels and weights.
+
+    ``crops`` (N, S, S, 3) uint8; ``labels`` (N,) whether the view shows rot: 1, 0, or -1
+    where that is unclear (a sliver of a patch at the rim: left out of the loss and of the
+    temperature); ``classes`` (N,) the onion's class (1 blemished); ``weights`` (N,) > 0.
+    """
+
+    crops: np.ndarray
+    labels: np.ndarray
+    classes: np.ndarray
+    weights: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.crops)
+        if not n:
+            raise ValueError("a crop set needs at least one crop; got none")
+        if not len(self.labels) == len(self.classes) == len(self.weights) == n:
+            raise ValueError(f"crops, labels, classes and weights must be of one length; got "
+                             f"{n}, {len(self.labels)}, {len(self.classes)} and "
+                             f"{len(self.weights)}")
+        if not np.all(np.asarray(self.weights) > 0):
+            raise ValueError("weights must be > 0")
+        if not np.isin(self.labels, (-1, 0, 1)).all() or not np.isin(self.classes, (0, 1)).all():
+            raise ValueError("labels must be -1, 0 or 1 and classes 0 or 1")
+
+
+@dataclass(frozen=True)
+class InspectionTrainConfig:
+    """Training hyperparameters (the network's are in
+    :class:`~perception.inspection.InspectionNetConfig`).
+
+    Augmentation (:func:`augment`): the crop window moves by up to ``shift`` of its side and
+    scales within ``scale``; the brightness varies by up to ``brightness``, each channel by up
+    to ``color`` more; Gaussian noise of a standard deviation up to ``noise`` grey levels is
+    added; and a share ``jpeg`` of the crops is re-encoded as JPEG of quality 30-90. The views
+    of every difficulty level are in the training set; these spread them further.
+    """
+
+    epochs: int = 30
+    batch_size: int = 128
+    lr: float = 3e-3
+    weight_decay: float = 5e-4
+    shift: float = 0.08
+    scale: tuple[float, float] = (0.85, 1.15)
+    brightness: float = 0.12
+    color: float = 0.06
+    noise: float = 6.0
+    jpeg: float = 0.3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.epochs < 1:
+            raise ValueError(f"epochs must be >= 1; got {self.epochs}")
+        if self.batch_size < 2:
+            raise ValueError(f"batch_size must be >= 2; got {self.batch_size}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0; got {self.lr}")
+
+
+def context_crop(rgb: np.ndarray, box) -> np.ndarray:
+    """The context crop (:data:`CONTEXT_SIZE` square, uint8) of the onion in ``box``."""
+    return crop_onion(rgb, box, CONTEXT_SIZE, scale=CONTEXT_SCALE)
+
+
+def augment(context: np.ndarray, rng: np.random.Generator, config: InspectionTrainConfig
+            ) -> np.ndarray:
+    """A training crop (:data:`~perception.inspection.CROP_SIZE` square) cut from a context
+    crop: shifted and scaled at random, mirrored half the time, its brightness and colour
+    jittered, noise added and, at times, JPEG artefacts (see :class:`InspectionTrainConfig`)."""
+    c = CONTEXT_SIZE / 2
+    half = CONTEXT_SIZE / CONTEXT_SCALE / (1 + 2 * CROP_MARGIN) / 2  # the box, in the context
+    crop = crop_onion(context, (c - half, c - half, c + half, c + half), CROP_SIZE,
+                      shift=tuple(rng.uniform(-config.shift, config.shift, 2)),
+                      scale=float(rng.uniform(*config.scale)))
+    if rng.random() < 0.5:
+        crop = crop[:, ::-1]
+    img = crop.astype(np.float32)
+    gain = (1.0 + rng.uniform(-config.brightness, config.brightness)) * (
+        1.0 + rng.uniform(-config.color, config.color, 3))
+    img = img * gain.astype(np.float32)
+    if config.noise:
+        img = img + rng.normal(0.0, rng.uniform(0.0, config.noise), img.shape)
+    crop = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    if config.jpeg and rng.random() < config.jpeg:
+        import cv2
+
+        ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(crop),
+                               [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(30, 91))])
+        if ok:
+            crop = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    return np.ascontiguousarray(crop)
+
+
+def _weighted_loss(logits: torch.Tensor, labels: torch.Tensor, weights: torch.Tensor
+                   ) -> torch.Tensor:
+    per = nn.functional.binary_cross_entropy_with_logits(logits, labels, reduction="none")
+    return (per * weights).sum() / weights.sum()
+
+
+@torch.no_grad()
+def _logits(net: InspectionNet, crops: np.ndarray, device: torch.device,
+            batch_size: int = 256) -> np.ndarray:
+    net.eval()
+    out = [net(to_tensor(crops[i:i + batch_size]).to(device)).float().cpu().numpy()
+           for i in range(0, len(crops), batch_size)]
+    return np.concatenate(out)
+
+
+def _nll(logits: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> float:
+    per = np.logaddexp(0.0, logits) - labels * logits
+    return float(np.sum(per * weights) / np.sum(weights))
+
+
+def _class_weights(classes: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``weights`` rescaled so that both classes weigh the same in all."""
+    out = np.asarray(weights, float).copy()
+    for c in (0, 1):
+        mine = classes == c
+        if mine.any():
+            out[mine] *= 0.5 / out[mine].sum()
+    return out
+
+
+def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig,
+                     net_config: InspectionNetConfig | None = None, *,
+                     rule: str = "noisy-or", device: str | torch.device = "cpu",
+                     on_epoch: Callable[[int, dict], None] | None = None
+                     ) -> tuple[InspectionClassifier, dict]:
+    """Train the network to see rot on ``train`` context crops; keep the epoch of lowest
+    weighted validation loss on ``val`` (inference crops); fit its calibrations there.
+
+    Crops whose label is unclear (-1) are left out of the loss, the choice of epoch and the
+    temperature; Platt's scaling to the onion's class uses every validation crop, its classes
+    weighted equally (so ``train_prior`` is 0.5). On CUDA the forward and backward passes run
+    in mixed precision (float16 autocast with a gradient scaler); on the CPU in float32.
+
+    Returns
+    -------
+    classifier : InspectionClassifier
+        Calibrated, with fusion rule ``rule``.
+    metrics : dict
+        ``history`` (per epoch: train loss, validation loss and accuracy), ``best_epoch``,
+        ``temperature``, ``platt``, ``val`` (loss and accuracy of the kept epoch, before and
+        after the temperature).
+    """
+    net_config = InspectionNetConfig() if net_config is None else net_config
+    device = torch.device(device)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    known = np.asarray(train.labels) >= 0
+    if not known.any():
+        raise ValueError("train holds no crop with a clear label")
+    crops = np.asarray(train.crops)[known]
+    labels = np.asarray(train.labels, np.float32)[known]
+    weights = np.asarray(train.weights, np.float32)[known]
+    val_known = np.asarray(val.labels) >= 0
+    if not val_known.any():
+        raise ValueError("val holds no crop with a clear label")
+    val_y = np.asarray(val.labels, float)[val_known]
+    val_w = np.asarray(val.weights, float)[val_known]
+    net = InspectionNet(net_config).to(device)
+    steps_per_epoch = max(1, math.ceil(len(crops) / config.batch_size))
+    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, epochs=config.epochs,
+                                                steps_per_epoch=steps_per_epoch,
+                                                pct_start=0.15)
+    amp = device.type == "cuda"
+    scaler = torch.amp.GradScaler("cuda", enabled=amp)
+    best, best_loss, best_epoch, history = None, np.inf, 0, []
+    for epoch in range(config.epochs):
+        net.train()
+        order = rng.permutation(len(crops))
+        total, seen = 0.0, 0.0
+        for i in range(0, len(order), config.batch_size):
+            idx = order[i:i + config.batch_size]
+            if len(idx) < 2:
+                continue  # batch norm needs two samples
+            x = to_tensor([augment(crops[j], rng, config) for j in idx]).to(device)
+            y = torch.from_numpy(labels[idx]).to(device)
+            w = torch.from_numpy(weights[idx]).to(device)
+            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
+                logits = net(x)
+            loss = _weighted_loss(logits.float(), y, w)
+            opt.zero_grad(set_to_none=True)
+            scaler.scale(loss).backward()
+            scaler.step(opt)
+            scaler.update()
+            sched.step()
+            total += float(loss.detach()) * float(w.sum())
+            seen += float(w.sum())
+        z = _logits(net, np.asarray(val.crops)[val_known], device)
+        val_loss = _nll(z, val_y, val_w)
+        acc = float(np.sum(val_w * ((z > 0) == (val_y > 0.5))) / val_w.sum())
+        row = {"epoch": epoch, "train_loss": total / max(seen, 1e-12), "val_loss": val_loss,
+               "val_accuracy": acc}
+        history.append(row)
+        logger.info("inspection classifier epoch %d: train loss %.4f, val loss %.4f, "
+                    "val accuracy %.4f", epoch, row["train_loss"], val_loss, acc)
+        if val_loss < best_loss:
+            best_loss, best, best_epoch = val_loss, copy.deepcopy(net.state_dict()), epoch
+        if on_epoch is not None:
+            on_epoch(epoch, row)
+    net.load_state_dict(best)
+    z_all = _logits(net, np.asarray(val.crops), device)
+    z = z_all[val_known]
+    temperature = fit_temperature(z, val_y, val_w)
+    classes = np.asarray(val.classes, float)
+    platt = fit_platt(z_all, classes, _class_weights(classes, np.asarray(val.weights, float)))
+    metrics = {
+        "history": history, "best_epoch": best_epoch, "temperature": temperature,
+        "platt": list(platt), "config": {**asdict(config), "scale": list(config.scale)},
+        "net": asdict(net_config),
+        "val": {"loss": _nll(z, val_y, val_w),
+                "loss_calibrated": _nll(z / temperature, val_y, val_w),
+                "accuracy": float(np.sum(val_w * ((z > 0) == (val_y > 0.5))) / val_w.sum()),
+                "n": int(val_known.sum()), "n_unclear": int((~val_known).sum())},
+        "n_train": int(known.sum()), "n_train_unclear": int((~known).sum()),
+    }
+    # the share of rot views the probabilities are calibrated to, smoothed (one view of each
+    # kind more) so that a small split showing only one kind still gives a prior in (0, 1)
+    rot_prior = float((np.sum(val_w * val_y) + 1.0) / (np.sum(val_w) + 2.0))
+    blemished = np.asarray(train.classes)[known] == 1
+    visibility = (float(np.sum(weights[blemished] * labels[blemished])
+                        / np.sum(weights[blemished])) if blemished.any() else 1.0)
+    visibility = min(max(visibility, 0.05), 1.0)
+    metrics.update({"rot_prior": rot_prior, "visibility": visibility})
+    classifier = InspectionClassifier(net.cpu(), temperature, platt, 0.5, rot_prior=rot_prior,
+                                      visibility=visibility, rule=rule,
+                                      metadata={"best_epoch": best_epoch, "val": metrics["val"]},
+                                      device=device)
+    return classifier, metrics

@@ -1,0 +1,241 @@
+"""The inspection: fusing views, the cost threshold, calibration, crops, the classifier."""
+
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+import torch
+
+from perception.fusion import (
+    cost_threshold,
+    expected_calibration_error,
+    fuse,
+    precision_recall_curve,
+)
+from perception.inspection import (
+    CROP_SIZE,
+    InspectionClassifier,
+    InspectionNet,
+    InspectionNetConfig,
+    Inspector,
+    crop_onion,
+    fit_platt,
+    fit_temperature,
+    rot_label,
+)
+from perception.train_inspection import (
+    CONTEXT_SIZE,
+    CropSet,
+    InspectionTrainConfig,
+    augment,
+    train_inspection,
+)
+
+#: What a view of a clean side says under each rule: noisy-or reads "rot in this view" (none:
+#: near 0); log-odds reads "this onion is blemished" (a clean side still leaves a blemished
+#: onion likely: many show one)
+CLEAN_SIDE = {"noisy-or": 0.04, "log-odds": 0.25}
+ROT_IN_VIEW = {"noisy-or": 0.99, "log-odds": 0.97}
+
+
+@pytest.mark.parametrize("rule", ["noisy-or", "log-odds"])
+def test_a_blemish_seen_in_one_of_three_views_is_found(rule):
+    # the two other views see a clean side: the rot in one view still decides
+    clean, rot = CLEAN_SIDE[rule], ROT_IN_VIEW[rule]
+    assert fuse([clean, rot, clean], rule) >= 0.5
+    assert fuse([rot, clean, clean], rule) == pytest.approx(fuse([clean, clean, rot], rule))
+
+
+@pytest.mark.parametrize("rule", ["noisy-or", "log-odds"])
+def test_a_good_onion_seen_three_times_stays_good(rule):
+    clean = CLEAN_SIDE[rule]
+    assert fuse([clean] * 3, rule) < 0.5
+    assert fuse([clean] * 3, rule) <= fuse([clean], rule) + 0.15  # more views, not more doubt
+
+
+def test_the_fusion_rules_are_what_they_say():
+    p = [0.2, 0.5, 0.9]
+    # noisy-or: each view of a blemished onion shows its rot with probability v
+    v, ratio = 0.7, np.array([(q / (1 - q)) / (0.4 / 0.6) for q in p])
+    odds = (0.3 / 0.7) * np.prod(1 - v + v * ratio)
+    assert fuse(p, "noisy-or", prior=0.3, train_prior=0.4, visibility=v) == pytest.approx(
+        odds / (1 + odds))
+    # a clean view lowers the odds by 1 - v at most; with every view showing rot (v = 1) one
+    # clean view clears the onion
+    assert fuse([0.5], "noisy-or", visibility=0.6) == pytest.approx(0.5)
+    assert fuse([0.999, 1e-6], "noisy-or", visibility=1.0) < 0.01
+    with pytest.raises(ValueError, match="visibility"):
+        fuse([0.5], "noisy-or", visibility=0.0)
+    # log-odds: the line's prior odds times each view's likelihood ratio
+    odds = (0.3 / 0.7) * np.prod([(q / (1 - q)) / 1.0 for q in p])
+    assert fuse(p, "log-odds", prior=0.3, train_prior=0.5) == pytest.approx(odds / (1 + odds))
+    # a view calibrated to another class balance: its prior is divided out
+    assert fuse([0.75], "log-odds", prior=0.5, train_prior=0.75) == pytest.approx(0.5)
+    for bad, match in (([], "at least one"), ([1.2], r"\[0, 1\]"), ([0.5, np.nan], r"\[0, 1\]")):
+        with pytest.raises(ValueError, match=match):
+            fuse(bad)
+    with pytest.raises(ValueError, match="rule"):
+        fuse([0.5], "max")
+    with pytest.raises(ValueError, match="prior"):
+        fuse([0.5], "log-odds", prior=1.0)
+
+
+def test_the_threshold_follows_the_costs():
+    assert cost_threshold(miss=8, waste=8) == 0.5
+    assert cost_threshold(miss=3, waste=1) == 0.25  # missing rot costs more: bin sooner
+    assert cost_threshold(miss=1, waste=3) == 0.75
+    assert cost_threshold(miss=0, waste=1) == 1.0 and cost_threshold(miss=1, waste=0) == 0.0
+    cuts = [cost_threshold(miss=m, waste=1.0) for m in (0.5, 1, 2, 4, 8)]
+    assert cuts == sorted(cuts, reverse=True)
+    for kwargs, match in (({"miss": -1, "waste": 1}, "miss"), ({"miss": 1, "waste": np.inf},
+                                                               "waste"),
+                          ({"miss": 0, "waste": 0}, "both be 0")):
+        with pytest.raises(ValueError, match=match):
+            cost_threshold(**kwargs)
+
+
+def test_the_default_threshold_comes_from_the_tasks_reward():
+    from irl.domains.onion_sorting import TRUE_THETA, misplacement_costs
+    from onionsort.stages.models import sorting_threshold
+
+    assert misplacement_costs() == (8.0, 8.0)
+    assert sorting_threshold() == 0.5 and sorting_threshold(miss=3, waste=1) == 0.25
+    theta = TRUE_THETA.copy()
+    theta[3] = 10.0  # binning a blemished onion is worth more: missing one costs more
+    miss, waste = misplacement_costs(theta)
+    assert miss == 14.0 and waste == 8.0
+    theta[0] = -5.0  # a reward that prefers binning good onions is no sorting task
+    with pytest.raises(ValueError, match="misplacing"):
+        misplacement_costs(theta)
+
+
+def test_expected_calibration_error_and_the_precision_recall_curve():
+    rng = np.random.default_rng(0)
+    p = rng.uniform(0, 1, 20_000)
+    y = rng.random(20_000) < p  # calibrated by construction
+    assert expected_calibration_error(p, y) < 0.02
+    assert expected_calibration_error(np.where(p > 0.5, 0.99, 0.01), y) > 0.2
+    # one bin: |mean(y) - mean(p)|
+    assert expected_calibration_error([0.9, 0.9], [1, 0], n_bins=1) == pytest.approx(0.4)
+    precision, recall, cut = precision_recall_curve([0.9, 0.8, 0.8, 0.1], [1, 0, 1, 0])
+    np.testing.assert_allclose(cut, [0.9, 0.8, 0.1])
+    np.testing.assert_allclose(precision, [1.0, 2 / 3, 0.5])
+    np.testing.assert_allclose(recall, [0.5, 1.0, 1.0])
+
+
+def test_temperature_and_platt_scaling_recover_what_made_the_labels():
+    rng = np.random.default_rng(1)
+    z = rng.normal(0, 3, 8000)
+    y = rng.random(8000) < 1 / (1 + np.exp(-z / 2.5))
+    assert fit_temperature(z, y) == pytest.approx(2.5, rel=0.08)
+    y2 = rng.random(8000) < 1 / (1 + np.exp(-(0.5 * z - 1.0)))
+    a, b = fit_platt(z, y2)
+    assert a == pytest.approx(0.5, abs=0.05) and b == pytest.approx(-1.0, abs=0.1)
+    # uninformative logits: the temperature stops at its bound, every probability near 1/2
+    assert fit_temperature(np.ones(100), np.arange(100) % 2) == pytest.approx(100.0)
+    with pytest.raises(ValueError, match="one length"):
+        fit_temperature(np.ones(3), np.ones(2))
+
+
+def test_a_view_is_labelled_by_the_rot_it_shows():
+    assert rot_label(0, 10_000, True) == 0  # a blemished onion, its rot out of sight
+    assert rot_label(500, 10_000, True) == 1
+    assert rot_label(20, 10_000, True) == -1  # a sliver at the rim: unclear
+    assert rot_label(None, 10_000, True) == 1  # not measured: the onion's class stands in
+
+
+def test_crops_centre_the_box_and_average_a_large_view():
+    rgb = np.zeros((240, 320, 3), np.uint8)
+    rgb[100:140, 150:190] = 200  # the "onion"
+    crop = crop_onion(rgb, (150, 100, 190, 140), margin=0.0)
+    assert crop.shape == (CROP_SIZE, CROP_SIZE, 3) and crop[2:-2, 2:-2].min() > 190
+    # a box at the border: the outside repeats the image's edge, the crop keeps its size
+    assert crop_onion(rgb, (0, 0, 30, 30)).shape == (CROP_SIZE, CROP_SIZE, 3)
+    noise = np.random.default_rng(0).normal(128, 30, (240, 320, 3)).clip(0, 255)
+    shrunk = crop_onion(noise.astype(np.uint8), (60, 20, 260, 220))
+    assert shrunk.std() < 30 / 2  # area averaging of a 200-pixel window into 64
+
+
+def _blob_crops(n, rng, size):
+    """Synthetic views: a bright disc, with a dark patch on it in the positives."""
+    v, u = np.mgrid[0:size, 0:size]
+    c = size / 2
+    crops, labels = [], []
+    for k in range(n):
+        img = np.full((size, size, 3), 240.0)
+        disc = (u - c) ** 2 + (v - c) ** 2 < (0.3 * size) ** 2
+        img[disc] = [190, 140, 70]
+        if k % 2:
+            a = rng.uniform(0, 2 * np.pi)
+            cx, cy = c + 0.15 * size * np.cos(a), c + 0.15 * size * np.sin(a)
+            img[(u - cx) ** 2 + (v - cy) ** 2 < (0.06 * size) ** 2] = [50, 35, 20]
+        img += rng.normal(0, 8, img.shape)
+        crops.append(img.clip(0, 255).astype(np.uint8))
+        labels.append(k % 2)
+    return np.stack(crops), np.array(labels)
+
+
+def test_the_classifier_learns_to_see_rot_and_its_checkpoint_round_trips(tmp_path):
+    rng = np.random.default_rng(0)
+    train_x, train_y = _blob_crops(160, rng, CONTEXT_SIZE)
+    val_x, val_y = _blob_crops(60, rng, CROP_SIZE)
+    net = InspectionNetConfig(width=8)
+    clf, metrics = train_inspection(
+        CropSet(train_x, train_y, train_y, np.ones(len(train_y))),
+        CropSet(val_x, val_y, val_y, np.ones(len(val_y))),
+        InspectionTrainConfig(epochs=6, batch_size=32, lr=5e-3), net)
+    assert metrics["val"]["accuracy"] >= 0.9, metrics["history"]
+    p = clf.rot_probabilities(val_x)
+    assert ((p >= 0.5) == (val_y == 1)).mean() >= 0.9
+    path = clf.save(tmp_path / "inspection_classifier.pt")
+    again = InspectionClassifier.load(path)
+    np.testing.assert_allclose(again.probabilities(val_x), clf.probabilities(val_x))
+    assert again.rule == clf.rule and again.temperature == clf.temperature
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="not an inspection classifier"):
+        InspectionClassifier.load(tmp_path / "bad.pt")
+    torch.save({"kind": "detector"}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match="not an inspection classifier"):
+        InspectionClassifier.load(tmp_path / "other.pt")
+
+
+def test_augmented_crops_are_crops():
+    context = np.random.default_rng(0).integers(0, 255, (CONTEXT_SIZE, CONTEXT_SIZE, 3),
+                                                 dtype=np.uint8)
+    crop = augment(context, np.random.default_rng(1), InspectionTrainConfig())
+    assert crop.shape == (CROP_SIZE, CROP_SIZE, 3) and crop.dtype == np.uint8
+
+
+class _FakeDetector:
+    """Finds the onion in views whose mean is above 10, with a box round the middle."""
+
+    def detect(self, images):
+        out = []
+        for img in images:
+            h, w = img.shape[:2]
+            found = int(img.mean() > 10)
+            out.append(NS(boxes=np.array([[w / 4, h / 4, 3 * w / 4, 3 * h / 4]] * found),
+                          scores=np.array([0.9] * found), classes=np.array([0] * found)))
+        return out
+
+
+def test_the_inspector_fuses_the_views_it_finds_and_calls_at_the_threshold():
+    torch.manual_seed(0)
+    clf = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)))
+    blank = np.zeros((120, 160, 3), np.uint8)
+    onion = np.full((120, 160, 3), 128, np.uint8)
+    p = clf.view_probabilities([crop_onion(onion, (40, 30, 120, 90))], "log-odds")[0]
+    low = Inspector(_FakeDetector(), clf, rule="log-odds", threshold=max(0.01, p / 4))
+    high = Inspector(_FakeDetector(), clf, rule="log-odds", threshold=min(0.99, 1 - (1 - p) / 4))
+    verdict = low([blank, onion, blank])
+    assert verdict.view_p_blemished[0] is None and verdict.view_p_blemished[2] is None
+    assert verdict.p_blemished == pytest.approx(p, rel=1e-5)
+    assert verdict.prediction == 1 and high([onion]).prediction == 0
+    none = low([blank, blank])
+    assert none.prediction == 2 and none.p_blemished is None  # unknown: no view showed it
+    assert low.last_detections([blank, blank]) is not None
+    assert low.last_detections([onion]) is None
+    with pytest.raises(ValueError, match="threshold"):
+        Inspector(_FakeDetector(), clf, threshold=1.0)
+    with pytest.raises(ValueError, match="rule"):
+        Inspector(_FakeDetector(), clf, rule="mean")

@@ -1,0 +1,55 @@
+"""The inspection stage end to end on a small rendered dataset: training writes a classifier
+the pipeline loads, ``fusion`` fixes its rule, and the measurement reports every level it saw."""
+
+import json
+
+import pytest
+
+from onionsort.stages import DatasetConfig, make_dataset
+from onionsort.stages.inspection import (
+    InspectionTrainStageConfig,
+    measure_inspection,
+    train_inspection_stage,
+)
+from onionsort.stages.models import PerceptionModels
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("inspection") / "data"
+    make_dataset(DatasetConfig(out=root, frames=90, steps_per_session=5, robot_onions=10,
+                               robot_views=3, seed=3))
+    return root
+
+
+def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tmp_path):
+    metrics = train_inspection_stage(InspectionTrainStageConfig(
+        data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="log-odds", visibility=0.3,
+        device="cpu"))
+    assert metrics["rule"] == "log-odds"
+    assert set(metrics["rules"]) == {"noisy-or", "log-odds"}
+    assert json.loads((tmp_path / "inspection_metrics.json").read_text())["rule"] == "log-odds"
+    shipped = PerceptionModels.load(device="cpu")
+    for name in ("detector.pt", "state_classifier.pt"):
+        (tmp_path / name).write_bytes((shipped.folder / name).read_bytes())
+    models = PerceptionModels.load(tmp_path, device="cpu")
+    assert models.inspection.rule == "log-odds" and models.inspection.visibility == 0.3
+    report = measure_inspection(models, dataset, "all", views=2)
+    robot = report["levels"]["clean"]["robot"]
+    assert robot["views"] == 10 * 2  # the first 2 of each onion's 3 views
+    assert set(robot["fused"]) == {"noisy-or", "log-odds"}
+    assert robot["fused"]["noisy-or"]["onions"] == 10
+
+
+def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="fusion must be one of"):
+        InspectionTrainStageConfig(data=tmp_path, out=tmp_path, fusion="mean")
+    with pytest.raises(ValueError, match=r"visibility must be in \(0, 1\]; got 0"):
+        InspectionTrainStageConfig(data=tmp_path, out=tmp_path, visibility=0.0)
+
+
+def test_the_clis_fusion_rules_are_the_librarys():
+    from onionsort.commands import _args
+    from perception.fusion import FUSION_RULES
+
+    assert _args.FUSION_RULES == FUSION_RULES
