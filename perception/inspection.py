@@ -365,22 +365,29 @@ class InspectionClassifier:
             out.append(self.net(x).float().cpu().numpy())
         return np.concatenate(out) if out else np.zeros(0)
 
+    def calibrated(self, logits: np.ndarray, rule: str) -> np.ndarray:
+        """The per-view probabilities ``rule`` fuses, from the network's ``logits`` (N,):
+        that the view shows rot (temperature scaling) for ``noisy-or``, that the onion is
+        blemished (Platt scaling) for ``log-odds``."""
+        if rule not in FUSION_RULES:
+            raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
+        z = np.asarray(logits, float)
+        if rule == "noisy-or":
+            return 1.0 / (1.0 + np.exp(-z / self.temperature))
+        a, b = self.platt
+        return 1.0 / (1.0 + np.exp(-(a * z + b)))
+
     def rot_probabilities(self, crops: Sequence[np.ndarray]) -> np.ndarray:
         """Calibrated probabilities (N,) that each crop shows rot."""
-        return 1.0 / (1.0 + np.exp(-self.logits(crops) / self.temperature))
+        return self.calibrated(self.logits(crops), "noisy-or")
 
     def probabilities(self, crops: Sequence[np.ndarray]) -> np.ndarray:
         """Calibrated probabilities (N,) that each crop's onion is blemished."""
-        a, b = self.platt
-        return 1.0 / (1.0 + np.exp(-(a * self.logits(crops) + b)))
+        return self.calibrated(self.logits(crops), "log-odds")
 
     def view_probabilities(self, crops: Sequence[np.ndarray], rule: str) -> np.ndarray:
-        """The per-view probabilities ``rule`` fuses: rot in view for ``noisy-or``, the
-        onion's class for ``log-odds``."""
-        if rule not in FUSION_RULES:
-            raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
-        return self.rot_probabilities(crops) if rule == "noisy-or" else \
-            self.probabilities(crops)
+        """The per-view probabilities ``rule`` fuses (:meth:`calibrated`) of crops."""
+        return self.calibrated(self.logits(crops), rule)
 
     def fuse(self, view_p: Sequence[float], rule: str, prior: float = 0.5) -> float:
         """:func:`perception.fusion.fuse` of views this classifier read, with its
@@ -436,14 +443,7 @@ class Inspector:
         call are kept (:meth:`last_detections`)."""
         found = self.detector.detect(list(views)) if len(views) else []
         self._last = (_digest(views), found)
-        out: list[np.ndarray | None] = []
-        for det in found:
-            scores = np.asarray(det.scores)
-            if scores.size == 0 or scores.max() < INSPECTION_SCORE:
-                out.append(None)
-            else:
-                out.append(np.asarray(det.boxes)[int(scores.argmax())])
-        return out
+        return [best_box(det) for det in found]
 
     def last_detections(self, views: Sequence[np.ndarray]) -> list | None:
         """The detector's detections of ``views`` if they were the last views inspected."""
@@ -475,6 +475,15 @@ class Inspector:
         p_bad = self.fuse(seen)
         return InspectionVerdict(bad if p_bad >= self.threshold else good, p_bad, per_view,
                                  self.threshold)
+
+
+def best_box(detections) -> np.ndarray | None:
+    """The onion's box (4,) among one view's ``detections`` (:class:`perception.Detections`):
+    the best of either class if it scores :data:`INSPECTION_SCORE` or more, else None."""
+    scores = np.asarray(detections.scores)
+    if scores.size == 0 or scores.max() < INSPECTION_SCORE:
+        return None
+    return np.asarray(detections.boxes)[int(scores.argmax())]
 
 
 def _digest(views: Sequence[np.ndarray]) -> str:

@@ -35,6 +35,7 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
     models = PerceptionModels.load(tmp_path, device="cpu")
     assert models.inspection.rule == "log-odds" and models.inspection.visibility == 0.3
     report = measure_inspection(models, dataset, "all", views=2)
+    assert set(report["levels"]) == {"clean"}  # the dataset's one level, from its records
     robot = report["levels"]["clean"]["robot"]
     assert robot["views"] == 10 * 2  # the first 2 of each onion's 3 views
     assert set(robot["fused"]) == {"noisy-or", "log-odds"}

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -65,16 +65,14 @@ class InspectionViews:
         return len(self.labels)
 
     def subset(self, mask: np.ndarray) -> InspectionViews:
-        return InspectionViews(**{k: getattr(self, k)[mask] for k in
-                                  ("crops", "labels", "classes", "level", "source", "onion",
-                                   "view", "found")})
+        return InspectionViews(**{f.name: getattr(self, f.name)[mask] for f in fields(self)})
 
     @classmethod
     def concat(cls, parts: list[InspectionViews]) -> InspectionViews:
         """The rows of several sets, in order (onion keys prefixed by the set's index, so
         that onions of two datasets never share one)."""
-        fields = ("crops", "labels", "classes", "level", "source", "view", "found")
-        out = {k: np.concatenate([getattr(p, k) for p in parts]) for k in fields}
+        out = {f.name: np.concatenate([getattr(p, f.name) for p in parts])
+               for f in fields(cls)}
         out["onion"] = np.concatenate([np.char.add(f"{i}:", p.onion.astype(str))
                                        for i, p in enumerate(parts)])
         return cls(**out)
@@ -117,7 +115,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     do not name theirs (datasets written before the field). A split with no such view is an
     error, or empty with ``allow_empty``.
     """
-    from perception.inspection import CROP_SIZE, INSPECTION_SCORE, crop_onion, rot_label
+    from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
     from recordings.dataset import read_metadata, read_split, split_names
 
@@ -128,18 +126,16 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     levels = meta.get("session_difficulty")
     default_level = dataset_level or _dataset_level(meta)
     rows = defaultdict(list)
-    pending: list[tuple[np.ndarray, list[float]]] = []
+    pending: list[np.ndarray] = []  # images waiting for the detector, in batches
 
     def flush() -> None:
         if not pending:
             return
-        for (image, _), det in zip(pending, detector.detect([im for im, _ in pending]),
-                                   strict=True):
-            scores = np.asarray(det.scores)
-            ok = scores.size > 0 and scores.max() >= INSPECTION_SCORE
-            rows["found"].append(ok)
-            rows["crops"].append(crop_onion(image, np.asarray(det.boxes)[int(scores.argmax())])
-                                 if ok else np.zeros((CROP_SIZE, CROP_SIZE, 3), np.uint8))
+        for image, det in zip(pending, detector.detect(pending), strict=True):
+            box = best_box(det)
+            rows["found"].append(box is not None)
+            rows["crops"].append(np.zeros((CROP_SIZE, CROP_SIZE, 3), np.uint8) if box is None
+                                 else crop_onion(image, box))
         pending.clear()
 
     for name in split_names(split):
@@ -169,7 +165,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
                 rows["found"].append(True)
             else:
-                pending.append((frame.color, rec["boxes"][k]))
+                pending.append(frame.color)
                 if len(pending) == 32:
                     flush()
     if detector is not None:
@@ -290,7 +286,9 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
-    rules = {rule: _fused_scores(classifier, val, rule) for rule in FUSION_RULES}
+    z = classifier.logits(val.crops)  # once, read under each rule
+    rules = {rule: _fused_scores(classifier, val, rule, classifier.calibrated(z, rule))
+             for rule in FUSION_RULES}
     classifier.rule = config.fusion or min(rules, key=lambda r: rules[r]["log_loss"])
     classifier.metadata["rules_on_val"] = rules
     metrics.update({"rules": rules, "rule": classifier.rule,
@@ -301,25 +299,23 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     return metrics
 
 
-def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray | None = None,
-           prior: float = 0.5) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Per onion of ``views`` (found views only): the fused probability under ``rule``, its
-    class, and its key."""
-    if p is None:
-        p = classifier.view_probabilities(views.crops, rule)
+def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per onion of ``views`` (found views only): the probability under ``rule`` that fuses
+    its views' probabilities ``p`` (one per row of ``views``), its class, and its key."""
     groups = defaultdict(list)
     for i, key in enumerate(views.onion):
         if views.found[i]:
             groups[key].append(i)
     keys = sorted(groups)
-    fused = np.array([classifier.fuse(p[groups[k]], rule, prior) for k in keys])
+    fused = np.array([classifier.fuse(p[groups[k]], rule) for k in keys])
     classes = np.array([views.classes[groups[k][0]] for k in keys])
     return fused, classes, keys
 
 
-def _fused_scores(classifier, views: InspectionViews, rule: str) -> dict:
+def _fused_scores(classifier, views: InspectionViews, rule: str, p: np.ndarray) -> dict:
     """Log-loss and accuracy of the fused call on the onions of ``views``."""
-    fused, y, _ = _fused(classifier, views, rule)
+    fused, y, _ = _fused(classifier, views, rule, p)
     q = np.clip(fused, 1e-6, 1 - 1e-6)
     return {"log_loss": float(-np.mean(y * np.log(q) + (1 - y) * np.log1p(-q))),
             "accuracy": float(np.mean((fused >= 0.5) == (y == 1))), "n_onions": len(y)}
@@ -352,9 +348,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     z = np.zeros(len(data))
     if data.found.any():
         z[data.found] = clf.logits(data.crops[data.found])
-    p_rot = 1.0 / (1.0 + np.exp(-z / clf.temperature))
-    a, b = clf.platt
-    p_class = 1.0 / (1.0 + np.exp(-(a * z + b)))
+    p_view = {rule: clf.calibrated(z, rule) for rule in FUSION_RULES}
+    p_rot, p_class = p_view["noisy-or"], p_view["log-odds"]  # rot in view; onion's class
     out: dict = {"threshold": threshold, "rule": clf.rule, "levels": {}}
     for level in sorted(set(data.level), key=_level_order):
         at = data.level == level
@@ -379,8 +374,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                     for v in sorted(set(data.view[found]))}
             subset = data.subset(mine)
             for rule in FUSION_RULES:
-                p = (p_rot if rule == "noisy-or" else p_class)[mine]
-                fused, y, _ = _fused(clf, subset, rule, p)
+                fused, y, _ = _fused(clf, subset, rule, p_view[rule][mine])
                 if not len(y):
                     continue
                 called = fused >= threshold
