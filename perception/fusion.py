@@ -22,6 +22,15 @@ Two fusion rules turn the K views of one onion into one probability (:data:`FUSI
 The robot bins an onion when its fused probability reaches the threshold that minimises the
 expected cost, ``waste / (waste + miss)`` (:func:`cost_threshold`), where ``miss`` is the cost of
 a blemished onion left on the line and ``waste`` that of a good onion in the bin.
+
+Both rules add one term per view to the log-odds, and a view's term is bounded (probabilities
+are clipped to ``[1e-6, 1 - 1e-6]``; a view that shows no onion adds nothing). So after some of
+its views an onion's call can be *settled* (:func:`settled`): no values of the views still to
+come could move the fused probability across the threshold, and the robot may stop looking
+without changing its decision. Under ``noisy-or`` a view showing rot settles a blemish at once
+(a clean view lowers the odds by ``1 - visibility`` at most), and a good onion is never settled
+early (one more view could show rot); under ``log-odds`` a view can say as much either way, and
+a call settles only once the views so far outweigh all those to come.
 """
 
 from __future__ import annotations
@@ -33,8 +42,10 @@ __all__ = [
     "cost_threshold",
     "expected_calibration_error",
     "fuse",
+    "log_odds",
     "logit",
     "precision_recall_curve",
+    "settled",
 ]
 
 FUSION_RULES = ("noisy-or", "log-odds")
@@ -82,26 +93,68 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
     ValueError
         If ``view_p`` is empty or holds a value outside [0, 1], or an argument is out of range.
     """
+    if np.asarray(view_p).size == 0:
+        raise ValueError("view_p must hold at least one view's probability; got none")
+    odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility)
+    return float(1.0 / (1.0 + np.exp(-odds)))
+
+
+def _view_terms(p: np.ndarray, rule: str, train_prior: float, visibility: float) -> np.ndarray:
+    """Each view's term (K,) in the fused log-odds under ``rule``."""
+    ratio = logit(p) - logit(train_prior)  # each view's log likelihood ratio
+    if rule == "log-odds":
+        return ratio
+    v = float(visibility)
+    # log((1 - v) + v L) without overflow: logaddexp of the two terms
+    return np.logaddexp(np.log1p(-v) if v < 1 else -np.inf, np.log(v) + ratio)
+
+
+def _checked(view_p, rule: str, prior, train_prior, visibility) -> tuple[np.ndarray, float,
+                                                                          float, float]:
     if rule not in FUSION_RULES:
         raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
     p = np.asarray(view_p, float).ravel()
-    if p.size == 0:
-        raise ValueError("view_p must hold at least one view's probability; got none")
     if not np.all((p >= 0) & (p <= 1)):
         raise ValueError(f"view_p must hold probabilities in [0, 1]; got {p.tolist()}")
     prior = _check_probability(prior, "prior")
     train_prior = _check_probability(train_prior, "train_prior")
-    ratio = logit(p) - logit(train_prior)  # each view's log likelihood ratio
-    if rule == "noisy-or":
-        v = float(visibility)
-        if not 0.0 < v <= 1.0:
-            raise ValueError(f"visibility must be in (0, 1]; got {visibility!r}")
-        # log((1 - v) + v L) without overflow: logaddexp of the two terms
-        terms = np.logaddexp(np.log1p(-v) if v < 1 else -np.inf, np.log(v) + ratio)
-        odds = logit(prior) + float(np.sum(terms))
-    else:
-        odds = logit(prior) + float(np.sum(ratio))
-    return float(1.0 / (1.0 + np.exp(-odds)))
+    v = float(visibility)
+    if rule == "noisy-or" and not 0.0 < v <= 1.0:
+        raise ValueError(f"visibility must be in (0, 1]; got {visibility!r}")
+    return p, prior, train_prior, v
+
+
+def log_odds(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: float = 0.5,
+             visibility: float = 0.8) -> float:
+    """The fused log-odds that the onion is blemished (:func:`fuse` before the sigmoid); with
+    no views, the line's prior log-odds. Arguments as for :func:`fuse`."""
+    p, prior, train_prior, v = _checked(view_p, rule, prior, train_prior, visibility)
+    return float(logit(prior)) + float(np.sum(_view_terms(p, rule, train_prior, v)))
+
+
+def settled(view_p, remaining: int, rule: str = "noisy-or", *, threshold: float = 0.5,
+            prior: float = 0.5, train_prior: float = 0.5, visibility: float = 0.8) -> bool:
+    """Whether the call on an onion seen in views ``view_p`` (those that showed it; possibly
+    none) can no longer change: whatever ``remaining`` more views show (or if they miss the
+    onion), its fused probability stays on the same side of ``threshold``.
+
+    Each further view adds a term between its values at ``p = 1e-6`` and ``p = 1 - 1e-6`` (or
+    nothing, if it misses the onion), so the call is settled when the log-odds stay at or
+    above the threshold's after ``remaining`` of the lowest terms, or below it after as many
+    of the highest. Other arguments as for :func:`fuse`.
+    """
+    if isinstance(remaining, bool) or not isinstance(remaining, int | np.integer) \
+            or remaining < 0:
+        raise ValueError(f"remaining must be an int >= 0; got {remaining!r}")
+    threshold = _check_probability(threshold, "threshold")
+    odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility)
+    if remaining == 0:
+        return True  # nothing left to see
+    low, high = _view_terms(np.array([0.0, 1.0]), rule, train_prior, visibility)
+    cut = float(logit(threshold))
+    margin = 1e-9 * max(1.0, abs(cut))  # the call itself compares probabilities, not log-odds
+    return bool(odds + remaining * min(low, 0.0) >= cut + margin
+                or odds + remaining * max(high, 0.0) < cut - margin)
 
 
 def cost_threshold(miss: float, waste: float) -> float:

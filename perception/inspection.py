@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from perception.fusion import FUSION_RULES, fuse
+from perception.fusion import FUSION_RULES, fuse, settled
 
 __all__ = [
     "CROP_MARGIN",
@@ -393,9 +393,19 @@ class InspectionClassifier:
         """:func:`perception.fusion.fuse` of views this classifier read, with its
         calibration: under ``rule``, for a line whose share of blemished onions is
         ``prior``."""
-        return fuse(view_p, rule, prior=prior,
-                    train_prior=self.rot_prior if rule == "noisy-or" else self.train_prior,
+        return fuse(view_p, rule, prior=prior, train_prior=self._train_prior(rule),
                     visibility=self.visibility)
+
+    def settled(self, view_p: Sequence[float], remaining: int, rule: str, *,
+                threshold: float, prior: float = 0.5) -> bool:
+        """:func:`perception.fusion.settled` for views this classifier read: whether the
+        call at ``threshold`` stays the same whatever ``remaining`` more views show."""
+        return settled(view_p, remaining, rule, threshold=threshold, prior=prior,
+                       train_prior=self._train_prior(rule), visibility=self.visibility)
+
+    def _train_prior(self, rule: str) -> float:
+        """The share the per-view probabilities of ``rule`` are calibrated to."""
+        return self.rot_prior if rule == "noisy-or" else self.train_prior
 
 
 class Inspector:
@@ -435,21 +445,24 @@ class Inspector:
         self.detector, self.classifier = detector, classifier
         self.rule, self.threshold, self.prior = rule, float(threshold), float(prior)
         self.values = tuple(int(v) for v in values)
-        self._last: tuple[str, list] | None = None
+        self._recent: dict[str, object] = {}  # view digest -> its detections
 
     def boxes(self, views: Sequence[np.ndarray]) -> list[np.ndarray | None]:
         """The onion's box (4,) in each view: the detector's best box of either class at or
         above :data:`INSPECTION_SCORE`; None where it found none. The detections of the last
-        call are kept (:meth:`last_detections`)."""
+        views are kept (:meth:`last_detections`)."""
         found = self.detector.detect(list(views)) if len(views) else []
-        self._last = (_digest(views), found)
+        for view, det in zip(views, found, strict=True):
+            self._recent[_digest([view])] = det
+        while len(self._recent) > _RECENT:
+            del self._recent[next(iter(self._recent))]
         return [best_box(det) for det in found]
 
     def last_detections(self, views: Sequence[np.ndarray]) -> list | None:
-        """The detector's detections of ``views`` if they were the last views inspected."""
-        if self._last is not None and self._last[0] == _digest(views):
-            return self._last[1]
-        return None
+        """The detector's detections of ``views`` if it read them among the last views
+        inspected (one at a time or together), else None."""
+        found = [self._recent.get(_digest([v])) for v in views]
+        return None if any(det is None for det in found) else found
 
     def view_probabilities(self, views: Sequence[np.ndarray]) -> list[float | None]:
         """Each view's calibrated probability, as the fusion rule reads it (that the view
@@ -465,9 +478,17 @@ class Inspector:
         """One probability from the probabilities of views of one onion."""
         return self.classifier.fuse(view_p, self.rule, self.prior)
 
-    def __call__(self, views: Sequence[np.ndarray]) -> InspectionVerdict:
-        """The verdict on one onion from its views (each (H, W, 3) uint8)."""
-        per_view = tuple(self.view_probabilities(views))
+    def settled(self, view_p: Sequence[float | None], remaining: int) -> bool:
+        """Whether the call on an onion whose views so far gave ``view_p`` (None where the
+        detector found no onion) stays the same whatever ``remaining`` more views give
+        (:func:`perception.fusion.settled`): the robot can stop showing it."""
+        return self.classifier.settled([p for p in view_p if p is not None], remaining,
+                                       self.rule, threshold=self.threshold, prior=self.prior)
+
+    def verdict(self, view_p: Sequence[float | None]) -> InspectionVerdict:
+        """The verdict on one onion from its views' probabilities (:meth:`view_probabilities`;
+        None where the detector found no onion)."""
+        per_view = tuple(None if p is None else float(p) for p in view_p)
         seen = [p for p in per_view if p is not None]
         good, bad, unknown = self.values
         if not seen:
@@ -475,6 +496,10 @@ class Inspector:
         p_bad = self.fuse(seen)
         return InspectionVerdict(bad if p_bad >= self.threshold else good, p_bad, per_view,
                                  self.threshold)
+
+    def __call__(self, views: Sequence[np.ndarray]) -> InspectionVerdict:
+        """The verdict on one onion from its views (each (H, W, 3) uint8)."""
+        return self.verdict(self.view_probabilities(views))
 
 
 def best_box(detections) -> np.ndarray | None:
@@ -484,6 +509,10 @@ def best_box(detections) -> np.ndarray | None:
     if scores.size == 0 or scores.max() < INSPECTION_SCORE:
         return None
     return np.asarray(detections.boxes)[int(scores.argmax())]
+
+
+_RECENT = 32
+"""Views whose detections an :class:`Inspector` keeps for :meth:`Inspector.last_detections`."""
 
 
 def _digest(views: Sequence[np.ndarray]) -> str:

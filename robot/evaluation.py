@@ -86,6 +86,8 @@ class OnionOutcome:
         False if the episode ended before the robot released it for good (or claimed it).
     p_blemished : float or None
         The inspection's probability that it is blemished, where the classifier gave one.
+    views : int
+        Inspection views the robot took of it (0 if never inspected).
     """
 
     index: int
@@ -94,13 +96,14 @@ class OnionOutcome:
     fate: Fate
     decided: bool = True
     p_blemished: float | None = None
+    views: int = 0
 
     def to_dict(self) -> dict:
         return {
             "index": self.index, "blemished": self.blemished,
             "perceived": None if self.perceived is None else self.perceived.name.lower(),
             "p_blemished": None if self.p_blemished is None else round(self.p_blemished, 5),
-            "fate": self.fate, "decided": self.decided,
+            "fate": self.fate, "decided": self.decided, "views": self.views,
         }
 
 
@@ -146,13 +149,19 @@ class SortingResult(_PrecisionRecall):
             )
 
     def to_dict(self) -> dict:
-        """A JSON-ready dict: counts, precision, recall, steps and the per-onion outcomes."""
+        """A JSON-ready dict: counts, precision, recall, steps, the inspection views taken and
+        the per-onion outcomes."""
         return {
             "tp": self.tp, "fp": self.fp, "tn": self.tn, "fn": self.fn,
             "precision": self.precision, "recall": self.recall,
             "n_onions": len(self.onions), "n_steps": self.n_steps, "undecided": self.undecided,
-            "onions": [o.to_dict() for o in self.onions],
+            "views_taken": self.views_taken, "onions": [o.to_dict() for o in self.onions],
         }
+
+    @property
+    def views_taken(self) -> int:
+        """Inspection views the robot took in all."""
+        return sum(o.views for o in self.onions)
 
     def table(self) -> str:
         """The confusion table with precision and recall, as aligned text."""
@@ -312,6 +321,7 @@ def evaluate_policy(
     difficulty: Difficulty | str = "clean",
     on_start: Callable[[StationView], None] | None = None,
     inspection_views: int = INSPECTION_VIEWS,
+    stop_when_settled: bool = True,
 ) -> SortingResult:
     """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
 
@@ -344,7 +354,11 @@ def evaluate_policy(
         Called once with a :class:`StationView` of the station before the first action (its
         image drawn with noise of its own, so it changes no later render).
     inspection_views : int
-        Views the robot takes of every onion it inspects (:func:`robot.station.inspection_poses`).
+        Views the robot takes of every onion it inspects (:func:`robot.station.inspection_poses`):
+        the most it takes.
+    stop_when_settled : bool
+        Stop showing an onion once its call is settled (a sequential ``classify``; see
+        :class:`robot.station.SawyerStation`): the same calls from fewer views.
 
     Returns
     -------
@@ -367,7 +381,8 @@ def evaluate_policy(
     budget = n_onions * max_steps_per_onion
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
                        move_steps=move_steps, render_every_step=render,
-                       difficulty=difficulty, inspection_views=inspection_views) as station:
+                       difficulty=difficulty, inspection_views=inspection_views,
+                       stop_when_settled=stop_when_settled) as station:
         tally = SortingTally(station.blemished)
         if on_start is not None:
             image = station.render(initial=True) if render else None
@@ -430,6 +445,8 @@ class SortingTally:
         self.fates: list[Fate | None] = [None] * len(self._blemished)
         #: the inspection's latest probability that each inspected onion is blemished
         self.p_blemished: dict[int, float] = {}
+        #: inspection views taken of each inspected onion
+        self.views: dict[int, int] = {}
         self.counts = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
 
     def is_blemished(self, index: int) -> bool:
@@ -446,6 +463,8 @@ class SortingTally:
         inspection gave; return the fate (None if it gave none)."""
         if done.p_blemished is not None:
             self.p_blemished[done.onion] = done.p_blemished
+        if done.views:
+            self.views[done.onion] = self.views.get(done.onion, 0) + len(done.views)
         fate = _fate(done.action, done.next_state) if done.changed else None
         if fate is not None:
             self.fates[done.onion] = fate
@@ -468,7 +487,7 @@ class SortingTally:
         outcomes = tuple(
             OnionOutcome(index=i, blemished=self.is_blemished(i), perceived=perceived[i],
                          fate=self.fates[i] or "line", decided=self.fates[i] is not None,
-                         p_blemished=p_blemished.get(i))
+                         p_blemished=p_blemished.get(i), views=self.views.get(i, 0))
             for i in range(n_onions)
         )
         final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}

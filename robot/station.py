@@ -46,7 +46,7 @@ import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, NamedTuple, Protocol
+from typing import Literal, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import pybullet as p
@@ -103,6 +103,7 @@ __all__ = [
     "Classifier",
     "InspectionLabel",
     "SawyerStation",
+    "SequentialClassifier",
     "StationStep",
     "Verdict",
     "inspection_poses",
@@ -141,6 +142,26 @@ Classifier = Callable[[list[np.ndarray]], "Prediction | Verdict"]
 """``classify(views) -> Prediction or Verdict``: the held onion's class from all its inspection
 views (each (h, w, 3) uint8 RGB, in the order of :func:`inspection_poses`): GOOD or BAD, or
 UNKNOWN to abstain (no view shows an onion)."""
+
+
+@runtime_checkable
+class SequentialClassifier(Protocol):
+    """A :data:`Classifier` that reads the views one at a time, so that the robot can stop
+    showing an onion once its call is settled (``perception.Inspector`` is one).
+
+    ``view_probabilities(views)`` gives each view's probability (None where it shows no
+    onion); ``settled(view_p, remaining)`` whether ``remaining`` more views could still change
+    the call on those; ``verdict(view_p)`` the call.
+    """
+
+    def __call__(self, views: list[np.ndarray]) -> Verdict: ...
+
+    def view_probabilities(self, views: list[np.ndarray]) -> list[float | None]: ...
+
+    def settled(self, view_p: list[float | None], remaining: int) -> bool: ...
+
+    def verdict(self, view_p: list[float | None]) -> Verdict: ...
+
 
 GROUND_TRUTH: Literal["ground-truth"] = "ground-truth"
 """Pass as ``classify`` to perceive every inspected onion's true class (perfect perception)."""
@@ -321,7 +342,11 @@ class SawyerStation:
     camera, inspection : CameraSpec
         The main camera and the inspection camera (:data:`ROBOT_INSPECTION_CAMERA`).
     inspection_views : int
-        Views of every inspected onion (:func:`inspection_poses`).
+        Views of every inspected onion (:func:`inspection_poses`): the most it takes.
+    stop_when_settled : bool
+        With a :class:`SequentialClassifier`, stop showing an onion as soon as its call can no
+        longer change (under ``noisy-or``, a view that shows rot settles a blemish at once):
+        the same calls from fewer views. False: always take every view.
     label_blemishes : bool
         Measure the rot each inspection view shows, for :meth:`inspection_labels` (one more
         render per view; for datasets).
@@ -356,6 +381,7 @@ class SawyerStation:
         inspection: CameraSpec = ROBOT_INSPECTION_CAMERA,
         difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
         inspection_views: int = INSPECTION_VIEWS,
+        stop_when_settled: bool = True,
         label_blemishes: bool = False,
     ) -> None:
         if isinstance(classify, str):
@@ -373,6 +399,7 @@ class SawyerStation:
                 or move_steps < 2:
             raise ValueError(f"move_steps must be an int >= 2; got {move_steps!r}")
         self.poses = inspection_poses(inspection_views)
+        self.stop_when_settled = bool(stop_when_settled)
         self.label_blemishes = bool(label_blemishes)
         self._blemish_probe = None
         seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
@@ -700,14 +727,16 @@ class SawyerStation:
         errs.append(self._move(ROBOT_TARGETS[Location.HOVER]))
         return errs
 
-    def _classify(self, onion: _LineUpOnion, views: list[np.ndarray]
+    def _classify(self, onion: _LineUpOnion, views: list[np.ndarray],
+                  view_p: list[float | None] | None = None
                   ) -> tuple[Prediction | None, float | None, tuple[float | None, ...]]:
         """The classifier's answer on ``views`` (None if it abstains: UNKNOWN), with the
-        probability that the onion is blemished and that of each view, where it gives them."""
+        probability that the onion is blemished and that of each view, where it gives them;
+        from a sequential classifier's ``view_p`` (one per view) when given."""
         if self.classify == GROUND_TRUTH:
             truth = Prediction.BAD if onion.appearance.blemished else Prediction.GOOD
             return truth, float(onion.appearance.blemished), ()
-        raw = self.classify(views)
+        raw = self.classify(views) if view_p is None else self.classify.verdict(view_p)
         p_bad, per_view = None, ()
         if hasattr(raw, "prediction"):
             p_bad = getattr(raw, "p_blemished", None)
@@ -721,20 +750,26 @@ class SawyerStation:
         return (None if answer == Prediction.UNKNOWN else answer,
                 None if p_bad is None else float(p_bad), per_view)
 
-    def _inspect(self, onion: _LineUpOnion) -> tuple[list[float], list[CameraImage]]:
+    def _inspect(self, onion: _LineUpOnion
+                 ) -> tuple[list[float], list[CameraImage], list[float | None] | None]:
         """Hold the onion up to the inspection camera and show it from every side.
 
         The onion arrives at the inspection pose, then the wrist turns (and tilts) it through
         :attr:`poses` about its own centre, rendering the inspection camera at each, and
-        brings it back to the inspection pose. Returns the motions' errors and the views (none
-        if the onion was inspected before: it is only held up again).
+        brings it back to the inspection pose. A :class:`SequentialClassifier` reads each view
+        as it comes, and with :attr:`stop_when_settled` the showing ends once the call is
+        settled. Returns the motions' errors, the views (none if the onion was inspected
+        before: it is only held up again) and, from a sequential classifier, each view's
+        probability (else None).
         """
         target = ROBOT_TARGETS[Location.FACE]
         errs = [self._move(target)]
         if onion.perceived is not None:
-            return errs, []
+            return errs, [], None
+        sequential = isinstance(self.classify, SequentialClassifier)
         centre = self.position(onion.index)
         views: list[CameraImage] = []
+        view_p: list[float | None] = []
         self.last_labels = []
         for k, (yaw, tilt) in enumerate(self.poses):
             if k:
@@ -745,9 +780,14 @@ class SawyerStation:
             views.append(self.render_inspection())
             if self.label_blemishes:
                 self.last_labels.append(self.inspection_labels(views[-1]))
-        if len(self.poses) > 1:
+            if sequential:
+                view_p.extend(self.classify.view_probabilities([views[-1].rgb]))
+                if self.stop_when_settled and self.classify.settled(
+                        view_p, len(self.poses) - k - 1):
+                    break
+        if len(views) > 1:
             errs.append(self._move(target, self.move_steps // 2, seed=self.arm.q))
-        return errs, views
+        return errs, views, view_p if sequential else None
 
     def _place_on_conveyor(self, onion: _LineUpOnion) -> list[float]:
         inspected = onion.perceived is not None
@@ -811,10 +851,10 @@ class SawyerStation:
             elif a == SortAction.PICK:
                 errs = self._pick(onion)
             elif a == SortAction.INSPECT:
-                errs, shown = self._inspect(onion)
+                errs, shown, view_p = self._inspect(onion)
                 if shown:
                     views = tuple(v.rgb for v in shown)
-                    perceived, p_bad, per_view = self._classify(onion, list(views))
+                    perceived, p_bad, per_view = self._classify(onion, list(views), view_p)
                     if perceived is None:
                         logger.warning("the classifier abstained on onion %d in all %d views; "
                                        "it counts as GOOD", onion.index, len(views))

@@ -99,7 +99,7 @@ def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_
         run = _run_dir(tmp_path / str(logged), expert)
         detector = _CountingDetector()
         evaluate(EvaluateConfig(run=run, onions=3, blemished=1, rerun=logged, mcap=False,
-                                inspection_views=2), _fake_models(detector))
+                                inspection_views=2, every_view=True), _fake_models(detector))
         calls[logged] = detector.images
     assert calls[True] == calls[False] == 3 * 2  # two views per onion, each found once
 
@@ -111,9 +111,11 @@ def test_the_experts_policy_runs_without_a_learning_run(tmp_path, capsys):
                  "--inspection-views", "2", "--difficulty", "paper", "--device", "cpu",
                  "--no-rerun", "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "expert: 3 onions (2 blemished), paper camera, inspection by 2 views" in said
+    assert "expert: 3 onions (2 blemished), paper camera, inspection by up to 2 views" in said
     saved = json.loads((out / "evaluation.json").read_text())
     assert saved["policy"] == "expert" and saved["inspection_views"] == 2
+    assert not saved["every_view"]
+    assert saved["views_taken"] == sum(o["views"] for o in saved["onions"])
     assert saved["threshold"] == 0.5 and saved["fusion"] in ("log-odds", "noisy-or")
     assert len(saved["onions"]) == 3 and (out / "evaluation.mcap").is_file()
     for onion in saved["onions"]:  # every inspected onion carries the probability behind it
@@ -124,7 +126,9 @@ def test_the_experts_policy_runs_without_a_learning_run(tmp_path, capsys):
 
     decisions = open_session(out / "evaluation.mcap").decisions.values()
     inspected = [d for d in decisions if d["perceived"] is not None]
-    assert inspected and all(len(d["view_p_blemished"]) == 2 for d in inspected)
+    assert inspected and all(1 <= len(d["view_p_blemished"]) <= 2 for d in inspected)
+    assert sorted(len(d["view_p_blemished"]) for d in inspected) == sorted(
+        o["views"] for o in saved["onions"] if o["views"])
 
 
 def test_the_threshold_follows_the_costs_given(tmp_path):

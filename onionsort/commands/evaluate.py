@@ -3,11 +3,13 @@
 Loads the greedy policy of ``onionsort learn``'s run folder (or, with ``--policy expert``, the
 task's own: perception measured apart from learning) and lets the Sawyer sort a line-up of
 onions in PyBullet. At inspection it turns and tilts each onion before its camera
-(``--inspection-views``); the detector finds the onion in each view, the inspection classifier
-reads it, the views are fused, and the onion is binned when the fused probability of a blemish
-reaches ``waste / (waste + miss)`` (``--miss-cost``, ``--waste-cost``: by default the task's
-reward's, 0.5). Reports TP (blemished in bin), FP (good in bin), TN (good left on the line), FN
-(blemished left on the line), precision and recall, and writes ``evaluation.json``,
+(``--inspection-views``, at most: it stops once no further view could change the call, which
+under ``noisy-or`` is as soon as a view shows rot; ``--every-view`` takes them all); the
+detector finds the onion in each view, the inspection classifier reads it, the views are
+fused, and the onion is binned when the fused probability of a blemish reaches ``waste /
+(waste + miss)`` (``--miss-cost``, ``--waste-cost``: by default the task's reward's, 0.5).
+Reports TP (blemished in bin), FP (good in bin), TN (good left on the line), FN (blemished
+left on the line), precision and recall, and writes ``evaluation.json``,
 ``evaluation.rrd`` (Rerun: the cameras, every inspection view, decisions, counts, and the work
 cell and the Sawyer in 3D) and ``evaluation.mcap`` (the run as a session for Foxglove, ``rerun
 mcap convert`` or ``recordings.open_session``: cameras, inspection views, ``/tf``,
@@ -69,6 +71,9 @@ def register(subparsers) -> None:
     parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
                         help="perception difficulty of the world (clean)")
     add_inspection_arguments(parser)
+    parser.add_argument("--every-view", action="store_true",
+                        help="take every inspection view of every onion, even once its call "
+                             "is settled (the same calls from more views)")
     add_device_argument(parser)
     parser.set_defaults(func=run)
 
@@ -84,16 +89,19 @@ def run(args) -> int:
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
         rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap,
         connect=args.connect, policy=args.policy, out=args.out,
-        inspection_views=args.inspection_views, miss_cost=args.miss_cost,
-        waste_cost=args.waste_cost, fusion=args.fusion, device=args.device)
+        inspection_views=args.inspection_views, every_view=args.every_view,
+        miss_cost=args.miss_cost, waste_cost=args.waste_cost, fusion=args.fusion,
+        device=args.device)
     result, out = evaluate(config)
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall")}))
         return 0
     how = ("ground truth" if args.ground_truth_inspection else
-           f"{out['inspection_views']} views fused by {out['fusion']}, binned from "
-           f"P(blemished) >= {out['threshold']:.2f}")
+           f"{'' if args.every_view else 'up to '}{out['inspection_views']} views "
+           f"({out['views_taken'] / max(sum(o['views'] > 0 for o in out['onions']), 1):.1f} "
+           f"an onion) fused by {out['fusion']}, binned from P(blemished) >= "
+           f"{out['threshold']:.2f}")
     print(f"{out['method']}: {args.onions} onions ({args.blemished} blemished), "
           f"{args.difficulty} camera, inspection by {how}")
     print(result.table())

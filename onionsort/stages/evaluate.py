@@ -82,7 +82,11 @@ class EvaluateConfig:
     out : Path or None
         Folder for the outputs (None: ``run``; required with ``policy="expert"``).
     inspection_views : int
-        Views the Sawyer takes of every onion (:func:`robot.station.inspection_poses`).
+        Views the Sawyer takes of every onion (:func:`robot.station.inspection_poses`), at most:
+        it stops showing an onion once its call is settled (no further view could change it).
+    every_view : bool
+        Take all ``inspection_views`` views of every onion, settled or not (the same calls,
+        more views).
     miss_cost, waste_cost : float or None
         Cost of a blemished onion left on the line, and of a good onion binned (None: the
         task's, from its reward); the robot bins from ``P(blemished) >= waste / (waste +
@@ -107,6 +111,7 @@ class EvaluateConfig:
     policy: str = "learned"
     out: Path | None = None
     inspection_views: int | None = None
+    every_view: bool = False
     miss_cost: float | None = None
     waste_cost: float | None = None
     fusion: str | None = None
@@ -291,7 +296,8 @@ def evaluate(config: EvaluateConfig, models=None):
                 seed=config.seed, classify=classify, render=logged or config.mcap,
                 difficulty=config.difficulty, on_step=each_step if on_step else None,
                 on_start=None if recorder is None else recorder.on_start,
-                inspection_views=config.inspection_views)
+                inspection_views=config.inspection_views,
+                stop_when_settled=not config.every_view)
         if recorder is not None:
             partial.replace(session)
     finally:
@@ -301,6 +307,7 @@ def evaluate(config: EvaluateConfig, models=None):
                "inspection": ("ground truth" if config.ground_truth_inspection else
                               "detector + inspection classifier"),
                "inspection_views": config.inspection_views,
+               "every_view": config.every_view,
                "threshold": None if inspector is None else inspector.threshold,
                "fusion": None if inspector is None else inspector.rule,
                **result.to_dict()}

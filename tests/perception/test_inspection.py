@@ -10,7 +10,9 @@ from perception.fusion import (
     cost_threshold,
     expected_calibration_error,
     fuse,
+    log_odds,
     precision_recall_curve,
+    settled,
 )
 from perception.inspection import (
     CROP_SIZE,
@@ -234,8 +236,65 @@ def test_the_inspector_fuses_the_views_it_finds_and_calls_at_the_threshold():
     none = low([blank, blank])
     assert none.prediction == 2 and none.p_blemished is None  # unknown: no view showed it
     assert low.last_detections([blank, blank]) is not None
-    assert low.last_detections([onion]) is None
+    assert low.last_detections([onion, blank]) is not None  # read one call before
+    assert low.last_detections([np.full((120, 160, 3), 77, np.uint8)]) is None  # never read
     with pytest.raises(ValueError, match="threshold"):
         Inspector(_FakeDetector(), clf, threshold=1.0)
     with pytest.raises(ValueError, match="rule"):
         Inspector(_FakeDetector(), clf, rule="mean")
+
+
+@pytest.mark.parametrize("rule", ["noisy-or", "log-odds"])
+def test_a_settled_call_is_the_call_after_every_view(rule):
+    """Whatever the views still to come show (or if they miss the onion), the call on an
+    onion settled after k of K views is the call after all K."""
+    rng = np.random.default_rng(0)
+    n_settled = 0
+    for _ in range(300):
+        k_all = int(rng.integers(1, 7))
+        kw = {"prior": rng.uniform(0.2, 0.8), "train_prior": rng.uniform(0.2, 0.8),
+              "visibility": rng.uniform(0.2, 1.0)}
+        threshold = rng.uniform(0.1, 0.9)
+        # views near 0, near 1 or in between, as a real classifier's
+        views = rng.choice([1e-7, 0.02, 0.3, 0.7, 0.98, 1 - 1e-7], size=k_all)
+        for k in range(k_all + 1):
+            if not settled(views[:k], k_all - k, rule, threshold=threshold, **kw):
+                continue
+            n_settled += k < k_all
+            call = log_odds(views[:k], rule, **kw) >= np.log(threshold / (1 - threshold))
+            for rest in (np.zeros(k_all - k), np.ones(k_all - k), rng.uniform(size=k_all - k),
+                         np.zeros(0)):  # the last: the remaining views all miss the onion
+                seen = np.r_[views[:k], rest]
+                assert (log_odds(seen, rule, **kw) >= np.log(threshold / (1 - threshold))
+                        if not len(seen) else fuse(seen, rule, **kw) >= threshold) == call
+    assert n_settled > 50  # it settles early often enough to matter
+
+
+def test_under_noisy_or_a_view_showing_rot_settles_a_blemish_and_nothing_settles_a_good_one():
+    kw = {"prior": 0.5, "train_prior": 0.5, "visibility": 0.3}
+    assert settled([0.999], 4, "noisy-or", **kw)  # a clean view lowers the odds by 0.7 at most
+    assert not settled([0.6], 4, "noisy-or", **kw)  # a hint is not enough yet
+    assert not settled([0.01] * 4, 1, "noisy-or", **kw)  # one more view could show rot
+    assert settled([0.01] * 4, 0, "noisy-or", **kw)  # nothing left to see
+    assert not settled([], 1, "noisy-or", **kw) and settled([], 0, "noisy-or", **kw)
+    with pytest.raises(ValueError, match="remaining"):
+        settled([0.5], -1)
+    with pytest.raises(ValueError, match="threshold"):
+        settled([0.5], 1, threshold=1.0)
+
+
+def test_the_inspector_reads_views_one_at_a_time_as_it_reads_them_together():
+    torch.manual_seed(0)
+    clf = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)), visibility=0.5)
+    views = [np.zeros((120, 160, 3), np.uint8),
+             *(np.full((120, 160, 3), g, np.uint8) for g in (90, 128, 200))]
+    inspector = Inspector(_FakeDetector(), clf, rule="noisy-or")
+    one_by_one = [p for v in views for p in inspector.view_probabilities([v])]
+    assert one_by_one == pytest.approx(inspector.view_probabilities(views), rel=1e-5)
+    assert one_by_one[0] is None  # the blank view shows no onion
+    together = inspector(views)
+    assert inspector.verdict(one_by_one) == together
+    seen = [p for p in one_by_one if p is not None]
+    assert inspector.settled(one_by_one, 2) == settled(
+        seen, 2, "noisy-or", threshold=0.5, prior=0.5, train_prior=clf.rot_prior,
+        visibility=0.5)

@@ -8,6 +8,8 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -229,3 +231,66 @@ def test_recording_the_start_changes_no_later_render(expert_pi):
     with pytest.raises(TypeError, match="on_start must be callable"):
         evaluate_policy(expert_pi, n_onions=1, n_blemished=0, classify="ground-truth",
                         on_start=3)
+
+
+class _SequentialByImage:
+    """A sequential classifier (:class:`robot.station.SequentialClassifier`) whose view
+    probability is drawn from the view's pixels: deterministic, and different from view to
+    view; calls by ``noisy-or`` at 0.5."""
+
+    kw: ClassVar[dict] = {"prior": 0.5, "train_prior": 0.5, "visibility": 0.5}
+
+    def view_probabilities(self, views):
+        import hashlib
+
+        return [(int(hashlib.blake2b(v.tobytes(), digest_size=4).hexdigest(), 16) % 1000 + 0.5)
+                / 1000 for v in views]
+
+    def settled(self, view_p, remaining):
+        from perception.fusion import settled
+
+        return settled(view_p, remaining, "noisy-or", threshold=0.5, **self.kw)
+
+    def verdict(self, view_p):
+        from perception.fusion import fuse
+
+        p = fuse(view_p, "noisy-or", **self.kw)
+        return SimpleNamespace(prediction=int(Prediction.BAD if p >= 0.5 else Prediction.GOOD),
+                               p_blemished=p, view_p_blemished=tuple(view_p))
+
+    def __call__(self, views):
+        return self.verdict(self.view_probabilities(views))
+
+
+def test_the_robot_stops_showing_an_onion_once_its_call_is_settled(expert_pi):
+    """It takes views until the call is settled (:func:`perception.fusion.settled`: no later
+    view could change it), and every view without stopping."""
+    from perception.fusion import settled as is_settled
+    from robot.station import SequentialClassifier
+
+    classify = _SequentialByImage()
+    assert isinstance(classify, SequentialClassifier)
+    runs, shown = {}, {True: {}, False: {}}
+    for stop in (True, False):
+        def keep(event, stop=stop):
+            if event.views:
+                shown[stop][event.onion] = list(event.view_p_blemished)
+        runs[stop] = evaluate_policy(expert_pi, n_onions=6, n_blemished=3, seed=4,
+                                     move_steps=40, classify=classify, inspection_views=4,
+                                     stop_when_settled=stop, on_step=keep)
+    stopping, every = runs[True], runs[False]
+    assert all(o.views == 4 for o in every.onions) and every.views_taken == 24
+    assert stopping.views_taken < every.views_taken  # some calls settled early
+    for onion in stopping.onions:
+        view_p = shown[True][onion.index]
+        assert len(view_p) == onion.views
+        k = onion.views  # settled after k views, not before (or all 4 taken)
+        assert k == 4 or is_settled(view_p, 4 - k, "noisy-or", threshold=0.5, **classify.kw)
+        assert not any(is_settled(view_p[:j], 4 - j, "noisy-or", threshold=0.5, **classify.kw)
+                       for j in range(1, k))
+        if k < 4:  # noisy-or settles early only on rot seen
+            assert onion.perceived == Prediction.BAD
+    # the first onion meets the same world in both runs: its views so far, and its call
+    first = stopping.onions[0]
+    assert shown[True][0] == shown[False][0][:first.views]
+    assert first.perceived == every.onions[0].perceived
