@@ -464,6 +464,18 @@ class Inspector:
         found = [self._recent.get(_digest([v])) for v in views]
         return None if any(det is None for det in found) else found
 
+    def detections(self, views: Sequence[np.ndarray]) -> list:
+        """The detector's detections of each of ``views``: those it read among the last views
+        inspected as they were, the others detected now. What a log or a perception topic
+        draws, without running the detector on a view twice."""
+        found = [self._recent.get(_digest([v])) for v in views]
+        missing = [i for i, det in enumerate(found) if det is None]
+        if missing:
+            for i, det in zip(missing, self.detector.detect([views[i] for i in missing]),
+                              strict=True):
+                found[i] = det
+        return found
+
     def view_probabilities(self, views: Sequence[np.ndarray]) -> list[float | None]:
         """Each view's calibrated probability, as the fusion rule reads it (that the view
         shows rot for ``noisy-or``, that its onion is blemished for ``log-odds``); None where
@@ -511,8 +523,9 @@ def best_box(detections) -> np.ndarray | None:
     return np.asarray(detections.boxes)[int(scores.argmax())]
 
 
-_RECENT = 32
-"""Views whose detections an :class:`Inspector` keeps for :meth:`Inspector.last_detections`."""
+_RECENT = 4096
+"""Views whose detections an :class:`Inspector` keeps for :meth:`Inspector.last_detections`
+(a session's inspection views, read in one call, are a few hundred)."""
 
 
 def _digest(views: Sequence[np.ndarray]) -> str:

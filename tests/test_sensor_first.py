@@ -218,3 +218,22 @@ def test_failed_or_repeated_runs_leave_earlier_results_and_no_empty_folders(work
                  str(tmp_path / "s.mcap")]) == 2
     assert "shorter than one step of --step-seconds 100" in capsys.readouterr().err
     assert not (tmp_path / "s.mcap").exists()
+
+
+def test_perceiving_a_session_reads_each_image_once(work, tmp_path):
+    # the inspection's detections of the inspection views are the ones the topic stores
+    from onionsort.stages.models import PerceptionModels
+    from onionsort.stages.perceive import perceive_session
+
+    path = tmp_path / "session.mcap"
+    shutil.copy(sorted((work / "rec").glob("*.mcap"))[0], path)
+    models = PerceptionModels.load(device="cpu")
+    read = []
+    detect = models.detector.detect
+    models.detector.detect = lambda images, **kw: read.extend(map(id, images)) or \
+        detect(images, **kw)
+    perceive_session(models, path, replace=True)
+    session = open_session(path)
+    n_views = sum(f.inspection_png is not None for f in session.frames())
+    assert n_views > 0
+    assert len(read) == session.n_frames + n_views  # every frame and every view, once

@@ -260,8 +260,7 @@ def evaluate(config: EvaluateConfig, models=None):
         inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold)
         classify = inspector
 
-        def detect(images):  # the boxes the inspection has just found, for the Rerun log
-            return inspector.last_detections(images) or loaded.detector.detect(images)
+        detect = inspector.detections  # the boxes the inspection found, for the Rerun log
 
     on_step, recorder = [], None
     session = folder / "evaluation.mcap"

@@ -140,6 +140,7 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
     """
     from recordings.perception import add_perception
     from recordings.reader import open_session
+    from state_abstraction.perceive import perceive_steps
 
     session = open_session(path)
     if session.frames_per_step != models.frames_per_step:
@@ -152,9 +153,12 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
     frames = list(session.frames())
     colors = {f.index: f.color for f in frames}  # each image decoded once
     views = {f.index: f.inspection for f in frames if f.inspection_png is not None}
-    perceived = models.perceive([([colors[f.index] for f in step],
-                                  [f.depth for f in step] if session.has_depth else None,
-                                  [views.get(f.index) for f in step]) for step in steps])
+    inspector = models.inspector()
+    perceived = perceive_steps(models.classifier,
+                               [([colors[f.index] for f in step],
+                                 [f.depth for f in step] if session.has_depth else None,
+                                 [views.get(f.index) for f in step]) for step in steps],
+                               inspector)
     if all(s.occluded for s in perceived):
         raise ValueError(f"{path}: perception called all {len(perceived)} steps occluded; "
                          "there is no usable step (is the camera blocked?)")
@@ -165,8 +169,9 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
         for index, det in zip(chunk, models.detector.detect([colors[k] for k in chunk]),
                               strict=True):
             detections[index] = _rows(det)
-    inspection = ({k: _rows(d) for k, d in zip(views, models.detector.detect(list(
-        views.values())), strict=True)} if views else {})
+    # the inspection's detections as it read the views (each view once), for the topic
+    inspection = {k: _rows(d) for k, d in zip(views, inspector.detections(list(views.values())),
+                                              strict=True)}
     docs = [{**seen.to_dict(), "frame": step[0].index}
             for seen, step in zip(perceived, steps, strict=True)]
     add_perception(path, docs, detections=detections, inspection=inspection,

@@ -237,7 +237,13 @@ def test_the_inspector_fuses_the_views_it_finds_and_calls_at_the_threshold():
     assert none.prediction == 2 and none.p_blemished is None  # unknown: no view showed it
     assert low.last_detections([blank, blank]) is not None
     assert low.last_detections([onion, blank]) is not None  # read one call before
-    assert low.last_detections([np.full((120, 160, 3), 77, np.uint8)]) is None  # never read
+    unseen = np.full((120, 160, 3), 77, np.uint8)
+    assert low.last_detections([unseen]) is None  # never read
+    calls = []
+    low.detector.detect = lambda views, detect=low.detector.detect: calls.append(len(views)) \
+        or detect(views)
+    both = low.detections([onion, unseen])  # the onion's as read before; only the new detected
+    assert calls == [1] and len(both) == 2 and len(both[0].scores) == len(both[1].scores) == 1
     with pytest.raises(ValueError, match="threshold"):
         Inspector(_FakeDetector(), clf, threshold=1.0)
     with pytest.raises(ValueError, match="rule"):
