@@ -214,7 +214,9 @@ def _check_dataset(root: Path, frames: int) -> None:
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory) -> Path:
-    """Inputs for the commands: two short perceived sessions, a learned run, a small dataset."""
+    """Inputs for the commands: four short perceived sessions, a learned run, a small dataset
+    (four, so that ``perceive``, which rewrites each in a moment after seconds of reading it,
+    changes its outputs often enough to be killed in between)."""
     from onionsort.stages import (
         DatasetConfig,
         LearnConfig,
@@ -229,7 +231,7 @@ def base(tmp_path_factory) -> Path:
     if _rerun_cli() is None:
         pytest.skip("the rerun CLI (to verify .rrd files) is not installed")
     root = tmp_path_factory.mktemp("faults")
-    record(RecordConfig(out=root / "rec", sessions=2, steps_per_session=4, occlusion=0.25,
+    record(RecordConfig(out=root / "rec", sessions=4, steps_per_session=4, occlusion=0.25,
                         seed=5))
     shutil.copytree(root / "rec", root / "perceived")
     sessions = tuple(sorted((root / "perceived").glob("*.mcap")))
