@@ -151,7 +151,7 @@ def settled(view_p, remaining: int, rule: str = "noisy-or", *, threshold: float 
     if remaining == 0:
         return True  # nothing left to see
     low, high = _view_terms(np.array([0.0, 1.0]), rule, train_prior, visibility)
-    cut = float(logit(threshold))
+    cut = float(np.log(threshold) - np.log1p(-threshold))  # not clipped, as the call is not
     margin = 1e-9 * max(1.0, abs(cut))  # the call itself compares probabilities, not log-odds
     return bool(odds + remaining * min(low, 0.0) >= cut + margin
                 or odds + remaining * max(high, 0.0) < cut - margin)

@@ -494,8 +494,11 @@ class Inspector:
         """Whether the call on an onion whose views so far gave ``view_p`` (None where the
         detector found no onion) stays the same whatever ``remaining`` more views give
         (:func:`perception.fusion.settled`): the robot can stop showing it."""
-        return self.classifier.settled([p for p in view_p if p is not None], remaining,
-                                       self.rule, threshold=self.threshold, prior=self.prior)
+        seen = [p for p in view_p if p is not None]
+        if not seen:  # the call is "unknown" until a view shows the onion
+            return remaining == 0
+        return self.classifier.settled(seen, remaining, self.rule, threshold=self.threshold,
+                                       prior=self.prior)
 
     def verdict(self, view_p: Sequence[float | None]) -> InspectionVerdict:
         """The verdict on one onion from its views' probabilities (:meth:`view_probabilities`;
@@ -531,5 +534,7 @@ _RECENT = 4096
 def _digest(views: Sequence[np.ndarray]) -> str:
     h = hashlib.blake2b(digest_size=16)
     for v in views:
-        h.update(np.ascontiguousarray(v).data)
+        v = np.ascontiguousarray(v)
+        h.update(repr((v.shape, v.dtype.str)).encode())
+        h.update(v.data)
     return h.hexdigest()

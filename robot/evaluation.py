@@ -358,7 +358,7 @@ def evaluate_policy(
         the most it takes.
     stop_when_settled : bool
         Stop showing an onion once its call is settled (a sequential ``classify``; see
-        :class:`robot.station.SawyerStation`): the same calls from fewer views.
+        :class:`robot.station.SawyerStation`): each onion's call from fewer views.
 
     Returns
     -------

@@ -346,7 +346,9 @@ class SawyerStation:
     stop_when_settled : bool
         With a :class:`SequentialClassifier`, stop showing an onion as soon as its call can no
         longer change (under ``noisy-or``, a view that shows rot settles a blemish at once):
-        the same calls from fewer views. False: always take every view.
+        the call all its views would give, from fewer. The image noise is one stream per run,
+        so later onions' views draw it otherwise than with every view taken. False: always
+        take every view.
     label_blemishes : bool
         Measure the rot each inspection view shows, for :meth:`inspection_labels` (one more
         render per view; for datasets).

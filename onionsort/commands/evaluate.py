@@ -73,7 +73,8 @@ def register(subparsers) -> None:
     add_inspection_arguments(parser)
     parser.add_argument("--every-view", action="store_true",
                         help="take every inspection view of every onion, even once its call "
-                             "is settled (the same calls from more views)")
+                             "is settled (each onion's call is what its first views settled; "
+                             "later onions see the image noise drawn otherwise)")
     add_device_argument(parser)
     parser.set_defaults(func=run)
 

@@ -85,8 +85,8 @@ class EvaluateConfig:
         Views the Sawyer takes of every onion (:func:`robot.station.inspection_poses`), at most:
         it stops showing an onion once its call is settled (no further view could change it).
     every_view : bool
-        Take all ``inspection_views`` views of every onion, settled or not (the same calls,
-        more views).
+        Take all ``inspection_views`` views of every onion, settled or not: each onion's call is
+        the one its settled views gave, but the views after draw their image noise otherwise.
     miss_cost, waste_cost : float or None
         Cost of a blemished onion left on the line, and of a good onion binned (None: the
         task's, from its reward); the robot bins from ``P(blemished) >= waste / (waste +

@@ -210,6 +210,7 @@ class EvaluationLogger:
                              f"{list(robot.joint_names)}")
         self.prefix = prefix
         self.task = task
+        self.views = max(1, int(views))
         self.detect: Detect | None = detector
         self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
         self.rec = open_recording(application_id, target, evaluation_blueprint(prefix, views))
@@ -287,6 +288,8 @@ class EvaluationLogger:
             if det is not None:
                 p_view = per_view[k] if k < len(per_view) else None
                 rec.log(f"{p}/inspection/view_{k}/detections", _boxes(det, p_view))
+        for k in range(len(views), self.views):  # an onion settled early: no stale views
+            rec.log(f"{p}/inspection/view_{k}", rr.Clear(recursive=True))
         p_bad = getattr(event, "p_blemished", None)
         if p_bad is not None:
             rec.log(f"{p}/inspection/p_blemished", rr.Scalars(float(p_bad)))

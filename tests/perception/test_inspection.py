@@ -306,3 +306,17 @@ def test_the_inspector_reads_views_one_at_a_time_as_it_reads_them_together():
     assert inspector.settled(one_by_one, 2) == settled(
         seen, 2, "noisy-or", threshold=0.5, prior=0.5, train_prior=clf.rot_prior,
         visibility=0.5)
+
+
+def test_an_onion_no_view_has_shown_is_never_settled_while_views_remain():
+    # the call is "unknown" until the detector finds the onion; a steep miss cost (a low
+    # threshold) must not end the inspection on the prior alone
+    torch.manual_seed(0)
+    clf = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)), visibility=0.3)
+    low = Inspector(_FakeDetector(), clf, rule="noisy-or", threshold=0.19)
+    assert settled([], 4, "noisy-or", threshold=0.19, visibility=0.3)  # the prior alone would
+    assert fuse([0.0] * 4, "noisy-or", visibility=0.3) >= 0.19  # but clean views still bin it
+    assert not low.settled([None], 4) and low.settled([None], 0)
+    assert low.verdict([None]).prediction == 2
+    # a threshold below the clipping of probabilities is compared as it is
+    assert not settled([1e-6, 1e-6], 1, "log-odds", threshold=1e-7, prior=0.3)
