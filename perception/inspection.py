@@ -461,20 +461,24 @@ class Inspector:
     def last_detections(self, views: Sequence[np.ndarray]) -> list | None:
         """The detector's detections of ``views`` if it read them among the last views
         inspected (one at a time or together), else None."""
-        found = [self._recent.get(_digest([v])) for v in views]
+        found = self._known(views)
         return None if any(det is None for det in found) else found
 
     def detections(self, views: Sequence[np.ndarray]) -> list:
         """The detector's detections of each of ``views``: those it read among the last views
         inspected as they were, the others detected now. What a log or a perception topic
         draws, without running the detector on a view twice."""
-        found = [self._recent.get(_digest([v])) for v in views]
+        found = self._known(views)
         missing = [i for i, det in enumerate(found) if det is None]
         if missing:
             for i, det in zip(missing, self.detector.detect([views[i] for i in missing]),
                               strict=True):
                 found[i] = det
         return found
+
+    def _known(self, views: Sequence[np.ndarray]) -> list:
+        """The kept detections of each view (None where it was not read lately)."""
+        return [self._recent.get(_digest([v])) for v in views]
 
     def view_probabilities(self, views: Sequence[np.ndarray]) -> list[float | None]:
         """Each view's calibrated probability, as the fusion rule reads it (that the view

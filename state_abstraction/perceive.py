@@ -125,6 +125,11 @@ class PerceivedStep:
         }
 
 
+def _mean(p: Sequence[float]) -> float:
+    """The default fusion of several views' probabilities: their mean."""
+    return float(np.mean(p))
+
+
 def track_predictions(onion: Sequence[int], waiting: Sequence[bool],
                       occluded: Sequence[bool], at_rest: Sequence[Sequence[float]],
                       later: Sequence[Sequence[float]] | None = None,
@@ -164,7 +169,7 @@ def track_predictions(onion: Sequence[int], waiting: Sequence[bool],
         raise ValueError(f"onion, waiting, occluded, at_rest and later must have equal lengths; "
                          f"got {n}, {len(waiting)}, {len(occluded)}, {len(at_rest)}, "
                          f"{len(later)}")
-    fuse = (lambda p: float(np.mean(p))) if fuse is None else fuse
+    fuse = _mean if fuse is None else fuse
     seen: list[float] = []
     predictions, probabilities = [], []
     for t in range(n):
@@ -227,13 +232,13 @@ def perceive_steps(
                                 strict=True):
             if p is not None:
                 (at_rest if k == 0 else later)[t].append(float(p))
-    fuse = None if inspection is None else inspection.fuse
+    fuse = _mean if inspection is None else inspection.fuse
     best = {k: probs[k].argmax(axis=1) for k in FACTOR_HEADS}
     occluded = probs["occluded"][:, 1] >= OCCLUDED_THRESHOLD
     predictions, p_bad = track_predictions(best["onion"], best["waiting"] == 1, occluded,
                                            at_rest, later, fuse)
     inspected = [None if not (a or b) else
-                 int((fuse or (lambda p: float(np.mean(p))))(a + b) >= PREDICTION_THRESHOLD)
+                 int(fuse(a + b) >= PREDICTION_THRESHOLD)
                  for a, b in zip(at_rest, later, strict=True)]
     return [
         PerceivedStep(
