@@ -11,15 +11,24 @@ frame is rendered (:meth:`mcap.writer.Writer.flush`). A process killed outright 
 loss after the OS wrote the pages) leaves a file without its summary whose every complete chunk
 is readable with ``recordings.open_session(path, recover=True)``; a recording stopped by an
 exception or Ctrl-C is finished normally (summary, footer) with status ``interrupted``.
+
+SIGINT and SIGTERM are held while a frame, a decision or the file's end is being written, and
+delivered once it is whole: a signal that lands in the middle of a write would raise inside it
+and leave half a record in the file, with the summary written after it.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -123,6 +132,51 @@ class SortingDecision(Protocol):
     def precision(self) -> float: ...
     @property
     def recall(self) -> float: ...
+
+
+_HELD_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM until the block ends; a signal that arrives meanwhile goes to its
+    own handler (Ctrl-C raises ``KeyboardInterrupt``) after it.
+
+    The handlers are swapped, not the signal mask: a process with other threads (the renderer's,
+    torch's) takes a masked signal on one of them, and Python then runs the handler in the
+    main thread all the same. Python runs handlers only in the main thread, so a block running
+    in any other thread is never interrupted by one and holds nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, Any]] = []
+    previous = {sig: signal.getsignal(sig) for sig in _HELD_SIGNALS}
+    previous = {sig: h for sig, h in previous.items() if h is not None}  # not set from Python
+    for sig in previous:
+        signal.signal(sig, lambda signum, frame: caught.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for signum, frame in caught:
+            handler = previous[signum]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
+
+
+def _whole(method: _F) -> _F:
+    """Run ``method`` with SIGINT and SIGTERM held (:func:`_signals_held`): what it writes to the
+    file is whole when an interruption arrives."""
+    @functools.wraps(method)
+    def held(*args, **kwargs):
+        with _signals_held():
+            return method(*args, **kwargs)
+    return held  # type: ignore[return-value]
 
 
 def _stamp(msg, time_ns: int) -> None:
@@ -244,6 +298,7 @@ class SessionWriter:
         self._channels: dict[str, int] = {}
         self._kinematics: dict[Path, UrdfJoints] = {}
 
+    @_whole
     def __enter__(self) -> SessionWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # the header, the session record and the channels go to a temporary name first, so the
@@ -298,10 +353,12 @@ class SessionWriter:
             return self.inspection_K is not None
         return self.ground_truth or topic not in Topic.GROUND_TRUTH
 
+    @_whole
     def __exit__(self, exc_type, exc, tb) -> None:
         status = "complete" if exc_type is None else "interrupted"
         self.close(status)
 
+    @_whole
     def close(self, status: str = "complete") -> None:
         """Finish the file (summary, footer) with the end record's ``status``; idempotent."""
         if self._writer is None:
@@ -328,6 +385,7 @@ class SessionWriter:
             self._channels[topic] = self._writer.register_channel(topic, "json", sid)
         self._write(topic, json.dumps(obj, separators=(",", ":")).encode(), time_ns, sequence)
 
+    @_whole
     def write_decision(self, decision: SortingDecision, *, frame: int, time_ns: int) -> None:
         """Write one step of a robot's sorting run and flush it to the OS.
 
@@ -378,6 +436,7 @@ class SessionWriter:
                 time_ns, step)
         self._writer.flush()
 
+    @_whole
     def write_sensor_frame(self, *, index: int, step: int, phase: int, time_ns: int,
                            color: np.ndarray, depth: np.ndarray | None = None,
                            inspection: np.ndarray | None = None,
@@ -407,6 +466,7 @@ class SessionWriter:
             self.write_world(world, time_ns, index)
         self._end_frame()
 
+    @_whole
     def write_frame(self, frame: TruthFrame) -> None:
         """Write one simulated frame, sensor side and ground truth, and flush it to the OS.
 
@@ -461,6 +521,7 @@ class SessionWriter:
         if phase == 0:
             self.n_steps += 1
 
+    @_whole
     def write_world(self, world: World, time_ns: int, sequence: int) -> None:
         """Write the 3D side of ``world`` at ``time_ns`` (see :mod:`recordings.world`).
 

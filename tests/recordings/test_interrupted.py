@@ -59,3 +59,37 @@ def test_ctrl_c_and_sigterm_finish_the_file(tmp_path, sig):
     if shutil.which(rerun):
         check = subprocess.run([rerun, "mcap", "check", str(path)], capture_output=True)
         assert check.returncode == 0, check.stdout.decode() + check.stderr.decode()
+
+
+def test_a_signal_during_a_write_is_delivered_after_the_frame_is_whole(recorded, tmp_path,
+                                                                       monkeypatch):
+    """Ctrl-C that lands while a frame's chunk is going to the file waits for the chunk: the
+    interrupt is raised once the frame is counted, and the finished file holds it whole."""
+    import os
+
+    from mcap.writer import Writer
+
+    from recordings import SessionWriter
+    from robot.camera import intrinsics
+
+    real_flush = Writer.flush
+    flushed = []
+
+    def interrupted_flush(self):
+        os.kill(os.getpid(), signal.SIGINT)  # arrives while the chunk is being written
+        real_flush(self)
+        flushed.append(True)
+
+    config = recorded.config
+    path = tmp_path / "s.mcap"
+    with pytest.raises(KeyboardInterrupt), SessionWriter(
+            path, {"seed": 4, "config": config.to_dict()}, intrinsics(config.camera),
+            intrinsics(config.inspection), frames_per_step=config.frames_per_step) as writer:
+        writer.write_frame(recorded.frames[0])
+        monkeypatch.setattr(Writer, "flush", interrupted_flush)
+        writer.write_frame(recorded.frames[1])
+    monkeypatch.undo()
+    assert flushed == [True] and writer.n_frames == 2  # the interrupt waited for the write
+    session = open_session(path)  # finished and valid: no recovery needed
+    assert session.status == "interrupted"
+    assert [f.index for f in session.frames()] == [0, 1]
