@@ -6,6 +6,8 @@
   (:mod:`recordings.steps`);
 - frame sources for a video file or a camera and the import of their frames as a session
   (:mod:`recordings.sources`, :mod:`recordings.segmentation`, :mod:`recordings.video_import`);
+- robots' bags: ROS 2 and ROS 1 bags (and Foxglove protobuf MCAP files) imported as sessions
+  (:mod:`recordings.bags`), sessions exported as rosbag2 folders (:mod:`recordings.ros_export`);
 - labelled datasets for perception (:mod:`recordings.dataset`);
 - all Rerun logging (:mod:`recordings.rerun`, imported on demand: it loads the Rerun SDK).
 """

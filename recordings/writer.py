@@ -26,6 +26,7 @@ import signal
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
@@ -67,6 +68,7 @@ from recordings.world import (
 )
 
 __all__ = [
+    "EncodedImage",
     "SessionWriter",
     "SortingDecision",
     "box_annotations",
@@ -195,6 +197,41 @@ def encode_color(rgb: np.ndarray, fmt: str = "jpeg", quality: int = 90) -> bytes
     if not ok:
         raise ValueError(f"could not encode an image of shape {rgb.shape} as {fmt}")
     return buf.tobytes()
+
+
+@dataclass(frozen=True)
+class EncodedImage:
+    """An image compressed already, written to the session as it is (a JPEG a camera or a bag
+    gave, say, or a PNG that keeps its pixels exactly): no second lossy encoding.
+
+    Attributes
+    ----------
+    format : str
+        ``"jpeg"`` or ``"png"``.
+    data : bytes
+        The compressed image, colour or grey (read back as RGB).
+    width, height : int
+        Its size in pixels.
+    """
+
+    format: str
+    data: bytes = field(repr=False)
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        if self.format not in ("jpeg", "png"):
+            raise ValueError(f"format must be 'jpeg' or 'png'; got {self.format!r}")
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"an image must be at least 1x1; got {self.width}x{self.height}")
+
+
+def _compressed(image: np.ndarray | EncodedImage, fmt: str) -> tuple[int, int, str, bytes]:
+    """``(height, width, format, data)`` of ``image``: an :class:`EncodedImage` as it is, an
+    RGB array compressed as ``fmt``."""
+    if isinstance(image, EncodedImage):
+        return image.height, image.width, image.format, image.data
+    return image.shape[0], image.shape[1], fmt, encode_color(image, fmt)
 
 
 def encode_depth(depth: np.ndarray) -> bytes:
@@ -451,12 +488,12 @@ class SessionWriter:
             The step clock: the frame's step and its position in the step.
         time_ns : int
             Recording time of the frame.
-        color : ndarray of shape (H, W, 3)
-            uint8 RGB.
+        color : ndarray of shape (H, W, 3) or EncodedImage
+            uint8 RGB (written as JPEG), or an image compressed already (written as it is).
         depth : ndarray of shape (H, W) or None
             float metres; required exactly when the writer was made with ``depth=True``.
-        inspection : ndarray of shape (h, w, 3) or None
-            The inspection view, on a step's first frame.
+        inspection : ndarray of shape (h, w, 3) or EncodedImage or None
+            The inspection view, on a step's first frame (an array is written as PNG).
         world : World or None
             A snapshot of the world the frame shows: its 3D topics are written too
             (:meth:`write_world`).
@@ -493,8 +530,8 @@ class SessionWriter:
                              f"frame {i} {'has' if depth is not None else 'lacks'} depth")
         if not 0 <= phase < self.frames_per_step:
             raise ValueError(f"phase must be in [0, {self.frames_per_step}); got {phase}")
-        h, w = color.shape[:2]
-        msg = CompressedImage(frame_id="camera", format="jpeg", data=encode_color(color))
+        h, w, fmt, data = _compressed(color, "jpeg")
+        msg = CompressedImage(frame_id="camera", format=fmt, data=data)
         _stamp(msg, t)
         self._write(Topic.COLOR, msg.SerializeToString(), t, i)
         if depth is not None:
@@ -511,9 +548,8 @@ class SessionWriter:
             raise ValueError(f"{self.path}: frame {i} has an inspection view but the session "
                              "was opened without inspection_K (no inspection camera)")
         if inspection is not None:
-            ih, iw = inspection.shape[:2]
-            msg = CompressedImage(frame_id="inspection", format="png",
-                                  data=encode_color(inspection, "png"))
+            ih, iw, fmt, data = _compressed(inspection, "png")
+            msg = CompressedImage(frame_id="inspection", format=fmt, data=data)
             _stamp(msg, t)
             self._write(Topic.INSPECTION, msg.SerializeToString(), t, i)
             self._write(Topic.INSPECTION_CALIBRATION, calibration_message(

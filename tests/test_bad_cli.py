@@ -127,6 +127,11 @@ CASES = [
      ["no Rerun viewer answers at rerun+http://127.0.0.1:9/proxy", "refused"]),
     # import
     (["import", "--out", "{d}/s.mcap"], ["give exactly one source", "video=None"]),
+    (["import", "{d}/two_frames.mcap", "--step-seconds", "2", "--out", "{d}/s.mcap"],
+     ["two_frames.mcap is an onionsort session already"]),
+    (["import", "{d}/video.mp4", "--depth-topic", "/d", "--out", "{d}/s.mcap"],
+     ["--depth-topic go with a ROS bag", "video.mp4 is not one"]),
+    (["import", "{d}/video.mp4", "--list"], ["--list lists a bag's topics", "video.mp4"]),
     (["import", "{d}/nofile.mp4", "--step-seconds", "2", "--out", "{d}/s.mcap"],
      ["nofile.mp4", "no such video file"]),
     (["import", "{d}/video.mp4", "--step-seconds", "2", "--out", "{d}/s.mcap"],
@@ -137,6 +142,16 @@ CASES = [
      ["afile exists", "--out"]),
     (["import", "{d}/video.mp4", "--step-seconds", "2", "--out", "{d}/afile/s.mcap"],
      ["afile", "is a file, not a folder"]),
+    # export
+    (["export", "{d}/garbage.mcap", "--out", "{d}/x"], ["garbage.mcap", "not an MCAP file"]),
+    (["export", "{d}/truncated.mcap", "--out", "{d}/x"],
+     ["truncated.mcap", "truncated or corrupt"]),
+    (["export", "{d}/nofile.mcap", "--out", "{d}/x"], ["nofile.mcap", "no such recording"]),
+    (["export", "{d}/two_frames.mcap", "--out", "{d}/afile"], ["afile exists", "--out"]),
+    (["export", "{d}/two_frames.mcap", "--format", "ros1", "--out", "{d}/x"],
+     ["--format", "invalid choice", "'ros1'"]),
+    (["export", "{d}/two_frames.mcap", "--storage", "zip", "--out", "{d}/x"],
+     ["--storage", "invalid choice", "'zip'"]),
     # dataset
     (["dataset", "--frames", "0", "--out", "{d}/x"], ["frames must be >= 1", "got 0"]),
     (["dataset", "--val", "0.6", "--test", "0.6", "--out", "{d}/x"],

@@ -9,6 +9,7 @@ COMMAND_MODULES = [
     "onionsort.commands.experiment",
     "onionsort.commands.record",
     "onionsort.commands.import_video",
+    "onionsort.commands.export",
     "onionsort.commands.dataset",
     "onionsort.commands.train",
     "onionsort.commands.perceive",

@@ -5,6 +5,7 @@ stage              config                       function
 =================  ===========================  ==========================================
 record             :class:`RecordConfig`        :func:`record` -> session paths
 import             :class:`ImportConfig`        :func:`import_video` -> a sensor-only session
+export             :class:`ExportConfig`        :func:`export_session` -> a rosbag2 folder
 dataset            :class:`DatasetConfig`       :func:`make_dataset`
 train              ``ClassifierTrainConfig``,   ``train_state_classifier``, ``train_detector``
                    ``DetectorTrainConfig``      (in :mod:`onionsort.stages.train`)
@@ -30,7 +31,8 @@ from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.demo import DemoConfig, demo
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.experiment import ExperimentConfig, run_experiment
-from onionsort.stages.import_video import ImportConfig, import_video
+from onionsort.stages.export import ExportConfig, export_session
+from onionsort.stages.import_video import ImportConfig, import_video, list_bag
 from onionsort.stages.learn import LearnConfig, learn
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.perceive import PerceiveConfig, perceive
@@ -42,6 +44,7 @@ __all__ = [
     "DemoConfig",
     "EvaluateConfig",
     "ExperimentConfig",
+    "ExportConfig",
     "ImportConfig",
     "LearnConfig",
     "PerceiveConfig",
@@ -52,8 +55,10 @@ __all__ = [
     "demo",
     "eval_perception",
     "evaluate",
+    "export_session",
     "import_video",
     "learn",
+    "list_bag",
     "make_dataset",
     "perceive",
     "record",

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,8 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from onionsort.stages.base import check_output_folder, log_config
+from recordings.bags import is_bag, mcap_kind
 
-__all__ = ["ImportConfig", "import_video", "perceived_labels", "perceived_segmentation",
+__all__ = ["ImportConfig", "import_video", "list_bag", "perceived_labels", "perceived_segmentation",
            "segmentation_scores"]
 
 logger = logging.getLogger(__name__)
@@ -60,7 +62,9 @@ class ImportConfig:
     out : Path
         The session file to create (``.mcap``); an existing file is refused.
     video : Path or None
-        A video file (any container and codec OpenCV reads).
+        A video file (any container and codec OpenCV reads), or a ROS 2 or ROS 1 bag (a rosbag2
+        folder, one of its files, a ``.bag``; :mod:`recordings.bags`): the stage tells them
+        apart by what the path is (:func:`recordings.bags.is_bag`).
     camera : int or None
         A camera index for ``cv2.VideoCapture``; exactly one of ``video`` and ``camera``.
     step_seconds : float or None
@@ -79,6 +83,20 @@ class ImportConfig:
         A video of the inspection spot, frame for frame with ``video``.
     inspection_intrinsics : Path or None
         Its intrinsics JSON (default: a 60-degree horizontal view).
+    color_topic : str or None
+        The bag's colour images (None: its one usable colour topic).
+    depth_topic : str or None
+        The bag's depth images (``16UC1`` millimetres or ``32FC1`` metres), optional.
+    camera_info_topic : str or None
+        The colour camera's ``CameraInfo`` (None: the one beside ``color_topic``, if any; then
+        ``intrinsics``; then the default).
+    inspection_topic : str or None
+        The bag's inspection view, optional.
+    step_topic : str or None
+        A topic whose messages mark step starts (instead of ``step_seconds`` or perceived
+        changes).
+    sync_tolerance : float
+        Seconds within which depth and the inspection view are matched to a colour frame.
     """
 
     out: Path
@@ -92,11 +110,38 @@ class ImportConfig:
     max_seconds: float = 60.0
     inspection: Path | None = None
     inspection_intrinsics: Path | None = None
+    color_topic: str | None = None
+    depth_topic: str | None = None
+    camera_info_topic: str | None = None
+    inspection_topic: str | None = None
+    step_topic: str | None = None
+    sync_tolerance: float = 0.05
+
+    @property
+    def is_bag(self) -> bool:
+        """Whether the source is a ROS bag rather than a video file or a camera."""
+        return self.video is not None and is_bag(self.video)
 
     def __post_init__(self) -> None:
         if (self.video is None) == (self.camera is None):
-            raise ValueError("give exactly one source: a video file or --camera INDEX; got "
-                             f"video={self.video}, camera={self.camera}")
+            raise ValueError("give exactly one source: a video file, a bag or --camera INDEX; "
+                             f"got video={self.video}, camera={self.camera}")
+        bag_options = {"--color-topic": self.color_topic, "--depth-topic": self.depth_topic,
+                       "--camera-info-topic": self.camera_info_topic,
+                       "--inspection-topic": self.inspection_topic,
+                       "--step-topic": self.step_topic}
+        if self.video is not None and mcap_kind(self.video) == "session":
+            raise ValueError(f"{self.video} is an onionsort session already; perceive it, or "
+                             "learn from it, as it is")
+        given = [name for name, value in bag_options.items() if value is not None]
+        if given and not self.is_bag:
+            raise ValueError(f"{', '.join(given)} go with a ROS bag; {self.video or 'a camera'}"
+                             " is not one (a rosbag2 folder, its .mcap or .db3 file, a .bag)")
+        if self.step_topic is not None and self.step_seconds is not None:
+            raise ValueError("give --step-topic or --step-seconds, not both")
+        if not (math.isfinite(self.sync_tolerance) and self.sync_tolerance >= 0):
+            raise ValueError(f"sync_tolerance must be a number of seconds >= 0; got "
+                             f"{self.sync_tolerance}")
         if self.step_seconds is not None and not self.step_seconds > 0:
             raise ValueError(f"step_seconds must be > 0; got {self.step_seconds}")
         if self.debounce < 1:
@@ -105,10 +150,23 @@ class ImportConfig:
             raise ValueError(f"frames_per_step must be >= 1; got {self.frames_per_step}")
         if not self.max_seconds > 0:
             raise ValueError(f"max_seconds must be > 0; got {self.max_seconds}")
-        if self.inspection is not None and self.video is None:
-            raise ValueError("--inspection VIDEO goes with a video file, not --camera")
+        if self.inspection is not None and (self.video is None or self.is_bag):
+            raise ValueError("--inspection VIDEO goes with a video file, not a camera or a bag "
+                             "(a bag's: --inspection-topic)")
         if Path(self.out).exists():
             raise FileExistsError(f"{self.out} exists; choose another --out")
+
+
+def list_bag(path: Path) -> list:
+    """The topics of the bag at ``path`` (:class:`recordings.bags.BagTopic`): type, count, rate
+    and what the import can use each for."""
+    from recordings.bags import Bag, is_bag
+
+    if not is_bag(path):
+        raise ValueError(f"--list lists a bag's topics; {path} is not a ROS bag (a rosbag2 "
+                         "folder, its .mcap or .db3 file, or a .bag)")
+    with Bag(path) as bag:
+        return bag.topics()
 
 
 def _open(config: ImportConfig):
@@ -180,20 +238,30 @@ def perceived_segmentation(classifier, colors: Iterable[np.ndarray], debounce: i
 
 def _step_of_frame(config: ImportConfig, frames) -> list[int]:
     """The step of each frame (a stream or a list of :class:`SourceFrame`)."""
+    if config.step_seconds is None:
+        return _perceived(config, (f.color for f in frames))
+    return _fixed_clock([f.time_ns for f in frames], config.step_seconds,
+                        str(config.video or f"camera {config.camera}"))
+
+
+def _perceived(config: ImportConfig, colors: Iterable[np.ndarray]) -> list[int]:
+    from onionsort.stages.models import PerceptionModels
+
+    classifier = PerceptionModels.load(config.models).classifier
+    return perceived_segmentation(classifier, colors, config.debounce)
+
+
+def _fixed_clock(times: list[int], step_seconds: float, name: str) -> list[int]:
+    """Steps of ``step_seconds`` over frames at ``times``; a trailing fragment shorter than
+    half a step joins the step before."""
     from recordings.segmentation import fixed_clock
 
-    if config.step_seconds is None:
-        from onionsort.stages.models import PerceptionModels
-
-        classifier = PerceptionModels.load(config.models).classifier
-        return perceived_segmentation(classifier, (f.color for f in frames), config.debounce)
-    times = [f.time_ns for f in frames]
     frame_ns = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else 0
     lasts = (times[-1] - times[0] + frame_ns) / 1e9 if times else 0.0
-    if lasts < config.step_seconds:
-        raise ValueError(f"{config.video or f'camera {config.camera}'} lasts {lasts:.1f} s, "
-                         f"shorter than one step of --step-seconds {config.step_seconds:g}")
-    steps = fixed_clock(times, config.step_seconds)
+    if lasts < step_seconds:
+        raise ValueError(f"{name} lasts {lasts:.1f} s, shorter than one step of "
+                         f"--step-seconds {step_seconds:g}")
+    steps = fixed_clock(times, step_seconds)
     # a trailing fragment shorter than half a step is no step: it joins the one before
     fragment = steps.count(steps[-1])
     if steps[-1] > 0 and fragment < 0.5 * steps.count(steps[0]):
@@ -214,6 +282,8 @@ def import_video(config: ImportConfig):
 
     log_config("import", config)
     check_output_folder(Path(config.out).parent, f"the folder of --out {config.out}")
+    if config.is_bag:
+        return _import_bag(config)
     with _open(config) as source:
         name = source.name
         K = (load_intrinsics(config.intrinsics) if config.intrinsics is not None
@@ -242,6 +312,90 @@ def import_video(config: ImportConfig):
     logger.info("%s: %d frames read, %d steps written", config.out, summary.frames_read,
                 summary.steps_written)
     return summary
+
+
+def _import_bag(config: ImportConfig):
+    """Import a bag (see :mod:`recordings.bags`); return its
+    :class:`recordings.bags.BagImport`."""
+    from recordings.bags import Bag, BagError, decode_image, import_bag, steps_from_marks
+
+    tolerance = round(config.sync_tolerance * 1e9)
+    with Bag(config.video) as bag:
+        color = bag.stream(bag.color_topic(config.color_topic, [config.inspection_topic]),
+                           "--color-topic", "colour")
+        frames = np.arange(len(color.stamps_ns))
+        depth, depth_of = None, None
+        if config.depth_topic is not None:
+            depth = bag.stream(config.depth_topic, "--depth-topic", "depth")
+            if (depth.width, depth.height) != (color.width, color.height):
+                raise BagError(f"--depth-topic {depth.topic}: depth of {depth.width}x"
+                               f"{depth.height} beside colour of {color.width}x{color.height};"
+                               " depth must be registered to the colour image, of its size")
+            match = depth.nearest(color.stamps_ns, tolerance)
+            frames, depth_of = frames[match >= 0], match[match >= 0]
+            if not len(frames):
+                raise BagError(f"no frame of {color.topic} has depth on {depth.topic} within "
+                               f"{config.sync_tolerance:g} s; raise --sync-tolerance")
+        times = color.stamps_ns[frames]
+        how: dict = {}
+        if config.step_topic is not None:
+            steps = np.asarray(steps_from_marks(times, bag.marks(config.step_topic)))
+            frames, times = frames[steps >= 0], times[steps >= 0]
+            if depth_of is not None:
+                depth_of = depth_of[steps >= 0]
+            steps = steps[steps >= 0].tolist()
+            if not steps:
+                raise BagError(f"--step-topic {config.step_topic} marks its first step after "
+                               f"the last frame of {color.topic}")
+            how = {"method": "step topic", "topic": config.step_topic}
+        elif config.step_seconds is not None:
+            steps = _fixed_clock(times.tolist(), config.step_seconds, bag.name)
+            how = {"method": "fixed clock", "step_seconds": config.step_seconds}
+        else:
+            wanted = {color.topic: set(frames.tolist())}
+            steps = _perceived(config, (decode_image(msgtype, msg, color.topic)
+                                        for _, _, msgtype, msg in bag.read([color.topic],
+                                                                           wanted)))
+            how = {"method": "perceived changes", "debounce": config.debounce}
+        K = _bag_intrinsics(bag, config.camera_info_topic, config.intrinsics, color,
+                            "--camera-info-topic")
+        view, view_K, view_of = None, None, None
+        if config.inspection_topic is not None:
+            view = bag.stream(config.inspection_topic, "--inspection-topic", "colour")
+            view_K = _bag_intrinsics(bag, None, config.inspection_intrinsics, view,
+                                     "--inspection-topic's camera info")
+            view_of = view.nearest(times, tolerance)
+        topics = {"color": color.topic, "depth": config.depth_topic,
+                  "inspection": config.inspection_topic}
+        summary = import_bag(
+            bag, config.out, color=color, frames=frames, step_of_frame=steps,
+            frames_per_step=config.frames_per_step, camera_K=K, depth=depth,
+            depth_of_frame=depth_of, inspection=view, inspection_of_frame=view_of,
+            inspection_K=view_K, metadata={"segmentation": how, "topics": topics})
+    logger.info("%s: %d frames read (%d left out), %d steps written", config.out,
+                summary.frames_read, summary.frames_dropped, summary.steps_written)
+    return summary
+
+
+def _bag_intrinsics(bag, info_topic: str | None, json_path: Path | None, stream,
+                    option: str) -> np.ndarray:
+    """A bag camera's K: from ``info_topic``; else from ``json_path``; else from the CameraInfo
+    beside its image topic; else the default for its size. A CameraInfo of another size than
+    the images is refused."""
+    from recordings.bags import BagError
+    from recordings.sources import default_intrinsics, load_intrinsics
+
+    if info_topic is None and json_path is not None:
+        return load_intrinsics(json_path)
+    info_topic = info_topic or bag.camera_info_beside(stream.topic)
+    if info_topic is None:
+        return default_intrinsics(stream.width, stream.height)
+    K, w, h = bag.intrinsics(info_topic, option)
+    if (w, h) != (stream.width, stream.height) and (w, h) != (0, 0):
+        raise BagError(f"{option} {info_topic} describes {w}x{h} images; {stream.topic} has "
+                       f"{stream.width}x{stream.height}")
+    logger.info("%s: intrinsics from %s", stream.topic, info_topic)
+    return K
 
 
 def _read_camera(source) -> list:
