@@ -96,12 +96,12 @@ def is_bag(path: str | Path) -> bool:
     """Whether ``path`` is a bag :class:`Bag` opens (by its name and, for an MCAP file, its
     profile), not a video or an onionsort session."""
     path = Path(path)
-    if path.is_dir():
-        return (path / "metadata.yaml").is_file()
+    if path.is_dir():  # a folder is no video: read as a rosbag2 folder (or refused as one)
+        return True
     if path.suffix in (".bag", ".db3"):
         return True
-    if path.suffix == ".mcap" and path.is_file():
-        return mcap_kind(path) in ("ros", "foxglove")
+    if path.suffix == ".mcap" and path.is_file():  # any MCAP file but a session of ours
+        return mcap_kind(path) != "session"
     return False
 
 
@@ -178,7 +178,8 @@ def _image_kind(msgtype: str, msg: Any) -> tuple[str | None, str]:
             return "colour", "jpeg"
         if data.startswith(_PNG_MAGIC):
             return "colour", "png"
-        return None, f"unsupported compressed format {fmt!r} (neither JPEG nor PNG)"
+        return None, (f"a CompressedImage whose data is neither JPEG nor PNG (its format "
+                      f"says {fmt!r}; compressed formats read: JPEG, PNG)")
     encoding = str(msg.encoding)
     if encoding in COLOR_ENCODINGS:
         return "colour", encoding
@@ -308,16 +309,19 @@ class Bag:
         if not self.path.exists():
             raise FileNotFoundError(2, "No such file or directory", str(self.path))
         self.name = str(self.path)
-        if self.path.suffix == ".mcap" and mcap_kind(self.path) == "foxglove":
-            self._reader = _FoxgloveReader(self.path)
-        else:
-            self._reader = AnyReader([self.path],
-                                     default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         try:
+            if self.path.suffix == ".mcap" and mcap_kind(self.path) == "foxglove":
+                self._reader = _FoxgloveReader(self.path)
+            else:
+                self._reader = AnyReader([self.path],
+                                         default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             self._reader.open()
         except Exception as exc:  # rosbags' reader errors, and what a damaged file raises
-            raise BagError(f"{self.path} cannot be read as a ROS bag ({_reason(exc)}); give "
-                           "a rosbag2 folder, one of its .mcap or .db3 files, or a ROS 1 .bag"
+            hint = ("a rosbag2 folder needs its metadata.yaml (`ros2 bag reindex` writes it)"
+                    if self.path.is_dir() and not (self.path / "metadata.yaml").is_file() else
+                    "a bag a recorder was killed writing must be repaired first (`ros2 bag "
+                    "reindex`, `mcap recover`, `rosbag reindex`)")
+            raise BagError(f"{self.path} cannot be read as a ROS bag ({_reason(exc)}); {hint}"
                            ) from None
         self._connections = {c.topic: c for c in self._reader.connections}
 
@@ -618,6 +622,11 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
     if out_path.exists():
         raise FileExistsError(f"{out_path} exists; choose another --out or remove it")
     selected = resample_steps(step_of_frame, frames_per_step)
+    sizes = np.bincount(np.unique(np.asarray(step_of_frame), return_inverse=True)[1])
+    if np.any(sizes < frames_per_step):
+        logger.warning("%s: %d of %d steps hold fewer than %d frames; their frames are "
+                       "repeated to make %d each", bag.name, int(np.sum(sizes < frames_per_step)),
+                       len(sizes), frames_per_step, frames_per_step)
     times = color.stamps_ns[frames]
     t0 = int(times.min())
     # the session's frames in order: (step, phase, colour message, depth message, view message)
@@ -653,6 +662,7 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
         with SessionWriter(partial, meta, camera_K, inspection_K,
                            frames_per_step=frames_per_step, depth=depth is not None,
                            ground_truth=False, overwrite=True) as writer:
+            writer.report_interruption = False  # removed on failure: nothing to report
 
             def write_ready() -> None:
                 nonlocal written, color_size
@@ -699,8 +709,8 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
         partial.rename(out_path)
     except BaseException:
         partial.unlink(missing_ok=True)
-        logger.error("%s: import into %s failed after %d frames; removed %s", bag.name,
-                     out_path, written, partial.name)
+        logger.info("%s: import into %s failed after %d frames; removed %s", bag.name,
+                    out_path, written, partial.name)
         raise
     return BagImport(path=out_path, source=bag.name, frames_read=len(frames),
                      frames_dropped=len(color.stamps_ns) - len(frames),

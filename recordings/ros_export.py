@@ -273,12 +273,19 @@ class _Cameras:
         return cal
 
 
+def _format(data: bytes) -> str:
+    """``png`` or ``jpeg``, by the compressed image's own signature (a session's colour is
+    JPEG, or PNG where it was imported from raw images; its inspection views PNG)."""
+    return "png" if data[:4] == b"\x89PNG" else "jpeg"
+
+
 def _frame_messages(bag: _Bag, frame: FrameRecord, cameras: _Cameras, raw_images: bool
                     ) -> Iterator[tuple[str, object]]:
     """The ``(topic, message)`` pairs of one frame, in the order they are written."""
     t = frame.time_ns
     yield Topic.COLOR, (bag.image(frame.color, "rgb8", 3, t, "camera") if raw_images
-                        else bag.compressed(frame.color_jpeg, "jpeg", t, "camera"))
+                        else bag.compressed(frame.color_jpeg, _format(frame.color_jpeg), t,
+                                            "camera"))
     if frame.depth_raw is not None:
         mm = np.frombuffer(frame.depth_raw, "<u2").reshape(frame.depth_shape)
         yield Topic.DEPTH, bag.image(mm, "16UC1", 2, t, "camera")
@@ -288,7 +295,8 @@ def _frame_messages(bag: _Bag, frame: FrameRecord, cameras: _Cameras, raw_images
     if frame.inspection_png is not None:
         yield Topic.INSPECTION, (
             bag.image(frame.inspection, "rgb8", 3, t, "inspection") if raw_images
-            else bag.compressed(frame.inspection_png, "png", t, "inspection"))
+            else bag.compressed(frame.inspection_png, _format(frame.inspection_png), t,
+                                "inspection"))
         cal = cameras.at(Topic.INSPECTION_CALIBRATION, frame.index, lambda: frame.inspection)
         if cal is not None:
             yield RosTopic.INSPECTION_INFO, bag.camera_info(cal, t, "inspection")

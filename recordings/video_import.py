@@ -162,6 +162,7 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
     try:
         with SessionWriter(partial, meta, K, inspection_K, frames_per_step=fps, depth=False,
                            ground_truth=False, overwrite=True) as writer:
+            writer.report_interruption = False  # removed on failure: nothing to report
             for frame in source:
                 if read >= n:
                     raise ValueError(f"{name} gave more frames than the {n} step_of_frame "
@@ -193,8 +194,8 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
         partial.rename(out_path)
     except BaseException:
         partial.unlink(missing_ok=True)
-        logger.error("%s: import into %s failed after %d frames; removed %s", name, out_path,
-                     read, partial.name)
+        logger.info("%s: import into %s failed after %d frames; removed %s", name, out_path,
+                    read, partial.name)
         raise
     summary = ImportSummary(path=out_path, source=name, frames_read=read,
                             frames_written=written, steps_written=len(selected),

@@ -330,6 +330,9 @@ class SessionWriter:
         self.depth, self.ground_truth = bool(depth), bool(ground_truth)
         self.n_frames = 0
         self.n_steps = 0
+        #: Log a warning when the file is finished as interrupted; False for a temporary file
+        #: its caller removes on failure (an import's ``.partial``).
+        self.report_interruption = True
         self._file = None
         self._writer: Writer | None = None
         self._channels: dict[str, int] = {}
@@ -407,7 +410,7 @@ class SessionWriter:
         finally:
             self._file.close()
             self._writer, self._file = None, None
-        if status != "complete":
+        if status != "complete" and self.report_interruption:
             logger.warning("%s: recording %s after %d frames (%d steps); the file is finished "
                            "and readable", self.path, status, self.n_frames, self.n_steps)
 

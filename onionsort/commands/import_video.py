@@ -6,7 +6,8 @@ The session holds colour, calibration, a step clock, and the inspection view wit
 sensor mode. Steps come from a fixed clock (``--step-seconds``), from a bag's topic that marks
 step starts (``--step-topic``) or, by default, from changes of the perceived state (debounced).
 
-A bag is a rosbag2 folder (MCAP or sqlite3), one of its files, or a ROS 1 ``.bag``:
+A bag is a rosbag2 folder (MCAP or sqlite3), one of its files, a ROS 1 ``.bag``, or an MCAP
+file of Foxglove protobuf images another tool wrote:
 ``--list`` prints its topics and which of them the import can use; with one usable colour topic
 ``--color-topic`` may be left out.
 

@@ -137,6 +137,9 @@ class ImportConfig:
         if given and not self.is_bag:
             raise ValueError(f"{', '.join(given)} go with a ROS bag; {self.video or 'a camera'}"
                              " is not one (a rosbag2 folder, its .mcap or .db3 file, a .bag)")
+        if self.camera_info_topic is not None and self.intrinsics is not None:
+            raise ValueError("give --camera-info-topic or --intrinsics, not both: the "
+                             "colour camera's intrinsics come from one of them")
         if self.step_topic is not None and self.step_seconds is not None:
             raise ValueError("give --step-topic or --step-seconds, not both")
         if not (math.isfinite(self.sync_tolerance) and self.sync_tolerance >= 0):
@@ -357,16 +360,17 @@ def _import_bag(config: ImportConfig):
                                         for _, _, msgtype, msg in bag.read([color.topic],
                                                                            wanted)))
             how = {"method": "perceived changes", "debounce": config.debounce}
-        K = _bag_intrinsics(bag, config.camera_info_topic, config.intrinsics, color,
-                            "--camera-info-topic")
-        view, view_K, view_of = None, None, None
+        K, K_from = _bag_intrinsics(bag, config.camera_info_topic, config.intrinsics, color,
+                                    "--camera-info-topic")
+        view, view_K, view_of, view_K_from = None, None, None, None
         if config.inspection_topic is not None:
             view = bag.stream(config.inspection_topic, "--inspection-topic", "colour")
-            view_K = _bag_intrinsics(bag, None, config.inspection_intrinsics, view,
-                                     "--inspection-topic's camera info")
+            view_K, view_K_from = _bag_intrinsics(bag, None, config.inspection_intrinsics, view,
+                                                  "--inspection-topic's camera info")
             view_of = view.nearest(times, tolerance)
         topics = {"color": color.topic, "depth": config.depth_topic,
-                  "inspection": config.inspection_topic}
+                  "inspection": config.inspection_topic, "intrinsics": K_from,
+                  "inspection_intrinsics": view_K_from if view is not None else None}
         summary = import_bag(
             bag, config.out, color=color, frames=frames, step_of_frame=steps,
             frames_per_step=config.frames_per_step, camera_K=K, depth=depth,
@@ -378,24 +382,24 @@ def _import_bag(config: ImportConfig):
 
 
 def _bag_intrinsics(bag, info_topic: str | None, json_path: Path | None, stream,
-                    option: str) -> np.ndarray:
-    """A bag camera's K: from ``info_topic``; else from ``json_path``; else from the CameraInfo
-    beside its image topic; else the default for its size. A CameraInfo of another size than
-    the images is refused."""
+                    option: str) -> tuple[np.ndarray, str]:
+    """A bag camera's K, and where it came from: ``info_topic``; else ``json_path``; else the
+    CameraInfo beside its image topic; else the default for its size. A CameraInfo of another
+    size than the images is refused."""
     from recordings.bags import BagError
     from recordings.sources import default_intrinsics, load_intrinsics
 
     if info_topic is None and json_path is not None:
-        return load_intrinsics(json_path)
+        return load_intrinsics(json_path), str(json_path)
     info_topic = info_topic or bag.camera_info_beside(stream.topic)
     if info_topic is None:
-        return default_intrinsics(stream.width, stream.height)
+        return default_intrinsics(stream.width, stream.height), "default (60-degree view)"
     K, w, h = bag.intrinsics(info_topic, option)
     if (w, h) != (stream.width, stream.height) and (w, h) != (0, 0):
         raise BagError(f"{option} {info_topic} describes {w}x{h} images; {stream.topic} has "
                        f"{stream.width}x{stream.height}")
     logger.info("%s: intrinsics from %s", stream.topic, info_topic)
-    return K
+    return K, info_topic
 
 
 def _read_camera(source) -> list:

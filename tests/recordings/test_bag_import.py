@@ -347,3 +347,26 @@ def test_a_foxglove_protobuf_file_of_another_tool_imports(session, tmp_path):
     assert [f.color_jpeg for f in frames] == [f.color_jpeg for f in original]
     assert [f.depth_raw for f in frames] == [f.depth_raw for f in original]
     np.testing.assert_allclose(np.asarray(back.metadata["camera_K"], float), K)
+
+
+def test_a_raw_imports_export_labels_its_png_colour(session, tmp_path):
+    """A session imported from raw images holds PNG colour; its export says so."""
+    from rosbags.highlevel import AnyReader
+
+    from onionsort.stages import ExportConfig, export_session
+
+    path = session_bag(session, tmp_path / "bag", "mcap", "rgb8", None, None)
+    imported(path, tmp_path / "s.mcap")
+    export_session(ExportConfig(session=tmp_path / "s.mcap", out=tmp_path / "out"))
+    with AnyReader([tmp_path / "out"], default_typestore=ROS2) as reader:
+        colour = [c for c in reader.connections if c.topic == "/camera/color"]
+        formats = {reader.deserialize(raw, c.msgtype).format
+                   for c, _, raw in reader.messages(connections=colour)}
+    assert formats == {"png"}
+
+
+def test_a_folder_without_metadata_is_refused_with_what_to_do(session, tmp_path, capsys):
+    path = session_bag(session, tmp_path / "bag", "mcap", "rgb8", None, None)
+    (path / "metadata.yaml").unlink()
+    err = _refused(capsys, tmp_path, str(path))
+    assert "cannot be read as a ROS bag" in err and "ros2 bag reindex" in err
