@@ -98,6 +98,14 @@ CASES = [
      ["batches must be >= 1", "0"]),
     (["experiment", "forestworld", "--workers", "0", "--out", "{d}/x"],
      ["workers must be >= 1", "0"]),
+    (["experiment", "forestworld", "--executor", "spark", "--out", "{d}/x"],
+     ["--executor", "invalid choice", "'spark'", "'local'"]),
+    (["experiment", "forestworld", "--ray-address", "auto", "--out", "{d}/x"],
+     ["ray_address is for executor 'ray'", "'local'"]),
+    (["record", "--workers", "0", "--out", "{d}/x"], ["workers must be >= 1", "0"]),
+    (["demo", "--quick", "--workers", "-1", "--out", "{d}/x"], ["workers must be >= 1", "-1"]),
+    (["demo", "--quick", "--executor", "dask", "--out", "{d}/x"],
+     ["--executor", "invalid choice", "'dask'"]),
     (["experiment", "forestworld", "--backend", "cuda", "--out", "{d}/x"],
      ["--backend", "invalid choice", "'cuda'", "'numba'"]),
     (["dataset", "--frames", "12", "--difficulty", "clean,foggy", "--out", "{d}/x"],
@@ -416,7 +424,7 @@ _FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources.py", "--list-
 #: ``onionsort/stages`` (by the module's name).
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
                     "calibrate": ["calibrate", "eval-perception"]}
-_SHARED = {"base", "models", "__init__", "_args"}
+_SHARED = {"base", "models", "parallel", "__init__", "_args"}
 #: Which commands run a stage module's refusals (``calibrate.py``'s come from calibrate alone).
 _CALLER_COMMANDS = {**_MODULE_COMMANDS, "calibrate": ["calibrate"], "inspection": ["train"]}
 

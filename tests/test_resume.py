@@ -14,9 +14,10 @@ from mcap.reader import make_reader
 from onionsort.cli import main
 from recordings import SessionWriter, open_session
 
-#: The tiny recording of these tests: 2 sessions of 4 steps, small images.
-RECORD = ["record", "--sessions", "2", "--steps-per-session", "4", "--frames-per-step", "2",
-          "--width", "48", "--height", "32", "--seed", "3"]
+#: The tiny recording of these tests: 2 sessions of 4 steps, small images, recorded in this
+#: process (the interruptions are made by patching it).
+RECORD = ["record", "--workers", "1", "--sessions", "2", "--steps-per-session", "4",
+          "--frames-per-step", "2", "--width", "48", "--height", "32", "--seed", "3"]
 
 
 def mcap_content(path) -> tuple[list, list]:
@@ -122,7 +123,7 @@ def test_record_resume_into_an_empty_folder_records_everything(uninterrupted, tm
 
 # --- demo --------------------------------------------------------------------------------
 
-DEMO = ["demo", "--quick", "--sessions", "2"]
+DEMO = ["demo", "--quick", "--workers", "1", "--sessions", "2"]
 #: Timings, the only numbers of results.json that may differ between two runs.
 TIMINGS = ("seconds", "learn_seconds")
 

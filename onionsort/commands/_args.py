@@ -90,3 +90,25 @@ def floats(text: str) -> tuple[float, ...]:
     except ValueError:
         msg = f"expected comma-separated numbers; got {text!r}"
         raise argparse.ArgumentTypeError(msg) from None
+
+
+def add_parallel_arguments(parser: argparse.ArgumentParser, *, pieces: str) -> None:
+    """``--executor``, ``--workers`` and ``--ray-address``: where a stage's independent
+    ``pieces`` run (:class:`onionsort.stages.parallel.ParallelOptions`)."""
+    group = parser.add_argument_group("parallel")
+    group.add_argument("--executor", choices=["local", "ray"], default="local",
+                       help=f"run the {pieces} on local worker processes (default) or as Ray "
+                            "tasks (pip install -e \".[ray]\")")
+    group.add_argument("--workers", type=int, metavar="N",
+                       help=f"{pieces} at a time: local worker processes, or the CPUs of a new "
+                            "local Ray instance (default: this machine's cores; 1: one after "
+                            "another in this process)")
+    group.add_argument("--ray-address", metavar="ADDRESS",
+                       help="the Ray cluster to join, e.g. auto or ray://head:10001 (default: "
+                            "$RAY_ADDRESS, else a local Ray instance of --workers CPUs)")
+
+
+def parallel_options(args: argparse.Namespace) -> dict:
+    """The :class:`~onionsort.stages.parallel.ParallelOptions` fields of parsed arguments."""
+    return {"executor": args.executor, "workers": args.workers,
+            "ray_address": args.ray_address}

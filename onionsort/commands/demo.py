@@ -28,6 +28,8 @@ from onionsort.commands._args import (
     add_device_argument,
     add_inspection_arguments,
     add_models_argument,
+    add_parallel_arguments,
+    parallel_options,
     subcommand,
 )
 
@@ -53,6 +55,7 @@ def register(subparsers) -> None:
     add_backend_argument(parser)
     add_inspection_arguments(parser)
     add_device_argument(parser)
+    add_parallel_arguments(parser, pieces="repeats' recordings and methods")
     parser.set_defaults(func=run)
 
 
@@ -66,7 +69,8 @@ def run(args) -> int:
                               resume=args.resume, backend=args.backend,
                               inspection_views=args.inspection_views,
                               miss_cost=args.miss_cost, waste_cost=args.waste_cost,
-                              fusion=args.fusion, device=args.device))
+                              fusion=args.fusion, device=args.device,
+                              **parallel_options(args)))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))

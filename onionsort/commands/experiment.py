@@ -17,10 +17,15 @@ Examples
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-from onionsort.commands._args import add_backend_argument, floats, subcommand
+from onionsort.commands._args import (
+    add_backend_argument,
+    add_parallel_arguments,
+    floats,
+    parallel_options,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -37,9 +42,6 @@ def register(subparsers) -> None:
     p.add_argument("--methods", default="mmap-birl,map-birl,hidden-data-em,maxent",
                    help="comma-separated subset of mmap-birl,map-birl,hidden-data-em,maxent")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                   help="parallel processes, or CPUs of a local Ray instance (run times are "
-                        "comparable within one run)")
     p.add_argument("--quick", action="store_true", help="a small sweep that takes seconds")
     add_backend_argument(p)
     p.add_argument("--out", type=Path, help="run folder (default runs/experiment-DOMAIN)")
@@ -47,11 +49,7 @@ def register(subparsers) -> None:
                    help="continue an interrupted sweep in --out: keep the trials in its "
                         "results.csv.partial and run the rest (same options; --backend may "
                         "differ)")
-    p.add_argument("--executor", choices=["process", "ray"], default="process",
-                   help="run trials on a local process pool (default) or as Ray tasks "
-                        '(pip install -e ".[ray]")')
-    p.add_argument("--ray-address", help="Ray cluster to join, e.g. auto or ray://head:10001 "
-                   "(default: $RAY_ADDRESS, else a local Ray instance of --workers CPUs)")
+    add_parallel_arguments(p, pieces="trials")
     p.set_defaults(func=run)
 
 
@@ -68,8 +66,8 @@ def run(args) -> int:
         trajectories=listed("trajectories"), length=listed("length"),
         learner_beta=listed("learner-beta", "learner"),
         methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
-        seed=args.seed, workers=args.workers, quick=args.quick, out=args.out,
-        executor=args.executor, ray_address=args.ray_address, resume=args.resume,
+        seed=args.seed, quick=args.quick, out=args.out,
+        resume=args.resume, **parallel_options(args),
         backend=args.backend)
     summary = run_experiment(config)
     print(format_table(summary["points"]))

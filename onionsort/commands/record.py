@@ -20,7 +20,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_connect_argument, add_session_arguments, subcommand
+from onionsort.commands._args import (
+    add_connect_argument,
+    add_parallel_arguments,
+    add_session_arguments,
+    parallel_options,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -46,6 +52,7 @@ def register(subparsers) -> None:
 
     parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
                         help="perception difficulty of the world (clean)")
+    add_parallel_arguments(parser, pieces="sessions")
     parser.set_defaults(func=run)
 
 
@@ -57,7 +64,8 @@ def run(args) -> int:
         out=args.out, sessions=args.sessions, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
         width=args.width, height=args.height, overwrite=args.overwrite, rerun=rerun,
-        difficulty=args.difficulty, connect=args.connect, resume=args.resume))
+        difficulty=args.difficulty, connect=args.connect, resume=args.resume,
+        **parallel_options(args)))
     print(f"recorded {len(paths)} sessions to {args.out}" + (" (complete ones kept)"
                                                              if args.resume else ""))
     return 0

@@ -54,6 +54,7 @@ from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.learn import LearnConfig, learn
 from onionsort.stages.models import PerceptionModels, sorting_threshold
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
 
@@ -74,7 +75,7 @@ SIZES = {False: {"sessions": 12, "steps": 20, "heldout": 1500, "onions": 50, "bl
 
 
 @dataclass(frozen=True)
-class DemoConfig:
+class DemoConfig(ParallelOptions):
     """The demo's run folder, seed, size, repeats, perception difficulty and models.
 
     ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
@@ -88,7 +89,10 @@ class DemoConfig:
     (each repeat's result names the backend its model was learned with, ``backends`` all).
     ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
     inspection (:class:`~onionsort.stages.evaluate.EvaluateConfig`); ``device`` where torch
-    runs the perception models.
+    runs the perception models. ``executor``, ``workers`` and ``ray_address``
+    (:class:`~onionsort.stages.parallel.ParallelOptions`) run the repeats' recordings, and
+    then every (repeat, method)'s learning and sorting, as pieces; with fewer repeats than
+    workers the recording and perception of a repeat run their sessions in parallel instead.
     """
 
     out: Path = Path("runs/demo")
@@ -110,6 +114,7 @@ class DemoConfig:
     def __post_init__(self) -> None:
         from irl.inference import check_backend
 
+        super().__post_init__()
         check_backend(self.backend)
         # the robot's inspection, checked as evaluate checks it (before any work starts)
         checked = EvaluateConfig(policy="expert", out=self.out,
@@ -132,7 +137,6 @@ def demo(config: DemoConfig) -> dict:
     """Run the whole job (with ``config.resume``, the stages not finished yet); write
     ``config.out/results.json`` and return its content."""
     import torch
-    from tqdm import tqdm
 
     from state_abstraction.calibration import load_calibration
 
@@ -152,7 +156,7 @@ def demo(config: DemoConfig) -> dict:
         logger.info("%s holds a finished demo; nothing to resume", out)
         return json.loads((out / "results.json").read_text())
     progress.start()
-    models = PerceptionModels.load(config.models, config.device)
+    models = PerceptionModels.load_cached(config.models, config.device)
     data = out / "heldout"
     progress.run("heldout", lambda: dataclasses.asdict(make_dataset(DatasetConfig(
         out=data, frames=size["heldout"], seed=config.seed + 1000, robot_onions=0,
@@ -169,22 +173,29 @@ def demo(config: DemoConfig) -> dict:
     logger.info("calibrated on %d held-out steps: state error rate %.3f, (state, action) "
                 "error rate %.3f", measured["n_steps"], calibration.state_error_rate,
                 calibration.pair_error_rate)
-    per_repeat: dict[str, list[dict]] = {m: [] for m in METHODS}
-    with tqdm(total=config.repeats * (2 + len(METHODS)), desc="demo", unit="stage") as bar:
-        for k in range(config.repeats):
-            folder = out if config.repeats == 1 else out / f"repeat_{k}"
-            seed = config.seed + k
-            recorded = progress.run(f"record-{k}", lambda folder=folder, seed=seed: _record(
-                folder, seed, size, config))
-            paths = [folder / "sessions" / name for name in recorded["sessions"]]
-            bar.update()
-            progress.run(f"perceive-{k}", lambda paths=paths: _perceive(paths, config, models))
-            bar.update()
-            for method in METHODS:
-                per_repeat[method].append(_learn_and_sort(
-                    progress, k, method, paths, calibration_path, folder / method, seed, size,
-                    config, models))
-                bar.update()
+    # the repeats' sessions, then every (repeat, method)'s learning and sorting, as pieces
+    folders = [out if config.repeats == 1 else out / f"repeat_{k}" for k in range(config.repeats)]
+    options = config.parallel_options()
+    spread = config.executor == "ray" or config.repeats >= config.n_workers
+    inner = ParallelOptions(workers=1) if spread else options
+    sessions: list[list[Path]] = [[] for _ in folders]
+    for k, paths in run_pieces(
+            _sessions_piece, [(progress, k, folders[k], config.seed + k, size, config, inner)
+                              for k in range(config.repeats)],
+            options if spread else ParallelOptions(workers=1),
+            names=[f"the sessions of repeat {k}" for k in range(config.repeats)],
+            desc="demo: record and perceive", unit="repeat"):
+        sessions[k] = paths
+    jobs = [(k, method) for k in range(config.repeats) for method in METHODS]
+    scored: dict[tuple[int, str], dict] = {}
+    for j, result in run_pieces(
+            _method_piece, [(progress, k, method, sessions[k], calibration_path,
+                             folders[k] / method, config.seed + k, size, config)
+                            for k, method in jobs], options,
+            names=[f"{method} of repeat {k}" for k, method in jobs],
+            desc="demo: learn and sort", unit="method"):
+        scored[jobs[j]] = result
+    per_repeat = {m: [scored[(k, m)] for k in range(config.repeats)] for m in METHODS}
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
                "difficulty": config.difficulty, "repeats": config.repeats,
@@ -271,25 +282,53 @@ class _Progress:
         return json.loads(path.read_text())["result"]
 
 
-def _record(folder: Path, seed: int, size: dict, config: DemoConfig) -> dict:
+def _sessions_piece(piece: tuple) -> list[Path]:
+    """Record and perceive repeat ``k``'s sessions (two stages, each skipped if its marker
+    says it finished); their paths. ``piece``: ``(progress, k, folder, seed, size, config,
+    options)``, ``options`` the recording's and perception's own executor."""
+    progress, k, folder, seed, size, config, options = piece
+    recorded = progress.run(f"record-{k}", lambda: _record(folder, seed, size, config,
+                                                           options))
+    paths = [folder / "sessions" / name for name in recorded["sessions"]]
+    progress.run(f"perceive-{k}", lambda: _perceive(paths, config, options))
+    return paths
+
+
+def _record(folder: Path, seed: int, size: dict, config: DemoConfig,
+            options: ParallelOptions) -> dict:
     """Record a repeat's sessions into ``folder/sessions`` (with ``sessions.rrd``); with
     ``config.resume``, keep the complete ones an interrupted demo recorded."""
     paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
                                 steps_per_session=size["steps"], occlusion=0.2, seed=seed,
                                 rerun=folder / "sessions.rrd", difficulty=config.difficulty,
-                                connect=config.connect, resume=config.resume))
+                                connect=config.connect, resume=config.resume,
+                                executor=options.executor, workers=options.workers,
+                                ray_address=options.ray_address))
     return {"sessions": [p.name for p in paths]}
 
 
-def _perceive(paths: list[Path], config: DemoConfig, models: PerceptionModels) -> dict:
+def _perceive(paths: list[Path], config: DemoConfig, options: ParallelOptions) -> dict:
     """Perceive the sessions of ``paths`` that hold no perception topics yet (all of them,
     unless an interrupted demo perceived some)."""
     from recordings import open_session
 
     todo = tuple(p for p in paths if open_session(p).perception_models is None)
     if todo:
-        perceive(PerceiveConfig(sessions=todo, models=config.models), models)
+        parallel = min(options.n_workers, len(todo)) > 1 or options.executor == "ray"
+        perceive(PerceiveConfig(sessions=todo, models=config.models, device=config.device,
+                                executor=options.executor, workers=options.workers,
+                                ray_address=options.ray_address),
+                 None if parallel else PerceptionModels.load_cached(config.models,
+                                                                    config.device))
     return {"perceived": [p.name for p in todo]}
+
+
+def _method_piece(piece: tuple) -> dict:
+    """Learn with one method and sort with its policy: ``piece`` is ``(progress, k, method,
+    sessions, calibration, run_dir, seed, size, config)``."""
+    progress, k, method, sessions, calibration, run_dir, seed, size, config = piece
+    return _learn_and_sort(progress, k, method, sessions, calibration, run_dir, seed, size,
+                           config, PerceptionModels.load_cached(config.models, config.device))
 
 
 def _check_new_folder(out: Path) -> None:

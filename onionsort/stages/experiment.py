@@ -6,11 +6,13 @@ learner setting and batch), ``summary.json`` (means with 95% percentile-bootstra
 batches) and the plots into the run folder. Rows go to ``results.csv.partial`` as trials finish,
 beside ``results.csv.partial.json`` (the sweep they belong to); ``resume=True`` keeps those rows
 and runs only the missing trials, so the final ``results.csv`` (rows in trial order) equals that
-of an uninterrupted run, timings aside. Trials run on a local process pool (``executor="process"``)
-or as Ray tasks (``executor="ray"``: the Ray instance this process already joined, else
-``ray_address``, else ``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give
-the same rows. ``backend`` picks the forward-backward kernels of MMAP-BIRL: numpy, or numba, which
-gives the same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed, always
+of an uninterrupted run, timings aside. Trials run on the stages' executor
+(:class:`~onionsort.stages.parallel.ParallelOptions`): a local process pool
+(``executor="local"``; ``"process"``, its former name, is taken too) or Ray tasks
+(``executor="ray"``: the Ray instance this process already joined, else ``ray_address``, else
+``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give the same rows.
+``backend`` picks the forward-backward kernels of MMAP-BIRL: numpy, or numba, which gives the
+same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed, always
 runs numpy). Each row records the backend of the sweep that ran it (``summary.json`` their
 counts), and a sweep may be resumed with the other one: the kept rows keep theirs.
 
@@ -33,15 +35,14 @@ import csv
 import dataclasses
 import json
 import logging
-import os
 from collections import Counter
-from concurrent.futures import Executor, Future
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from onionsort.stages.base import check_output_folder, log_config, write_json
+from onionsort.stages.parallel import ParallelOptions, RayExecutor
 
-__all__ = ["CSV_COLUMNS", "EXECUTORS", "ExperimentConfig", "format_table", "parse_list",
+__all__ = ["CSV_COLUMNS", "ExperimentConfig", "format_table", "parse_list",
            "run_experiment"]
 
 logger = logging.getLogger(__name__)
@@ -63,11 +64,9 @@ CSV_COLUMNS = ["method", "occlusion", "noise", "trajectories", "length", "learne
                "n_iter", "converged", "backend"]
 #: The columns that name a trial (all but its scores): a row's identity when resuming.
 TRIAL_COLUMNS = ("method", "occlusion", "noise", "trajectories", "length", "learner", "batch")
-EXECUTORS = ("process", "ray")
 PARTIAL = "results.csv.partial"
 #: Beside the partial rows: the sweep they belong to, checked by ``resume``.
 PARTIAL_SWEEP = "results.csv.partial.json"
-RAY_EXTRA = 'pip install -e ".[ray]"'
 
 
 def parse_list(text: str, name: str, kind: str = "int") -> tuple:
@@ -91,7 +90,7 @@ def parse_list(text: str, name: str, kind: str = "int") -> tuple:
 
 
 @dataclass(frozen=True)
-class ExperimentConfig:
+class ExperimentConfig(ParallelOptions):
     """A sweep as asked for; None fields take the paper's (or the quick) defaults.
 
     Attributes
@@ -108,17 +107,11 @@ class ExperimentConfig:
         Learner settings (``irl.experiments.parse_learner_setting``): betas, factors of the
         domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
     methods : tuple of str
-    seed, workers : int
-        ``workers``: processes of the pool, or CPUs of a new local Ray instance.
+    seed : int
     quick : bool
         A small sweep that takes seconds.
     out : Path or None
         Run folder (default ``runs/experiment-DOMAIN``).
-    executor : str
-        ``process`` (a local process pool) or ``ray`` (Ray tasks; the ``ray`` extra).
-    ray_address : str or None
-        The Ray cluster to join (``auto``, ``ray://host:10001``, ``host:6379``); None: the
-        ``RAY_ADDRESS`` environment variable, else a new local instance.
     resume : bool
         Keep the rows of ``results.csv.partial`` (an interrupted run of this same sweep in
         this folder) and run only the missing trials.
@@ -137,11 +130,8 @@ class ExperimentConfig:
     learner_beta: tuple[str, ...] | None = None
     methods: tuple[str, ...] = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
     seed: int = 0
-    workers: int = 2
     quick: bool = False
     out: Path | None = None
-    executor: str = "process"
-    ray_address: str | None = None
     resume: bool = False
     backend: str = "numpy"
 
@@ -149,16 +139,11 @@ class ExperimentConfig:
         from irl.inference import check_backend
 
         check_backend(self.backend)
-        if self.executor not in EXECUTORS:
-            raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; "
-                             f"got {self.executor!r}")
-        if self.ray_address is not None and self.executor != "ray":
-            raise ValueError(f"ray_address is for executor 'ray'; got executor "
-                             f"{self.executor!r} with ray_address {self.ray_address!r}")
+        if self.executor == "process":  # the former name of the local executor
+            object.__setattr__(self, "executor", "local")
+        super().__post_init__()
         if self.batches is not None and self.batches < 1:
             raise ValueError(f"batches must be >= 1; got {self.batches}")
-        if self.workers < 1:
-            raise ValueError(f"workers must be >= 1; got {self.workers}")
 
     def sweep(self):
         """The :class:`irl.experiments.SweepConfig` this resolves to."""
@@ -227,7 +212,7 @@ def run_experiment(config: ExperimentConfig) -> dict:
             with partial.open("a", newline="") as fh:
                 writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
                 for k, r in tqdm(run_trials([trials[i] for i in pending],
-                                            workers=config.workers, executor=executor),
+                                            workers=config.n_workers, executor=executor),
                                  initial=len(done), total=len(trials),
                                  desc=f"{config.domain} sweep", unit="fit"):
                     results[pending[k]] = r
@@ -242,7 +227,8 @@ def run_experiment(config: ExperimentConfig) -> dict:
     partial.unlink()
     (out / PARTIAL_SWEEP).unlink(missing_ok=True)
     points = summarize(ordered, seed=sweep.seed)
-    summary = {"config": asdict(sweep), "workers": config.workers, "executor": config.executor,
+    summary = {"config": asdict(sweep), "workers": config.n_workers,
+               "executor": config.executor,
                "resumed_trials": len(done),
                "trial_backends": dict(sorted(Counter(r.backend for r in ordered).items())),
                "bootstrap": {"method": "percentile, resampling batches",
@@ -327,53 +313,12 @@ def _trial_key(item) -> tuple:
     return tuple(getattr(item, k) for k in TRIAL_COLUMNS)
 
 
-class _RayExecutor(Executor):
-    """Ray tasks behind :class:`concurrent.futures.Executor`'s ``submit``: one CPU per task.
-
-    Joins the Ray instance this process is already connected to if there is one (and leaves
-    it running), else ``address`` (None: ``RAY_ADDRESS``, else a new local instance of
-    ``num_cpus`` CPUs), which :meth:`shutdown` disconnects from.
-    """
-
-    def __init__(self, address: str | None, num_cpus: int) -> None:
-        try:
-            import ray
-        except ImportError:
-            raise ValueError(f"--executor ray needs Ray, an optional extra: {RAY_EXTRA}") from None
-        self._ray = ray
-        self._joined = not ray.is_initialized()
-        if self._joined:
-            local = address is None and not os.environ.get("RAY_ADDRESS")
-            options = {"num_cpus": max(num_cpus, 1), "include_dashboard": False} if local else {}
-            ray.init(address=address, logging_level=logging.WARNING, **options)
-        self._tasks: dict = {}
-        self._refs: list = []
-
-    def submit(self, fn, /, *args, **kwargs) -> Future:
-        task = self._tasks.get(fn)
-        if task is None:
-            task = self._tasks[fn] = self._ray.remote(num_cpus=1)(fn)
-        ref = task.remote(*args, **kwargs)
-        self._refs.append(ref)
-        return ref.future()
-
-    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        ray, refs, self._refs = self._ray, self._refs, []
-        if refs:
-            _, running = ray.wait(refs, num_returns=len(refs), timeout=0)
-            for ref in running:
-                ray.cancel(ref)
-        if self._joined:
-            ray.shutdown()
-            self._joined = False
-
-
 def _executor(config: ExperimentConfig, pending: list[int]):
     """The executor of ``config`` for ``pending`` trials: None (``run_trials``' own process
     pool) or a Ray executor, as a context manager that shuts it down."""
     if config.executor != "ray" or not pending:
         return contextlib.nullcontext()
-    return _RayExecutor(config.ray_address, config.workers)
+    return RayExecutor(config.ray_address, config.n_workers)
 
 
 def format_table(points: list[dict]) -> str:

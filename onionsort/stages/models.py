@@ -27,6 +27,10 @@ _FILES = {"state_classifier_sha256": CLASSIFIER_FILE, "detector_sha256": DETECTO
           "inspection_sha256": INSPECTION_FILE}
 
 
+#: Models loaded by :meth:`PerceptionModels.load_cached` in this process.
+_LOADED: dict[tuple, PerceptionModels] = {}
+
+
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
@@ -44,6 +48,16 @@ class PerceptionModels:
     device: str = "cpu"
 
     @classmethod
+    def load_cached(cls, folder: Path | str | None = None, device: str = "auto"
+                    ) -> PerceptionModels:
+        """:meth:`load`, once per process for each folder and device: a worker of a parallel
+        stage loads the models once for all the pieces it runs."""
+        key = (None if folder is None else Path(folder).resolve(), device)
+        if key not in _LOADED:
+            _LOADED[key] = cls.load(folder, device)
+        return _LOADED[key]
+
+    @classmethod
     def load(cls, folder: Path | str | None = None, device: str = "auto") -> PerceptionModels:
         """Load ``state_classifier.pt``, ``detector.pt`` and ``inspection_classifier.pt``
         from ``folder`` (default: shipped) onto ``device`` (``auto``, ``cpu`` or ``cuda``;
@@ -59,12 +73,13 @@ class PerceptionModels:
         import torch
 
         from onionsort.stages.base import resolve_device
+        from onionsort.stages.parallel import worker_threads
         from perception import Detector
         from perception.inspection import InspectionClassifier
         from state_abstraction.classifier import StateClassifier
 
         where = resolve_device(device)
-        torch.set_num_threads(2)
+        torch.set_num_threads(worker_threads() or 2)
         folder = DEFAULT_MODELS if folder is None else Path(folder)
         for name, command in ((CLASSIFIER_FILE, "onionsort train state-classifier"),
                               (DETECTOR_FILE, "onionsort train detector"),

@@ -13,6 +13,7 @@ Example::
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ import numpy as np
 
 from onionsort.stages.base import check_device, check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
 
@@ -28,7 +30,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class PerceiveConfig:
+class PerceiveConfig(ParallelOptions):
     """Which sessions to perceive, with which models.
 
     Attributes
@@ -44,6 +46,9 @@ class PerceiveConfig:
         Frames per detector batch.
     device : str
         Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    executor, workers, ray_address
+        Where the sessions are perceived (:class:`~onionsort.stages.parallel.ParallelOptions`):
+        each is a piece.
     """
 
     sessions: tuple[Path, ...]
@@ -53,6 +58,7 @@ class PerceiveConfig:
     device: str = "auto"
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_device(self.device)
         if not self.sessions:
             raise ValueError("sessions must name at least one session file; got none")
@@ -89,21 +95,37 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
     ``config.replace``, in a folder that takes the rewrite, with steps of the classifier's
     frame count), so a bad one is refused before any model runs or any file changes.
     """
-    from tqdm import tqdm
-
     log_config("perceive", config)
     frames_per_step = _check_sessions(config)
-    models = PerceptionModels.load(config.models, config.device) if models is None else models
+    here = models is not None or (min(config.n_workers, len(config.sessions)) == 1 and \
+        config.executor == "local")
+    if models is None:  # the parent checks the models too, before any worker starts
+        models = PerceptionModels.load_cached(config.models, config.device)
     for path, fps in frames_per_step.items():
         if fps != models.frames_per_step:
             raise ValueError(_frame_count_error(path, fps, models.frames_per_step))
-    out = []
-    for path in tqdm(config.sessions, desc="perceive", unit="session"):
-        out.append(perceive_session(models, path, replace=config.replace,
-                                    batch_size=config.batch_size))
-        logger.info("%s: %d steps, %d called occluded", path, out[-1].n_steps,
-                    out[-1].n_occluded)
+    if here:  # one after another, with the models given or loaded here
+        options, pieces = ParallelOptions(workers=1), [(models, p) for p in config.sessions]
+    else:
+        options = config.parallel_options()
+        pieces = [((config.models, config.device), p) for p in config.sessions]
+    out: list[PerceivedSession | None] = [None] * len(pieces)
+    for i, result in run_pieces(functools.partial(_perceive_piece, replace=config.replace,
+                                                  batch_size=config.batch_size),
+                                pieces, options, names=[str(p) for p in config.sessions],
+                                desc="perceive", unit="session"):
+        out[i] = result
+        logger.info("%s: %d steps, %d called occluded", result.path, result.n_steps,
+                    result.n_occluded)
     return out
+
+
+def _perceive_piece(piece: tuple, *, replace: bool, batch_size: int) -> PerceivedSession:
+    """Perceive one session: ``piece`` is ``(models or (folder, device), path)``."""
+    models, path = piece
+    if not isinstance(models, PerceptionModels):
+        models = PerceptionModels.load_cached(*models)
+    return perceive_session(models, path, replace=replace, batch_size=batch_size)
 
 
 def _check_sessions(config: PerceiveConfig) -> dict[Path, int]:

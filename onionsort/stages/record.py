@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.stages.base import check_difficulty, log_config, output_folder
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = ["RecordConfig", "record"]
 
@@ -32,7 +33,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class RecordConfig:
+class RecordConfig(ParallelOptions):
     """How many sessions to simulate, how, and where to write them.
 
     Attributes
@@ -59,6 +60,9 @@ class RecordConfig:
         (``rerun+http://HOST:9876/proxy``), in addition to the ``rerun`` file.
     resume : bool
         Keep the complete sessions already in ``out`` and record the others (see above).
+    executor, workers, ray_address
+        Where the sessions are recorded (:class:`~onionsort.stages.parallel.ParallelOptions`):
+        each is a piece, simulated from its own seed.
     """
 
     out: Path
@@ -76,6 +80,7 @@ class RecordConfig:
     resume: bool = False
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_difficulty(self.difficulty)
         if self.resume and self.overwrite:
             raise ValueError("resume keeps the complete sessions in --out and overwrite "
@@ -193,17 +198,14 @@ def _sessions_to_record(config: RecordConfig, paths: list[Path]) -> list[int]:
 
 
 def _record_sessions(config: RecordConfig, paths: list[Path], todo: list[int]) -> None:
-    """Record the sessions ``todo`` (indices into ``paths``); log every session to Rerun."""
+    """Record the sessions ``todo`` (indices into ``paths``), each a piece of the executor;
+    log every session to Rerun."""
     import signal
 
     import numpy as np
-    from tqdm import tqdm
 
     from recordings import open_session
-    from robot.simulation import expert_model
 
-    session_config = _session_config(config)
-    policy, initial = expert_model(session_config.blemish_rate)
     seeds = np.random.SeedSequence(config.seed).spawn(config.sessions)
     rerun_logger = None
     if config.rerun is not None or config.connect is not None:
@@ -217,15 +219,14 @@ def _record_sessions(config: RecordConfig, paths: list[Path], todo: list[int]) -
 
     # SIGINT explicitly too: a process started in the background inherits SIGINT ignored
     previous = {sig: signal.signal(sig, _terminate) for sig in (signal.SIGTERM, signal.SIGINT)}
-    total = len(todo) * session_config.n_steps * session_config.frames_per_step
+    pieces = [(paths[i], seeds[i], i, config) for i in todo]
     try:
-        with tqdm(total=total, unit="frame", desc="record") as bar:
-            for i, (path, seed) in enumerate(zip(paths, seeds, strict=True)):
-                if i in todo:
-                    _record_session(path, seed, i, config, session_config, (policy, initial),
-                                    bar)
-                if rerun_logger is not None:
-                    rerun_logger.log_session(open_session(path), i)
+        for _ in run_pieces(_record_piece, pieces, config, names=[paths[i].name for i in todo],
+                            desc="record", unit="session"):
+            pass
+        if rerun_logger is not None:
+            for i, path in enumerate(paths):
+                rerun_logger.log_session(open_session(path), i)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -233,8 +234,19 @@ def _record_sessions(config: RecordConfig, paths: list[Path], todo: list[int]) -
             rerun_logger.close()
 
 
+def _record_piece(piece: tuple) -> Path:
+    """Record one session: ``piece`` is ``(path, seed, index, config)``."""
+    from robot.simulation import expert_model
+
+    path, seed, index, config = piece
+    session_config = _session_config(config)
+    _record_session(path, seed, index, config, session_config,
+                    expert_model(session_config.blemish_rate))
+    return path
+
+
 def _record_session(path: Path, seed, index: int, config: RecordConfig, session_config,
-                    expert: tuple, bar) -> None:
+                    expert: tuple) -> None:
     """Simulate session ``index`` from its seed and write it to ``path``; ``expert`` is the
     sorter's ``(policy, initial)``."""
     import platform
@@ -260,6 +272,5 @@ def _record_session(path: Path, seed, index: int, config: RecordConfig, session_
                           overwrite=config.overwrite) as writer:
         for frame in session.frames():
             writer.write_frame(frame)
-            bar.update()
     logger.info("%s: %d frames, %d steps, %d occluded", path, writer.n_frames,
                 writer.n_steps, int(session.occluded.sum()))

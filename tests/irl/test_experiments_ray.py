@@ -1,7 +1,7 @@
 """Sweeps on other executors: Ray tasks give the process pool's rows, timings aside.
 
-The Ray tests join a local instance started with ``ray.init(num_cpus=2)`` and are skipped when
-Ray (the ``ray`` extra) is not installed.
+The Ray tests join a local instance started with ``ray.init(num_cpus=2)`` (the ``ray`` fixture
+of ``tests/conftest.py``), skipped where Ray (the ``ray`` extra) is not installed, except in CI.
 """
 
 from __future__ import annotations
@@ -10,8 +10,6 @@ import csv
 import json
 import sys
 from concurrent.futures import ThreadPoolExecutor
-
-import pytest
 
 from irl.experiments import SweepConfig, run_sweep, run_trials
 from onionsort.cli import main
@@ -26,14 +24,6 @@ def untimed_rows(path):
 
 def untimed(result):
     return {k: v for k, v in vars(result).items() if k != "seconds"}
-
-
-@pytest.fixture(scope="module")
-def ray():
-    ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False)
-    yield ray
-    ray.shutdown()
 
 
 def test_any_executor_gives_the_serial_results_by_trial():

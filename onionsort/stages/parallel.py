@@ -1,0 +1,296 @@
+"""One executor for every stage whose pieces are independent: local worker processes or Ray.
+
+A stage cuts its work into pieces (sessions to record or perceive, line-ups to evaluate,
+methods to learn, repeats of a demo, trials of a sweep), each a picklable value and a
+module-level function of it, and hands them to :func:`run_pieces` with the stage config's
+:class:`ParallelOptions`:
+
+- ``executor="local"``: ``workers`` processes on this machine (a ``forkserver`` pool: each
+  worker starts clean, whatever this process has loaded); ``workers=1`` runs the pieces here,
+  one after another, with no pool at all.
+- ``executor="ray"``: Ray tasks of one CPU each, on the Ray instance this process has joined,
+  else on ``ray_address`` (or ``RAY_ADDRESS``): an existing cluster; else on a new local
+  instance of ``workers`` CPUs.
+
+What a piece computes depends only on the piece (its seed comes from what it is: a session's
+index, a repeat, a method), never on which worker ran it or when, so every executor and every
+worker count give the same results. Each worker runs torch, OpenMP and BLAS on one thread
+(:func:`worker_threads`), so that N workers do not oversubscribe N cores, and keeps what it
+loads (the perception models, :func:`onionsort.stages.models.PerceptionModels.load_cached`)
+for all the pieces it runs.
+
+One progress bar counts the pieces. Ctrl-C, or SIGTERM where the stage turns it into one,
+stops the workers' pieces too (a worker takes SIGTERM as Ctrl-C). A piece that fails stops the
+run with one line naming it (a ``ValueError`` where the piece said its input was bad, else a
+``RuntimeError``); a worker that dies (killed, out of memory) does the same, naming the pieces
+it may have been running.
+Nothing is dropped silently: ``--resume``, where a stage has it, finishes the run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import TypeVar
+
+__all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "run_pieces",
+           "worker_threads"]
+
+logger = logging.getLogger(__name__)
+
+#: Where the pieces of a stage can run.
+EXECUTORS = ("local", "ray")
+#: How to install Ray (an optional extra).
+RAY_EXTRA = 'pip install -e ".[ray]"'
+#: Threads of torch, OpenMP and BLAS in this process: 1 in a worker, else the library default.
+_WORKER_THREADS: int | None = None
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+P = TypeVar("P")
+R = TypeVar("R")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParallelOptions:
+    """Where a stage's independent pieces run; every parallel stage's config has these fields.
+
+    Attributes
+    ----------
+    executor : str
+        ``local`` (worker processes on this machine) or ``ray`` (a Ray cluster, or a local
+        Ray instance).
+    workers : int or None
+        Local worker processes, or the CPUs of a new local Ray instance (None: this machine's
+        cores). 1 runs the pieces in this process, one after another.
+    ray_address : str or None
+        The Ray cluster to join with ``executor="ray"`` (None: ``RAY_ADDRESS``, else a new local
+        instance).
+    """
+
+    executor: str = "local"
+    workers: int | None = None
+    ray_address: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.executor not in EXECUTORS:
+            raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; got "
+                             f"{self.executor!r}")
+        if self.workers is not None and (isinstance(self.workers, bool)
+                                         or not isinstance(self.workers, int)
+                                         or self.workers < 1):
+            raise ValueError(f"workers must be >= 1; got {self.workers!r}")
+        if self.ray_address is not None and self.executor != "ray":
+            raise ValueError(f"ray_address is for executor 'ray'; got executor "
+                             f"{self.executor!r} with ray_address {self.ray_address!r}")
+
+    @property
+    def n_workers(self) -> int:
+        """``workers``, or this machine's cores."""
+        return self.workers if self.workers is not None else max(os.cpu_count() or 1, 1)
+
+    def parallel_options(self) -> ParallelOptions:
+        """These fields alone (to hand on to another stage)."""
+        return ParallelOptions(executor=self.executor, workers=self.workers,
+                               ray_address=self.ray_address)
+
+
+def worker_threads() -> int | None:
+    """Threads a library may use in this process: 1 in a worker of :func:`run_pieces`, else
+    None (its own default)."""
+    return _WORKER_THREADS
+
+
+#: In a local worker: the pool's table of which process runs which piece (pid while it runs,
+#: 0 before and after), shared with the parent, which reads it when a worker dies.
+_RUNNING = None
+
+
+def _start_worker(running=None) -> None:
+    """A worker's initializer: one thread for torch, OpenMP and BLAS (set before any of them
+    loads, a local worker being a fresh process), and the pool's table of running pieces."""
+    global _WORKER_THREADS, _RUNNING
+    _WORKER_THREADS = 1
+    _RUNNING = running
+    for name in _THREAD_VARIABLES:
+        os.environ[name] = "1"
+    if running is not None:  # a local worker stops its piece on SIGTERM as on Ctrl-C
+        signal.signal(signal.SIGTERM, _interrupt)
+
+
+def _interrupt(signum, _frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _tracked(fn: Callable[[P], R], index: int, piece: P) -> R:
+    """Run ``fn(piece)`` in a local worker, marked as running in the pool's table."""
+    _RUNNING[index] = os.getpid()
+    try:
+        return fn(piece)
+    finally:
+        _RUNNING[index] = 0
+
+
+def _in_worker(fn: Callable[[P], R], piece: P) -> R:
+    """Run ``fn(piece)`` in a Ray worker, capped to one thread like a local one."""
+    _start_worker()
+    with contextlib.suppress(ImportError):
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    return fn(piece)
+
+
+class RayExecutor(Executor):
+    """Ray tasks behind :class:`concurrent.futures.Executor`'s ``submit``: one CPU per task.
+
+    Joins the Ray instance this process is already connected to if there is one (and leaves
+    it running), else ``address`` (None: ``RAY_ADDRESS``, else a new local instance of
+    ``num_cpus`` CPUs), which :meth:`shutdown` disconnects from.
+    """
+
+    def __init__(self, address: str | None, num_cpus: int) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise ValueError(f"--executor ray needs Ray, an optional extra: {RAY_EXTRA}") from None
+        self._ray = ray
+        self._joined = not ray.is_initialized()
+        if self._joined:
+            local = address is None and not os.environ.get("RAY_ADDRESS")
+            options = {"num_cpus": max(num_cpus, 1), "include_dashboard": False} if local else {}
+            ray.init(address=address, logging_level=logging.WARNING, **options)
+        self._tasks: dict = {}
+        self._refs: list = []
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        task = self._tasks.get(fn)
+        if task is None:
+            task = self._tasks[fn] = self._ray.remote(num_cpus=1)(fn)
+        ref = task.remote(*args, **kwargs)
+        self._refs.append(ref)
+        return ref.future()
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        ray, refs, self._refs = self._ray, self._refs, []
+        if refs:
+            _, running = ray.wait(refs, num_returns=len(refs), timeout=0)
+            for ref in running:
+                ray.cancel(ref)
+        if self._joined:
+            ray.shutdown()
+            self._joined = False
+
+
+def _failure(name: str, exc: BaseException) -> Exception:
+    """The one-line error of a failed piece: a ValueError where the piece refused its input
+    (the CLI's exit 2), else a RuntimeError."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, ValueError | OSError | TypeError | KeyError):
+        return ValueError(f"{name}: {text}")
+    kind = type(exc).__name__
+    return RuntimeError(f"{name} failed ({kind}: {text})" if kind not in text
+                        else f"{name} failed ({text})")
+
+
+def _executor(options: ParallelOptions, n_pieces: int):
+    """``(executor, table of running pieces)``: None for this process, a local pool (with its
+    table), or Ray."""
+    workers = min(options.n_workers, n_pieces)
+    if options.executor == "ray":
+        return RayExecutor(options.ray_address, options.n_workers), None
+    if workers <= 1:
+        return None, None
+    context = multiprocessing.get_context("forkserver")
+    running = context.Array("q", n_pieces, lock=False)
+    return ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                               initializer=_start_worker, initargs=(running,)), running
+
+
+def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptions, *,
+               names: Sequence[str], desc: str, unit: str = "piece",
+               progress: bool = True) -> Iterator[tuple[int, R]]:
+    """Run ``fn(piece)`` for every piece; yield ``(index, result)`` as each finishes.
+
+    Parameters
+    ----------
+    fn : callable
+        A module-level function (workers import it by name).
+    pieces : sequence
+        Picklable values, one per piece.
+    options : ParallelOptions
+        Where to run them.
+    names : sequence of str
+        What each piece is (``session_003.mcap``, ``repeat 2, mmap-birl``), for messages.
+    desc, unit : str
+        The progress bar's label and unit.
+    progress : bool
+        Show the progress bar.
+
+    Raises
+    ------
+    ValueError or RuntimeError
+        The first piece that fails, or the pieces a dead worker may have held, by name; the
+        pieces not started yet are cancelled.
+    """
+    from tqdm import tqdm
+
+    pieces = list(pieces)
+    if len(names) != len(pieces):
+        raise ValueError(f"names must name each of the {len(pieces)} pieces; got "
+                         f"{len(names)}")
+    with tqdm(total=len(pieces), desc=desc, unit=unit, disable=not progress) as bar:
+        executor, running = _executor(options, len(pieces)) if pieces else (None, None)
+        if executor is None:
+            for i, piece in enumerate(pieces):
+                try:
+                    result = fn(piece)
+                except Exception as exc:
+                    raise _failure(names[i], exc) from exc
+                bar.update()
+                yield i, result
+            return
+        futures: dict[Future, int] = {}
+        try:
+            for i, piece in enumerate(pieces):
+                future = (executor.submit(_tracked, fn, i, piece) if running is not None
+                          else executor.submit(_in_worker, fn, piece))
+                futures[future] = i
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    held = [names[j] for j in range(len(pieces)) if running[j]] or [names[i]]
+                    raise RuntimeError(
+                        f"a worker process died (killed, or out of memory) running "
+                        f"{' or '.join(held)}; run again (with --resume where the command has "
+                        "it) to finish") from None
+                except Exception as exc:
+                    raise _failure(names[i], _ray_cause(exc)) from exc
+                bar.update()
+                yield i, result
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM here: the workers stop their pieces too
+            for process in getattr(executor, "_processes", {}).values():
+                with contextlib.suppress(OSError):
+                    process.terminate()
+            raise
+        finally:
+            for future in futures:
+                future.cancel()
+            executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _ray_cause(exc: BaseException) -> BaseException:
+    """The piece's own exception inside Ray's wrapper (``RayTaskError``), where there is one."""
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, BaseException):
+        return cause
+    worker_died = type(exc).__name__ in ("WorkerCrashedError", "NodeDiedError")
+    return RuntimeError("its Ray worker died (killed, or out of memory)") if worker_died else exc

@@ -1,0 +1,175 @@
+"""The stages' executor: the same results on 1 worker, 2 workers and Ray; a failing piece or a
+killed worker is one line naming the piece."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from onionsort.cli import main
+from onionsort.stages.parallel import ParallelOptions, run_pieces, worker_threads
+from recordings import open_session
+
+
+def square(x: int) -> tuple[int, int, int | None]:
+    return x * x, os.getpid(), worker_threads()
+
+
+def refuse_three(x: int) -> int:
+    if x == 3:
+        raise ValueError("three is not allowed")
+    if x == 4:
+        raise ZeroDivisionError("division by zero")
+    return x
+
+
+def killed_on_two(x: int) -> int:
+    if x == 2:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return x
+
+
+def run(fn, pieces, **options):
+    return dict(run_pieces(fn, pieces, ParallelOptions(**options),
+                           names=[f"piece {p}" for p in pieces], desc="test", progress=False))
+
+
+def test_pieces_give_the_same_results_here_and_on_two_workers():
+    here = run(square, range(6), workers=1)
+    pool = run(square, range(6), workers=2)
+    assert {i: r[0] for i, r in here.items()} == {i: r[0] for i, r in pool.items()}
+    assert {r[1] for r in here.values()} == {os.getpid()}  # no pool at all
+    assert os.getpid() not in {r[1] for r in pool.values()}
+    assert {r[2] for r in pool.values()} == {1}  # each worker runs one thread
+    assert os.environ.get("OMP_NUM_THREADS") != "1" or worker_threads() is None
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_piece_is_named(workers):
+    with pytest.raises(ValueError, match=r"^piece 3: three is not allowed$"):
+        run(refuse_three, [0, 1, 2, 3], workers=workers)
+    with pytest.raises(RuntimeError, match=r"^piece 4 failed \(ZeroDivisionError: division"):
+        run(refuse_three, [4], workers=workers)
+
+
+def test_a_killed_worker_names_its_piece():
+    with pytest.raises(RuntimeError, match=r"worker process died .* running piece 2"):
+        run(killed_on_two, [0, 1, 2, 3, 4, 5], workers=2)
+
+
+@pytest.mark.parametrize("bad", [0, -2, 1.5, True])
+def test_bad_workers_are_refused(bad):
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        ParallelOptions(workers=bad)
+    with pytest.raises(ValueError, match="executor must be one of local, ray"):
+        ParallelOptions(executor="threads")
+
+
+RECORD = ["record", "--sessions", "3", "--steps-per-session", "3", "--frames-per-step", "3",
+          "--seed", "5"]
+
+
+def frames_of(path: Path) -> list[tuple]:
+    return [(f.index, f.step, f.phase, f.time_ns, f.color_jpeg, f.depth_raw, f.inspection_png,
+             json.dumps(f.state, sort_keys=True)) for f in open_session(path).frames()]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> dict[int, Path]:
+    """The same recording on one worker and on two."""
+    out = {}
+    for workers in (1, 2):
+        folder = tmp_path_factory.mktemp(f"rec{workers}")
+        assert main([*RECORD, "--workers", str(workers), "--out", str(folder)]) == 0
+        out[workers] = folder
+    return out
+
+
+def test_record_on_two_workers_writes_what_one_writes(recorded):
+    for name in ("session_000.mcap", "session_001.mcap", "session_002.mcap"):
+        assert frames_of(recorded[2] / name) == frames_of(recorded[1] / name)
+
+
+def _perceived_copies(recorded, tmp_path, *runs: list[str]) -> list[list[Path]]:
+    out = []
+    for k, extra in enumerate(runs):
+        folder = tmp_path / f"p{k}"
+        folder.mkdir()
+        paths = []
+        for src in sorted(recorded[1].glob("*.mcap")):
+            paths.append(folder / src.name)
+            paths[-1].write_bytes(src.read_bytes())
+        assert main(["perceive", *map(str, paths), *extra]) == 0
+        out.append(paths)
+    return out
+
+
+def same_perception(a: Path, b: Path) -> None:
+    """The same perceived demonstration, and the same detections to float rounding: torch
+    sums in another order on another number of threads (one in a worker, two here)."""
+    da, db = open_session(a).perceived_demonstration(), open_session(b).perceived_demonstration()
+    assert list(da.observations) == list(db.observations)
+    assert list(da.occluded) == list(db.occluded)
+    for topic in ("/perception/detections", "/perception/state"):
+        xa, xb = perception_numbers(a, topic), perception_numbers(b, topic)
+        assert len(xa) == len(xb) > 0
+        np.testing.assert_allclose(xa, xb, atol=1e-4)
+
+
+def perception_numbers(path: Path, topic: str) -> np.ndarray:
+    """Every number of a perception topic's JSON messages, in order."""
+    from mcap.reader import make_reader
+
+    def numbers(x):
+        if isinstance(x, dict):
+            return [n for k in sorted(x) for n in numbers(x[k])]
+        if isinstance(x, list):
+            return [n for v in x for n in numbers(v)]
+        return [float(x)] if isinstance(x, int | float) else []
+
+    with open(path, "rb") as f:
+        return np.asarray([n for _, _, m in make_reader(f).iter_messages(topics=[topic])
+                           for n in numbers(json.loads(m.data))])
+
+
+def test_perceive_on_two_workers_perceives_what_one_does(recorded, tmp_path):
+    one, two = _perceived_copies(recorded, tmp_path, ["--workers", "1"], ["--workers", "2"])
+    for a, b in zip(one, two, strict=True):
+        same_perception(a, b)
+
+
+def test_perceive_on_ray_writes_the_files_local_workers_write(recorded, tmp_path, ray):
+    local, on_ray = _perceived_copies(recorded, tmp_path, ["--workers", "2"],
+                                      ["--executor", "ray"])
+    for a, b in zip(local, on_ray, strict=True):
+        assert a.read_bytes() == b.read_bytes()  # one thread each: byte-identical
+
+
+def untimed(results: dict) -> dict:
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if k not in ("seconds", "learn_seconds")}
+        if isinstance(x, list):
+            return [strip(v) for v in x]
+        return x
+    return strip(results)
+
+
+DEMO = ["demo", "--quick", "--repeats", "2", "--sessions", "2", "--seed", "3"]
+
+
+@pytest.mark.slow
+def test_demo_on_two_workers_and_on_ray_gives_the_same_results(tmp_path, ray):
+    results = {}
+    for name, extra in (("one", ["--workers", "1"]), ("two", ["--workers", "2"]),
+                        ("ray", ["--executor", "ray"])):
+        assert main([*DEMO, *extra, "--out", str(tmp_path / name)]) == 0
+        results[name] = untimed(json.loads((tmp_path / name / "results.json").read_text()))
+    assert results["two"] == results["one"]
+    assert results["ray"] == results["one"]
+    assert np.isfinite(results["one"]["methods"]["mmap-birl"]["precision"])
