@@ -113,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
         if is_bad_input(exc):  # bad input or an unusable path: one line, exit 2
             print(f"{prog}: error: {describe_error(exc)}", file=sys.stderr)
             return 2
+        if type(exc).__name__ == "WorkerLost":  # a killed worker: neither input nor a bug
+            print(f"{prog}: error: {describe_error(exc)}", file=sys.stderr)
+            return 1
         print(f"{prog}: internal error: {describe_error(exc)} (run again with --debug for "
               "the traceback, and please report it)", file=sys.stderr)
         return 1

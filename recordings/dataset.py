@@ -50,8 +50,9 @@ from recordings.frames import TruthFrame
 from recordings.schema import check_task, task_of
 from recordings.steps import group_steps
 
-__all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetStep", "DatasetWriter", "LabelledFrame",
-           "dataset_task", "read_metadata", "read_split", "read_steps", "split_names"]
+__all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
+           "LabelledFrame", "dataset_task", "read_metadata", "read_split", "read_steps",
+           "split_names"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -139,22 +140,13 @@ class DatasetWriter:
             difficulty: str | None = None) -> None:
         """Add a frame of ``session`` (and its inspection view) to ``split``; ``difficulty``
         names the session's perception difficulty in its records."""
-        if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
-        records = self._records[split, "camera"]
-        name = f"{len(records):06d}"
-        folder = self.root / split
-        _write_rgb(folder / "color" / f"{name}.png", frame.color)
-        depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
-        _write_png(folder / "depth" / f"{name}.png", depth_mm)
-        records.append(frame_record(frame, session, name, task=self.task,
-                                    difficulty=difficulty))
-        if frame.inspection is not None:
-            close = self._records[split, "inspection"]
-            name = f"{len(close):06d}"
-            _write_rgb(folder / "inspection" / f"{name}.png", frame.inspection)
-            close.append(frame_record(frame, session, name, view="inspection",
-                                      task=self.task, difficulty=difficulty))
+        _check_split(split)
+        records, close = self._records[split, "camera"], self._records[split, "inspection"]
+        camera, view = _write_frame(self.root / split, frame, session, f"{len(records):06d}",
+                                    f"{len(close):06d}", self.task, difficulty)
+        records.append(camera)
+        if view is not None:
+            close.append(view)
 
     def add_robot_view(self, split: str, rgb: np.ndarray, labels, lineup: int, index: int,
                        view: int = 0, difficulty: str | None = None) -> None:
@@ -166,23 +158,19 @@ class DatasetWriter:
         robot's views of it) and ``difficulty``, and no state (the robot's views are for the
         detector and the inspection classifier only).
         """
-        if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
+        _check_split(split)
         records = self._records[split, "inspection"]
-        name = f"{len(records):06d}"
-        _write_rgb(self.root / split / "inspection" / f"{name}.png", rgb)
-        kept = [tuple(label) for label in labels if label[2] >= MIN_VISIBLE_PIXELS]
-        record = {"color": f"inspection/{name}.png", "source": "robot",
-                  "boxes": [[int(v) for v in k[0]] for k in kept],
-                  "classes": [int(k[1]) for k in kept],
-                  "visible_pixels": [int(k[2]) for k in kept],
-                  "lineup": int(lineup), "index": int(index), "view": int(view)}
-        if any(len(k) > 3 and k[3] is not None for k in kept):
-            record["rot_pixels"] = [None if len(k) < 4 or k[3] is None else int(k[3])
-                                    for k in kept]
-        if difficulty is not None:
-            record["difficulty"] = difficulty
-        records.append(record)
+        records.append(_write_robot_view(self.root / split, f"{len(records):06d}", rgb, labels,
+                                         lineup, index, view, difficulty))
+
+    def add_part(self, split: str, part: DatasetPart) -> None:
+        """Add the records of a :class:`DatasetPart` of ``split`` (its images are written
+        already), after those added so far."""
+        _check_split(split)
+        if part.split != split:
+            raise ValueError(f"the part holds frames of {part.split!r}, not {split!r}")
+        for view in VIEWS:
+            self._records[split, view].extend(part.records[view])
 
     def flush(self, split: str | None = None) -> None:
         for s in SPLITS if split is None else (split,):
@@ -195,6 +183,76 @@ class DatasetWriter:
         inspection = {s: len(self._records[s, "inspection"]) for s in SPLITS}
         _write_json(self.root / "dataset.json",
                     {**self.metadata, "splits": counts, "inspection_splits": inspection})
+
+
+class DatasetPart:
+    """The frames of one piece of a dataset (a session, a robot line-up) in one split, written
+    under names of their own (``PREFIX_NNNN``), so that pieces rendered at the same time, in
+    other processes, never collide; :meth:`DatasetWriter.add_part` then adds their records,
+    in the pieces' order, whichever finished first."""
+
+    def __init__(self, root: Path | str, split: str, prefix: str, *,
+                 task: TaskDescription = SORTING_TASK) -> None:
+        _check_split(split)
+        self.folder, self.split, self.prefix = Path(root) / split, split, prefix
+        self.task = _check_task(task)
+        self.records: dict[str, list[dict]] = {view: [] for view in VIEWS}
+
+    def _name(self, view: str) -> str:
+        return f"{self.prefix}_{len(self.records[view]):04d}"
+
+    def add(self, frame: TruthFrame, session: int, difficulty: str | None = None) -> None:
+        """As :meth:`DatasetWriter.add`."""
+        camera, view = _write_frame(self.folder, frame, session, self._name("camera"),
+                                    self._name("inspection"), self.task, difficulty)
+        self.records["camera"].append(camera)
+        if view is not None:
+            self.records["inspection"].append(view)
+
+    def add_robot_view(self, rgb: np.ndarray, labels, lineup: int, index: int, view: int = 0,
+                       difficulty: str | None = None) -> None:
+        """As :meth:`DatasetWriter.add_robot_view`."""
+        self.records["inspection"].append(_write_robot_view(
+            self.folder, self._name("inspection"), rgb, labels, lineup, index, view,
+            difficulty))
+
+
+def _check_split(split: str) -> None:
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}; got {split!r}")
+
+
+def _write_frame(folder: Path, frame: TruthFrame, session: int, name: str, view_name: str,
+                 task: TaskDescription, difficulty: str | None) -> tuple[dict, dict | None]:
+    """Write a frame's images into a split's ``folder`` as ``name`` (its inspection view as
+    ``view_name``); its records (the view's None without one)."""
+    _write_rgb(folder / "color" / f"{name}.png", frame.color)
+    depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
+    _write_png(folder / "depth" / f"{name}.png", depth_mm)
+    camera = frame_record(frame, session, name, task=task, difficulty=difficulty)
+    if frame.inspection is None:
+        return camera, None
+    _write_rgb(folder / "inspection" / f"{view_name}.png", frame.inspection)
+    return camera, frame_record(frame, session, view_name, view="inspection", task=task,
+                                difficulty=difficulty)
+
+
+def _write_robot_view(folder: Path, name: str, rgb: np.ndarray, labels, lineup: int,
+                      index: int, view: int, difficulty: str | None) -> dict:
+    """Write a robot's inspection view into a split's ``folder`` as ``name``; its record."""
+    _write_rgb(folder / "inspection" / f"{name}.png", rgb)
+    kept = [tuple(label) for label in labels if label[2] >= MIN_VISIBLE_PIXELS]
+    record = {"color": f"inspection/{name}.png", "source": "robot",
+              "boxes": [[int(v) for v in k[0]] for k in kept],
+              "classes": [int(k[1]) for k in kept],
+              "visible_pixels": [int(k[2]) for k in kept],
+              "lineup": int(lineup), "index": int(index), "view": int(view)}
+    if any(len(k) > 3 and k[3] is not None for k in kept):
+        record["rot_pixels"] = [None if len(k) < 4 or k[3] is None else int(k[3])
+                                for k in kept]
+    if difficulty is not None:
+        record["difficulty"] = difficulty
+    return record
 
 
 def _write_rgb(path: Path, rgb: np.ndarray) -> None:

@@ -26,7 +26,7 @@ RULES: dict[str, set[str]] = {
                    "cv2", "numpy", "irl"},
     "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},
     "onionsort": {"irl", "perception", "state_abstraction", "recordings", "robot", "numpy",
-                  "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray"},
+                  "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray", "threadpoolctl"},
 }
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from onionsort.cli import main
-from onionsort.stages.parallel import ParallelOptions, run_pieces, worker_threads
+from onionsort.stages.parallel import ParallelOptions, WorkerLost, run_pieces, worker_threads
 from recordings import open_session
 
 
@@ -58,7 +58,7 @@ def test_a_failing_piece_is_named(workers):
 
 
 def test_a_killed_worker_names_its_piece():
-    with pytest.raises(RuntimeError, match=r"worker process died .* running piece 2"):
+    with pytest.raises(WorkerLost, match=r"worker process died .* running piece 2"):
         run(killed_on_two, [0, 1, 2, 3, 4, 5], workers=2)
 
 
@@ -173,3 +173,80 @@ def test_demo_on_two_workers_and_on_ray_gives_the_same_results(tmp_path, ray):
     assert results["two"] == results["one"]
     assert results["ray"] == results["one"]
     assert np.isfinite(results["one"]["methods"]["mmap-birl"]["precision"])
+
+
+def _descendants(pid: int) -> list[int]:
+    """The processes under ``pid`` (Linux: read from /proc)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = [], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def _writer_of(pid: int, name: str, timeout: float = 120.0) -> int:
+    """The process under ``pid`` that has the file ``name`` open, once it has some frames."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for child in _descendants(pid):
+            try:
+                links = [os.readlink(fd) for fd in Path(f"/proc/{child}/fd").iterdir()]
+            except OSError:
+                continue
+            held = [link for link in links if Path(link).name == name]
+            if held and Path(held[0]).stat().st_size > 100_000:
+                return child
+        time.sleep(0.05)
+    pytest.fail(f"no worker wrote {name} within {timeout} s")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="finds the worker in /proc")
+def test_a_killed_worker_fails_the_recording_and_resume_finishes_it(tmp_path):
+    import subprocess
+    import sys
+
+    argv = ["record", "--sessions", "3", "--steps-per-session", "30", "--seed", "9"]
+    out = tmp_path / "rec"
+    proc = subprocess.Popen([sys.executable, "-m", "onionsort.cli", *argv, "--workers", "2",
+                             "--out", str(out)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    os.kill(_writer_of(proc.pid, "session_001.mcap"), signal.SIGKILL)
+    assert proc.wait(timeout=120) == 1
+    err = proc.stderr.read().decode().strip().splitlines()[-1]
+    assert err.startswith("onionsort record: error: a worker process died")
+    assert "session_001.mcap" in err and "--resume" in err
+
+    assert main([*argv, "--workers", "2", "--out", str(out), "--resume"]) == 0
+    assert main([*argv, "--workers", "1", "--out", str(tmp_path / "whole")]) == 0
+    for name in ("session_000.mcap", "session_001.mcap", "session_002.mcap"):
+        assert open_session(out / name).status == "complete"
+        assert frames_of(out / name) == frames_of(tmp_path / "whole" / name)
+
+
+def dataset_files(root: Path) -> dict[str, bytes]:
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file() and p.name != "dataset.json"}
+
+
+def test_dataset_on_two_workers_writes_the_same_files(tmp_path):
+    argv = ["dataset", "--frames", "40", "--steps-per-session", "4", "--frames-per-step", "2",
+            "--robot-onions", "12", "--robot-views", "2", "--difficulty", "clean,hard",
+            "--seed", "2"]
+    for workers in (1, 2):
+        assert main([*argv, "--workers", str(workers), "--out", str(tmp_path / f"d{workers}")]) == 0
+    one, two = dataset_files(tmp_path / "d1"), dataset_files(tmp_path / "d2")
+    assert one == two and len(one) > 40
+    meta = [json.loads((tmp_path / d / "dataset.json").read_text()) for d in ("d1", "d2")]
+    assert {k: v for k, v in meta[0].items() if k != "created_utc"} == {
+        k: v for k, v in meta[1].items() if k != "created_utc"}

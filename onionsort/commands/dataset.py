@@ -14,7 +14,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_session_arguments, subcommand
+from onionsort.commands._args import (
+    add_parallel_arguments,
+    add_session_arguments,
+    parallel_options,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -36,6 +41,7 @@ def register(subparsers) -> None:
                         help="perception difficulty of the world: one of "
                              f"{', '.join(DIFFICULTY_LEVELS)} (clean), or several joined by "
                              "commas for a mix whose sessions take the levels in turn")
+    add_parallel_arguments(parser, pieces="sessions and line-ups")
     parser.set_defaults(func=run)
 
 
@@ -59,7 +65,7 @@ def run(args) -> int:
         out=args.out, frames=args.frames, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
         val=args.val, test=args.test, robot_onions=args.robot_onions, difficulty=args.difficulty,
-        robot_views=args.robot_views))
+        robot_views=args.robot_views, **parallel_options(args)))
     sessions = ", ".join(f"{s}: {n} sessions" for s, n in summary.sessions.items())
     print(f"wrote {summary.frames} frames ({sessions}) to {args.out}")
     if summary.robot_views:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.stages.base import check_difficulty, check_output_folder, log_config
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
 
@@ -27,7 +28,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class DatasetConfig:
+class DatasetConfig(ParallelOptions):
     """What to render.
 
     Attributes
@@ -54,6 +55,10 @@ class DatasetConfig:
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
         today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
         whose sessions and robot line-ups take the levels in turn.
+    executor, workers, ray_address
+        Where the sessions and the line-ups are rendered
+        (:class:`~onionsort.stages.parallel.ParallelOptions`): each is a piece, rendered from
+        its own seed into images named after it (``s0003_0012.png``, ``l0001_0004.png``).
     """
 
     out: Path
@@ -70,6 +75,7 @@ class DatasetConfig:
     rot_labels: bool = True
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         object.__setattr__(self, "out", Path(self.out))
         for level in self.levels:
             check_difficulty(level)
@@ -113,7 +119,6 @@ def split_plan(n_sessions: int, val: float, test: float) -> list[str]:
 def make_dataset(config: DatasetConfig) -> DatasetSummary:
     """Render ``config.frames`` labelled frames into ``config.out``."""
     import numpy as np
-    from tqdm import tqdm
 
     from onionsort import __version__
     from recordings.dataset import DatasetWriter
@@ -122,7 +127,7 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     if (config.out / "dataset.json").exists():
         raise FileExistsError(f"{config.out} already holds a dataset; choose a new --out")
     check_output_folder(config.out)
-    from robot.simulation import SessionConfig, SortingSession, expert_model
+    from robot.simulation import SessionConfig
 
     levels = config.levels
     session_configs = [SessionConfig(n_steps=config.steps_per_session,
@@ -142,25 +147,24 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
         metadata["config"]["difficulty"] = [c.difficulty.to_dict() for c in session_configs]
         metadata["session_difficulty"] = [levels[k % len(levels)] for k in range(n_sessions)]
     writer = DatasetWriter(config.out, metadata)
-    policy, initial = expert_model(session_configs[0].blemish_rate)
     seeds = np.random.SeedSequence([config.seed, 0x0D47A5E7]).spawn(n_sessions)
-    written = 0
+    blemish_rate = session_configs[0].blemish_rate  # the sorter's policy: one for all levels
+    sessions = [(config.out, plan[k], k, seeds[k], session_configs[k % len(levels)],
+                 blemish_rate, min(per_session, config.frames - k * per_session))
+                for k in range(n_sessions)]
+    views = 0
     try:
-        with tqdm(total=config.frames, unit="frame", desc="dataset") as bar:
-            for k, (split, seed) in enumerate(zip(plan, seeds, strict=True)):
-                session_config = session_configs[k % len(levels)]
-                with SortingSession(session_config, policy, initial, seed) as session:
-                    for frame in session.frames():
-                        if written == config.frames:
-                            break
-                        writer.add(split, frame, session=k,
-                                   difficulty=session_config.difficulty.name)
-                        written += 1
-                        bar.update()
-                writer.flush(split)
-        views = _robot_views(writer, config) if config.robot_onions else 0
+        parts = dict(run_pieces(_render_session, sessions, config,
+                                names=[f"session {k}" for k in range(n_sessions)],
+                                desc="dataset", unit="session"))
+        written = 0
+        for k in range(n_sessions):  # in the sessions' order, whichever finished first
+            written += len(parts[k].records["camera"])
+            writer.add_part(plan[k], parts.pop(k))
+        if config.robot_onions:
+            views = _robot_views(writer, config)
     except BaseException:
-        # the labels written so far stay, but no dataset.json: an interrupted dataset never
+        # the labels added so far stay, but no dataset.json: an interrupted dataset never
         # reads as a finished one (a SIGKILL leaves the same)
         writer.flush()
         raise
@@ -168,26 +172,54 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     return DatasetSummary(written, {s: plan.count(s) for s in dict.fromkeys(plan)}, views)
 
 
-def _robot_views(writer, config: DatasetConfig) -> int:
-    """Add the Sawyer's inspection views, line-ups of 10 onions split like the sessions."""
-    import numpy as np
-    from tqdm import tqdm
+def _render_session(piece: tuple):
+    """Render one session into its split: ``piece`` is ``(root, split, index, seed,
+    session_config, blemish_rate, frames)``; its :class:`recordings.dataset.DatasetPart`."""
+    from recordings.dataset import DatasetPart
+    from robot.simulation import SortingSession, expert_model
 
-    from robot.station import robot_inspection_views
+    root, split, k, seed, session_config, blemish_rate, n_frames = piece
+    part = DatasetPart(root, split, f"s{k:04d}")
+    with SortingSession(session_config, *expert_model(blemish_rate), seed) as session:
+        for frame in session.frames():
+            if len(part.records["camera"]) == n_frames:
+                break
+            part.add(frame, session=k, difficulty=session_config.difficulty.name)
+    return part
+
+
+def _robot_views(writer, config: DatasetConfig) -> int:
+    """Add the Sawyer's inspection views, line-ups of 10 onions split like the sessions, each
+    a piece."""
+    import numpy as np
 
     sizes = [10] * (config.robot_onions // 10) + ([config.robot_onions % 10]
                                                  if config.robot_onions % 10 else [])
     plan = (split_plan(len(sizes), config.val, config.test) if len(sizes) >= 3
             else ["train"] * len(sizes))
     seeds = np.random.SeedSequence([config.seed, 0x5A3E7]).spawn(len(sizes))
+    lineups = [(config.out, plan[k], k, sizes[k], seeds[k],
+                config.levels[k % len(config.levels)], config.robot_views)
+               for k in range(len(sizes))]
+    parts = dict(run_pieces(_render_lineup, lineups, config,
+                            names=[f"line-up {k}" for k in range(len(sizes))],
+                            desc="robot views", unit="line-up"))
     n = 0
-    for k, (size, split, seed) in enumerate(tqdm(list(zip(sizes, plan, seeds, strict=True)),
-                                                 desc="robot views", unit="line-up")):
-        level = config.levels[k % len(config.levels)]
-        for index, view, rgb, labels in robot_inspection_views(
-                size, seed, level, inspection_views=config.robot_views):
-            writer.add_robot_view(split, rgb, labels, lineup=k, index=index, view=view,
-                                  difficulty=level)
-            n += 1
-        writer.flush(split)
+    for k in range(len(sizes)):
+        n += len(parts[k].records["inspection"])
+        writer.add_part(plan[k], parts.pop(k))
     return n
+
+
+def _render_lineup(piece: tuple):
+    """Render one line-up's inspection views: ``piece`` is ``(root, split, index, size, seed,
+    level, views)``; its :class:`recordings.dataset.DatasetPart`."""
+    from recordings.dataset import DatasetPart
+    from robot.station import robot_inspection_views
+
+    root, split, k, size, seed, level, views = piece
+    part = DatasetPart(root, split, f"l{k:04d}")
+    for index, view, rgb, labels in robot_inspection_views(size, seed, level,
+                                                           inspection_views=views):
+        part.add_robot_view(rgb, labels, lineup=k, index=index, view=view, difficulty=level)
+    return part

@@ -6,8 +6,8 @@ module-level function of it, and hands them to :func:`run_pieces` with the stage
 :class:`ParallelOptions`:
 
 - ``executor="local"``: ``workers`` processes on this machine (a ``forkserver`` pool: each
-  worker starts clean, whatever this process has loaded); ``workers=1`` runs the pieces here,
-  one after another, with no pool at all.
+  worker starts clean, whatever threads this process runs, and loads what its pieces need);
+  ``workers=1`` runs the pieces here, one after another, with no pool at all.
 - ``executor="ray"``: Ray tasks of one CPU each, on the Ray instance this process has joined,
   else on ``ray_address`` (or ``RAY_ADDRESS``): an existing cluster; else on a new local
   instance of ``workers`` CPUs.
@@ -34,14 +34,15 @@ import logging
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import TypeVar
 
-__all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "run_pieces",
-           "worker_threads"]
+__all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "WorkerLost",
+           "run_pieces", "worker_threads"]
 
 logger = logging.getLogger(__name__)
 
@@ -118,8 +119,14 @@ def _start_worker(running=None) -> None:
     global _WORKER_THREADS, _RUNNING
     _WORKER_THREADS = 1
     _RUNNING = running
-    for name in _THREAD_VARIABLES:
+    for name in _THREAD_VARIABLES:  # for libraries not loaded yet
         os.environ[name] = "1"
+    if "torch" in sys.modules:  # loaded already (a Ray worker that ran torch before)
+        sys.modules["torch"].set_num_threads(1)
+    with contextlib.suppress(ImportError):  # BLAS and OpenMP pools loaded already
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
     if running is not None:  # a local worker stops its piece on SIGTERM as on Ctrl-C
         signal.signal(signal.SIGTERM, _interrupt)
 
@@ -140,10 +147,6 @@ def _tracked(fn: Callable[[P], R], index: int, piece: P) -> R:
 def _in_worker(fn: Callable[[P], R], piece: P) -> R:
     """Run ``fn(piece)`` in a Ray worker, capped to one thread like a local one."""
     _start_worker()
-    with contextlib.suppress(ImportError):
-        from threadpoolctl import threadpool_limits
-
-        threadpool_limits(1)
     return fn(piece)
 
 
@@ -188,6 +191,11 @@ class RayExecutor(Executor):
             self._joined = False
 
 
+class WorkerLost(RuntimeError):
+    """A worker process died (killed, out of memory) while it ran a piece: not the input's
+    fault nor a bug; running again (``--resume``) finishes the work."""
+
+
 def _failure(name: str, exc: BaseException) -> Exception:
     """The one-line error of a failed piece: a ValueError where the piece refused its input
     (the CLI's exit 2), else a RuntimeError."""
@@ -207,7 +215,9 @@ def _executor(options: ParallelOptions, n_pieces: int):
         return RayExecutor(options.ray_address, options.n_workers), None
     if workers <= 1:
         return None, None
-    context = multiprocessing.get_context("forkserver")
+    # forkserver: each worker starts clean, whatever threads this process runs (Rerun's, Ray's,
+    # torch's: a plain fork of them deadlocks), and imports what its pieces need
+    context = multiprocessing.get_context("forkserver" if sys.platform != "win32" else "spawn")
     running = context.Array("q", n_pieces, lock=False)
     return ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                initializer=_start_worker, initargs=(running,)), running
@@ -268,12 +278,15 @@ def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptio
                     result = future.result()
                 except BrokenProcessPool:
                     held = [names[j] for j in range(len(pieces)) if running[j]] or [names[i]]
-                    raise RuntimeError(
+                    raise WorkerLost(
                         f"a worker process died (killed, or out of memory) running "
                         f"{' or '.join(held)}; run again (with --resume where the command has "
                         "it) to finish") from None
                 except Exception as exc:
-                    raise _failure(names[i], _ray_cause(exc)) from exc
+                    cause = _ray_cause(exc)
+                    if isinstance(cause, WorkerLost):
+                        raise WorkerLost(f"{names[i]}: {cause}") from None
+                    raise _failure(names[i], cause) from exc
                 bar.update()
                 yield i, result
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM here: the workers stop their pieces too
@@ -292,5 +305,7 @@ def _ray_cause(exc: BaseException) -> BaseException:
     cause = getattr(exc, "cause", None)
     if isinstance(cause, BaseException):
         return cause
-    worker_died = type(exc).__name__ in ("WorkerCrashedError", "NodeDiedError")
-    return RuntimeError("its Ray worker died (killed, or out of memory)") if worker_died else exc
+    if type(exc).__name__ in ("WorkerCrashedError", "NodeDiedError"):
+        return WorkerLost("its Ray worker died (killed, or out of memory); run again (with "
+                          "--resume where the command has it) to finish")
+    return exc
