@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{prog}: error: {describe_error(exc)}", file=sys.stderr)
             return 2
         if type(exc).__name__ == "WorkerLost":  # a killed worker: neither input nor a bug
-            print(f"{prog}: error: {describe_error(exc)}", file=sys.stderr)
+            print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return 1
         print(f"{prog}: internal error: {describe_error(exc)} (run again with --debug for "
               "the traceback, and please report it)", file=sys.stderr)

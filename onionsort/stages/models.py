@@ -52,7 +52,10 @@ class PerceptionModels:
                     ) -> PerceptionModels:
         """:meth:`load`, once per process for each folder and device: a worker of a parallel
         stage loads the models once for all the pieces it runs."""
-        key = (None if folder is None else Path(folder).resolve(), device)
+        where = DEFAULT_MODELS if folder is None else Path(folder)
+        files = tuple((name, (where / name).stat().st_mtime_ns) for name in _FILES.values()
+                      if (where / name).is_file())  # a model trained again is loaded again
+        key = (where.resolve(), device, files)
         if key not in _LOADED:
             _LOADED[key] = cls.load(folder, device)
         return _LOADED[key]

@@ -6,7 +6,8 @@ module-level function of it, and hands them to :func:`run_pieces` with the stage
 :class:`ParallelOptions`:
 
 - ``executor="local"``: ``workers`` processes on this machine (a ``forkserver`` pool: each
-  worker starts clean, whatever threads this process runs, and loads what its pieces need);
+  worker starts clean, whatever threads this process runs, and loads what its pieces need;
+  the pool is kept for the next pieces, of this stage or the next, while this process runs);
   ``workers=1`` runs the pieces here, one after another, with no pool at all.
 - ``executor="ray"``: Ray tasks of one CPU each, on the Ray instance this process has joined,
   else on ``ray_address`` (or ``RAY_ADDRESS``): an existing cluster; else on a new local
@@ -108,8 +109,8 @@ def worker_threads() -> int | None:
     return _WORKER_THREADS
 
 
-#: In a local worker: the pool's table of which process runs which piece (pid while it runs,
-#: 0 before and after), shared with the parent, which reads it when a worker dies.
+#: In a local worker: the pool's table of which process runs which piece (a slot per worker,
+#: see :func:`_tracked`), shared with the parent, which reads it when a worker dies.
 _RUNNING = None
 
 
@@ -136,12 +137,19 @@ def _interrupt(signum, _frame):
 
 
 def _tracked(fn: Callable[[P], R], index: int, piece: P) -> R:
-    """Run ``fn(piece)`` in a local worker, marked as running in the pool's table."""
-    _RUNNING[index] = os.getpid()
+    """Run ``fn(piece)`` in a local worker, marked in the pool's table (a slot per worker:
+    its pid, and the piece it runs plus one, 0 when idle)."""
+    pid = os.getpid()
+    with _RUNNING.get_lock():
+        slots = range(0, len(_RUNNING), 2)
+        slot = next((k for k in slots if _RUNNING[k] == pid), None)
+        if slot is None:
+            slot = next(k for k in slots if _RUNNING[k] == 0)
+        _RUNNING[slot], _RUNNING[slot + 1] = pid, index + 1
     try:
         return fn(piece)
     finally:
-        _RUNNING[index] = 0
+        _RUNNING[slot + 1] = 0
 
 
 def _in_worker(fn: Callable[[P], R], piece: P) -> R:
@@ -215,12 +223,30 @@ def _executor(options: ParallelOptions, n_pieces: int):
         return RayExecutor(options.ray_address, options.n_workers), None
     if workers <= 1:
         return None, None
-    # forkserver: each worker starts clean, whatever threads this process runs (Rerun's, Ray's,
-    # torch's: a plain fork of them deadlocks), and imports what its pieces need
-    context = multiprocessing.get_context("forkserver" if sys.platform != "win32" else "spawn")
-    running = context.Array("q", n_pieces, lock=False)
-    return ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                               initializer=_start_worker, initargs=(running,)), running
+    if workers not in _POOLS:
+        # forkserver: each worker starts clean, whatever threads this process runs (Rerun's,
+        # Ray's, torch's: a plain fork of them deadlocks), and imports what its pieces need
+        context = multiprocessing.get_context("forkserver" if sys.platform != "win32"
+                                              else "spawn")
+        running = context.Array("q", 2 * workers)
+        _POOLS[workers] = (ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                               initializer=_start_worker,
+                                               initargs=(running,)), running)
+    return _POOLS[workers]
+
+
+#: Local pools, by worker count, kept while this process runs: the next pieces (of this
+#: stage, or of the next one, as in a demo) run on workers that have imported and loaded what
+#: they need already. A pool is dropped after a failure or an interruption.
+_POOLS: dict[int, tuple[ProcessPoolExecutor, object]] = {}
+
+
+def _drop(executor: Executor) -> None:
+    """Shut ``executor`` down, and forget it if it is a kept local pool."""
+    for workers, (pool, _) in list(_POOLS.items()):
+        if pool is executor:
+            del _POOLS[workers]
+    executor.shutdown(wait=True, cancel_futures=True)
 
 
 def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptions, *,
@@ -267,6 +293,7 @@ def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptio
                 yield i, result
             return
         futures: dict[Future, int] = {}
+        whole = False
         try:
             for i, piece in enumerate(pieces):
                 future = (executor.submit(_tracked, fn, i, piece) if running is not None
@@ -277,7 +304,8 @@ def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptio
                 try:
                     result = future.result()
                 except BrokenProcessPool:
-                    held = [names[j] for j in range(len(pieces)) if running[j]] or [names[i]]
+                    held = [names[running[k + 1] - 1] for k in range(0, len(running), 2)
+                            if 0 < running[k + 1] <= len(pieces)] or [names[i]]
                     raise WorkerLost(
                         f"a worker process died (killed, or out of memory) running "
                         f"{' or '.join(held)}; run again (with --resume where the command has "
@@ -289,6 +317,7 @@ def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptio
                     raise _failure(names[i], cause) from exc
                 bar.update()
                 yield i, result
+            whole = True
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM here: the workers stop their pieces too
             for process in getattr(executor, "_processes", {}).values():
                 with contextlib.suppress(OSError):
@@ -297,7 +326,8 @@ def run_pieces(fn: Callable[[P], R], pieces: Sequence[P], options: ParallelOptio
         finally:
             for future in futures:
                 future.cancel()
-            executor.shutdown(wait=True, cancel_futures=True)
+            if not (whole and running is not None):  # a kept local pool stays, whole
+                _drop(executor)
 
 
 def _ray_cause(exc: BaseException) -> BaseException:
