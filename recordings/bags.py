@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,7 +50,7 @@ import numpy as np
 
 from recordings.schema import SESSION_METADATA
 from recordings.segmentation import resample_steps
-from recordings.writer import EncodedImage, SessionWriter
+from recordings.writer import EncodedImage, SessionWriter, encode_color
 
 __all__ = [
     "COLOR_ENCODINGS",
@@ -222,23 +221,15 @@ def decode_image(msgtype: str, msg: Any, topic: str = "the image") -> np.ndarray
     return np.ascontiguousarray(rgb)
 
 
-def _encoded(msgtype: str, msg: Any, topic: str) -> tuple[EncodedImage, np.ndarray | None]:
-    """A colour message as the session stores it, and its pixels where they were decoded: a
-    JPEG or PNG as it is (its size read from its header), a raw image as PNG."""
-    import cv2
-
+def _encoded(msgtype: str, msg: Any, topic: str) -> EncodedImage:
+    """A colour message as the session stores it: a JPEG or PNG as it is (decoded once, to
+    check it and read its size), a raw image as PNG."""
+    rgb = decode_image(msgtype, msg, topic)
+    h, w = rgb.shape[:2]
     if msgtype == COMPRESSED:
         data = bytes(msg.data)
-        kind, fmt = _image_kind(msgtype, msg)
-        if kind is None:
-            raise BagError(f"{topic}: {fmt}")
-        rgb = decode_image(msgtype, msg, topic)
-        return EncodedImage(fmt, data, rgb.shape[1], rgb.shape[0]), rgb
-    rgb = decode_image(msgtype, msg, topic)
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
-    if not ok:
-        raise BagError(f"{topic}: could not encode a {rgb.shape} image as PNG")
-    return EncodedImage("png", buf.tobytes(), rgb.shape[1], rgb.shape[0]), rgb
+        return EncodedImage("png" if data.startswith(_PNG_MAGIC) else "jpeg", data, w, h)
+    return EncodedImage("png", encode_color(rgb, "png"), w, h)
 
 
 def _intrinsics(msg: Any) -> tuple[np.ndarray, int, int]:
@@ -672,7 +663,7 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
                         [(inspection.topic, v)] if v >= 0 else [])
                     if any(k not in held for k in keys):
                         return
-                    image = held[keys[0]][0]
+                    image = held[keys[0]]
                     size = (image.width, image.height)
                     color_size = color_size or size
                     if size != color_size:
@@ -685,7 +676,7 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
                                        f"{metres.shape[1]}x{metres.shape[0]} beside colour of "
                                        f"{size[0]}x{size[1]}; depth must be registered to the "
                                        "colour image, of its size")
-                    view = held[keys[-1]][0] if v >= 0 else None
+                    view = held[keys[-1]] if v >= 0 else None
                     writer.write_sensor_frame(index=written, step=step, phase=phase, time_ns=t,
                                               color=image, depth=metres, inspection=view)
                     for k in keys:
@@ -716,12 +707,3 @@ def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np
                      frames_dropped=len(color.stamps_ns) - len(frames),
                      steps_written=len(selected), frames_per_step=frames_per_step,
                      depth=depth is not None, inspection=inspection is not None)
-
-
-def frames_per_second(stamps_ns: np.ndarray) -> float | None:
-    """The median frame rate of a stream, None for fewer than two frames."""
-    if len(stamps_ns) < 2:
-        return None
-    gaps = np.diff(np.sort(stamps_ns))
-    gap = float(np.median(gaps[gaps > 0])) if np.any(gaps > 0) else 0.0
-    return 1e9 / gap if gap > 0 and math.isfinite(gap) else None

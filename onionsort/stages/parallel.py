@@ -45,8 +45,6 @@ from typing import TypeVar
 __all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "WorkerLost",
            "run_pieces", "worker_threads"]
 
-logger = logging.getLogger(__name__)
-
 #: Where the pieces of a stage can run.
 EXECUTORS = ("local", "ray")
 #: How to install Ray (an optional extra).
