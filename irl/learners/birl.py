@@ -157,6 +157,27 @@ class _BayesianIRL(LearnerBase):
         grad = self._likelihood_and_gradient(model, theta, data)[1]
         return grad + model.prior.grad_log_prob(theta)
 
+    def log_posterior_function(self, demos: Sequence[Demonstration]):
+        """``theta -> (log posterior, gradient)`` for these demonstrations, checked once.
+
+        The model and the demonstrations are validated and prepared here, not at each call,
+        so the function suits an optimizer's or a sampler's inner loop (``theta`` is taken as
+        a finite float array of shape (K,) without checks). Values are those of
+        :meth:`log_posterior` and :meth:`log_posterior_gradient`.
+        """
+        return self._objective(self._check_model(), demos)
+
+    def _objective(self, model: _Model, demos):
+        data = self._prepare(model, self._check_problem(demos))
+        log_prior = model.prior._value_and_grad(self.mdp.n_features)
+
+        def value_and_gradient(theta: np.ndarray) -> tuple[float, np.ndarray]:
+            ll, grad = self._likelihood_and_gradient(model, theta, data)
+            value, prior_grad = log_prior(theta)
+            return ll + value, grad + prior_grad
+
+        return value_and_gradient
+
     # -- fitting --------------------------------------------------------------------------
 
     def _check_search(self) -> dict:
@@ -190,18 +211,11 @@ class _BayesianIRL(LearnerBase):
         """
         model = self._check_model()
         search = self._check_search()
-        data = self._prepare(model, self._check_problem(demos))
+        objective = self._objective(model, demos)  # no checks in the optimizer's loop
         prior, K = model.prior, self.mdp.n_features
         first = (np.broadcast_to(prior.mean, (K,)).astype(float)
                  if search["init"] is None else search["init"])
         starts = [first] + [prior.sample(K, search["rng"]) for _ in range(search["n_restarts"] - 1)]
-
-        log_prior = prior._value_and_grad(K)
-
-        def objective(theta):  # theta comes from the optimizer: no checks in the loop
-            ll, grad = self._likelihood_and_gradient(model, theta, data)
-            value, prior_grad = log_prior(theta)
-            return ll + value, grad + prior_grad
 
         with scratch_held():  # one set of forward-backward buffers for the whole search
             if self.optimizer == "lbfgs":
