@@ -54,8 +54,8 @@ from irl.stats import effective_sample_size, split_rhat
 __all__ = [
     "METHODS",
     "Diagnostics",
-    "Posterior",
     "PolicyRisk",
+    "Posterior",
     "expected_regret",
     "load_posterior",
     "map_policy_risk",

@@ -90,7 +90,7 @@ def test_demonstrations_that_show_nothing_leave_the_prior(method):
 
 
 def test_laplace_covariance_is_minus_the_inverse_hessian():
-    mdp, est, demos = noisy_two_state_problem(seed=4)
+    _mdp, est, demos = noisy_two_state_problem(seed=4)
     post = sample_posterior(est, demos, n_samples=10, method="laplace")
     t, h = post.map_theta[0], 1e-3
     f = [est.log_posterior(np.array([t + d]), demos) for d in (-h, 0.0, h)]
@@ -132,7 +132,7 @@ def test_confidence_rows_sum_to_one_and_credible_sets_are_the_fewest_actions():
 
 @pytest.mark.parametrize("method", ["laplace", "mcmc"])
 def test_a_seed_reproduces_the_samples(method):
-    mdp, est, demos = noisy_two_state_problem(seed=2)
+    _mdp, est, demos = noisy_two_state_problem(seed=2)
     kw = {"n_samples": 200, "method": method, "n_draws": 60, "n_warmup": 30}
     a = sample_posterior(est, demos, seed=11, **kw)
     b = sample_posterior(est, demos, seed=11, **kw)
@@ -142,7 +142,7 @@ def test_a_seed_reproduces_the_samples(method):
 
 
 def test_a_fitted_estimator_is_left_as_it_was():
-    mdp, est, demos = noisy_two_state_problem(seed=2)
+    _mdp, est, demos = noisy_two_state_problem(seed=2)
     est.fit(demos[:1])
     before = est.theta_.copy()
     post = sample_posterior(est, demos, n_samples=20, method="laplace")
@@ -157,7 +157,7 @@ def test_a_fitted_estimator_is_left_as_it_was():
     ({"n_chains": 1}, "n_chains must be"),
 ])
 def test_bad_arguments_get_one_line_that_names_them(kwargs, message):
-    mdp, est, demos = noisy_two_state_problem()
+    _mdp, est, demos = noisy_two_state_problem()
     with pytest.raises((ValueError, TypeError)) as info:
         sample_posterior(est, demos, **kwargs)
     assert message in str(info.value) and "\n" not in str(info.value)
@@ -166,7 +166,7 @@ def test_bad_arguments_get_one_line_that_names_them(kwargs, message):
 def test_only_bayesian_learners_have_a_posterior():
     dom = irl.domains.onion_sorting()
     demos, _ = dom.sample(n=1, length=5, seed=0)
-    with pytest.raises(TypeError, match="estimator must be an irl.MMAPBIRL or irl.MAPBIRL"):
+    with pytest.raises(TypeError, match=r"estimator must be an irl\.MMAPBIRL or irl\.MAPBIRL"):
         sample_posterior(irl.HiddenDataEM(dom.mdp, dom.observation_model), demos)
 
 
@@ -198,7 +198,7 @@ def test_expected_regret_is_zero_where_every_sample_agrees():
 
 
 def test_a_posterior_file_round_trips_and_a_wrong_file_is_one_line(tmp_path):
-    mdp, est, demos = noisy_two_state_problem()
+    _mdp, est, demos = noisy_two_state_problem()
     post = sample_posterior(est, demos, n_samples=50, seed=0, method="mcmc", n_draws=40,
                             n_warmup=20)
     back = load_posterior(post.save(tmp_path / "posterior.npz"))
