@@ -277,6 +277,33 @@ def learning_curve_figure(objective: Sequence[float], method: str, path: Path) -
     return _save(fig, path, plt)
 
 
+def confidence_figure(confidence: np.ndarray, policy: np.ndarray, state_names: Sequence[str],
+                      action_names: Sequence[str], path: Path) -> Path:
+    """``confidence[s, a]`` as a heat map, one row per state, the MAP policy's action ringed;
+    the rows where it is below 0.9 are named in red. A PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    S, A = confidence.shape
+    fig, ax = plt.subplots(figsize=(2.6 + 0.75 * A, 1.2 + 0.21 * S))
+    ax.imshow(confidence, vmin=0, vmax=1, cmap="Blues", aspect="auto")
+    for s in range(S):
+        a = int(policy[s])
+        ax.add_patch(plt.Rectangle((a - 0.5, s - 0.5), 1, 1, fill=False, lw=1.4, ec="darkorange"))
+        ax.text(a, s, f"{confidence[s, a]:.2f}", ha="center", va="center", fontsize=6,
+                color="white" if confidence[s, a] > 0.6 else "black")
+    ax.set_xticks(range(A), list(action_names), rotation=35, ha="right", fontsize=8)
+    ax.set_yticks(range(S), list(state_names), fontsize=6)
+    for s, label in enumerate(ax.get_yticklabels()):
+        if confidence[s, int(policy[s])] < 0.9:
+            label.set_color("crimson")
+    ax.set_title("posterior confidence per state (ringed: the learned policy's action)",
+                 fontsize=9)
+    return _save(fig, path, plt)
+
+
 def precision_recall_figure(report: dict, folder: Path) -> list[Path]:
     """The inspection's precision-recall curves (``onionsort eval-perception``): one PNG per
     source (``inspection_pr_robot.png``, ``inspection_pr_human.png``), a curve per difficulty

@@ -185,3 +185,32 @@ def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built
     np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-9)
     assert fast_model["policy_indices"] == ref_model["policy_indices"]
     assert fast_model["n_iter"] == ref_model["n_iter"]
+
+
+@pytest.mark.parametrize("posterior_method", ["laplace", "mcmc"])
+def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perceived_sessions,
+                                                                  posterior_method):
+    from irl.posterior import load_posterior
+    from onionsort.stages.learn import load_confidence
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+    from rerun.chunk import RrdReader
+
+    out = tmp_path / "run"
+    assert main(["learn", *map(str, perceived_sessions), "--posterior", "--samples", "200",
+                 "--posterior-method", posterior_method, "--observation-model",
+                 str(DEFAULT_MODELS / CALIBRATION_FILE), "--allow-model-mismatch",
+                 "--out", str(out)]) == 0
+    model = json.loads((out / "model.json").read_text())
+    doc = json.loads((out / "policy_confidence.json").read_text())
+    post = load_posterior(out / "posterior.npz")
+    assert post.theta.shape == (200, 6) and post.method == posterior_method
+    assert model["posterior"]["risk"] == doc["risk"]
+    assert len(doc["states"]) == 48
+    for s, row in enumerate(doc["states"]):
+        assert sum(row["confidence"].values()) == pytest.approx(1.0, abs=1e-3)
+        assert row["map_action"] == model["policy"][s]["action"]
+        assert row["map_action"] in row["credible_90"]
+    np.testing.assert_allclose(load_confidence(out), post.map_confidence(), atol=1e-4)
+    assert (out / "policy_confidence.png").stat().st_size > 10_000
+    paths = {c.entity_path for c in RrdReader(out / "learn.rrd").store().stream()}
+    assert {"/learn/confidence", "/learn/least_sure"} <= paths

@@ -61,6 +61,7 @@ __all__ = [
     "SortAction",
     "SortingState",
     "decode_state",
+    "describe_state",
     "encode_state",
     "misplacement_costs",
     "next_state",
@@ -146,6 +147,24 @@ def decode_state(index: int) -> SortingState:
     """The factored state of a flat index."""
     values = SORTING_TASK.decode(int(index)).values()
     return SortingState(*(enum(v) for enum, v in zip(_FACTOR_ENUMS, values, strict=True)))
+
+
+_ONION_WORDS = {Prediction.GOOD: "a good onion", Prediction.BAD: "a blemished onion",
+                Prediction.UNKNOWN: "an uninspected onion"}
+_PLACE_WORDS = {Location.CONVEYOR: "on the conveyor", Location.HOVER: "above the conveyor",
+                Location.FACE: "at the inspection pose", Location.BIN: "in the bin"}
+_GRIPPER_WORDS = {**_PLACE_WORDS, Location.CONVEYOR: "at the conveyor",
+                  Location.BIN: "over the bin"}
+
+
+def describe_state(index: int) -> str:
+    """State ``index`` in the task's words, e.g. "a blemished onion held at the inspection
+    pose"."""
+    s = decode_state(index)
+    onion = _ONION_WORDS[s.prediction]
+    if _holding(s) and s.end_effector == s.onion:
+        return f"{onion} held {_PLACE_WORDS[s.onion]}"
+    return f"{onion} {_PLACE_WORDS[s.onion]}, the gripper {_GRIPPER_WORDS[s.end_effector]}"
 
 
 def _holding(s: SortingState) -> bool:

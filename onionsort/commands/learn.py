@@ -14,6 +14,8 @@ Examples
         --out runs/learn-mmap --connect rerun+http://192.168.1.20:9876/proxy
     onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --out runs/learn-mmap --backend numba       # compiled forward-backward (the fast extra)
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \
+        --out runs/learn-mmap --posterior            # + posterior.npz, policy_confidence.json
 """
 
 from __future__ import annotations
@@ -39,6 +41,14 @@ def register(subparsers) -> None:
     parser.add_argument("--allow-model-mismatch", action="store_true",
                         help="learn even if the sessions were perceived by other models (or "
                              "in another sensor mode) than the calibration measured")
+    parser.add_argument("--posterior", action="store_true",
+                        help="also sample the posterior over reward weights (mmap-birl, "
+                             "map-birl): posterior.npz, policy_confidence.json and .png")
+    parser.add_argument("--samples", type=int, default=1000, metavar="N",
+                        help="posterior samples (1000)")
+    parser.add_argument("--posterior-method", choices=("mcmc", "laplace"), default="mcmc",
+                        help="HMC chains on the exact gradient (mcmc), or a Gaussian at the MAP "
+                             "(laplace, fast)")
     add_backend_argument(parser)
     add_connect_argument(parser, what="the learning run (learn.rrd)")
     parser.set_defaults(func=run)
@@ -51,9 +61,16 @@ def run(args) -> int:
                               out=args.out, method=args.method, seed=args.seed,
                               allow_model_mismatch=args.allow_model_mismatch,
                               overwrite=args.overwrite, connect=args.connect,
-                              backend=args.backend))
+                              backend=args.backend, posterior=args.posterior,
+                              samples=args.samples, posterior_method=args.posterior_method))
     print(f"{args.method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
           f"steps, {model['n_occluded']} occluded)")
     print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
+    if "posterior" in model:
+        risk = model["posterior"]["risk"]
+        print(f"  posterior ({args.posterior_method}, {model['posterior']['n_samples']} "
+              f"samples): P(the policy is optimal) {risk['p_map_optimal']:.3f}, expected ILE "
+              f"{risk['expected_ile']:.3f}")
+        print(f"wrote {args.out / 'policy_confidence.json'}")
     print(f"wrote {args.out / 'model.json'}")
     return 0

@@ -8,7 +8,10 @@ mode as the sessions were perceived; ``allow_model_mismatch`` overrides the refu
 Writes into ``out``: ``model.json`` (method, learned reward weights with feature names, the
 greedy policy with state and action names, the inputs, the forward-backward backend),
 ``learning_curve.json`` and ``.png``, and ``learn.rrd`` (Rerun), which ``connect`` also streams
-to a viewer on another machine.
+to a viewer on another machine. With ``posterior``, the Bayesian learners also draw the
+posterior over reward weights (:mod:`irl.posterior`) and write ``posterior.npz``,
+``policy_confidence.json`` (per state, each action's confidence, the 90% credible actions, the
+MAP policy's risk and the sampler's diagnostics) and ``policy_confidence.png``.
 
 Example::
 
@@ -33,12 +36,18 @@ from onionsort.stages.models import model_mismatch
 if TYPE_CHECKING:
     from irl.domains.task import TaskDescription
 
-__all__ = ["MODEL_FILE", "LearnConfig", "learn", "load_policy"]
+__all__ = ["CONFIDENCE_FILE", "MODEL_FILE", "POSTERIOR_FILE", "LearnConfig", "learn",
+           "load_confidence", "load_policy"]
 
 logger = logging.getLogger(__name__)
 
 MODEL_FILE = "model.json"
 MODEL_FORMAT = "onionsort.learned-model/1"
+POSTERIOR_FILE = "posterior.npz"
+CONFIDENCE_FILE = "policy_confidence.json"
+CONFIDENCE_FORMAT = "onionsort.policy-confidence/1"
+#: The learners with an exact posterior to sample.
+BAYESIAN_METHODS = ("mmap-birl", "map-birl")
 
 
 @dataclass(frozen=True)
@@ -70,6 +79,13 @@ class LearnConfig:
         Forward-backward kernels (``irl.inference.BACKENDS``): ``numpy`` or ``numba`` (the
         ``fast`` extra), equal to rounding; used by the methods that run forward-backward
         (``mmap-birl``, ``hidden-data-em``), recorded in ``model.json`` for every method.
+    posterior : bool
+        Also sample the posterior over reward weights (``mmap-birl`` and ``map-birl`` only).
+    samples : int
+        Posterior samples (1000).
+    posterior_method : str
+        ``mcmc`` (HMC chains, the default) or ``laplace`` (a Gaussian at the MAP, fast); see
+        :mod:`irl.posterior`.
     """
 
     sessions: tuple[Path, ...]
@@ -82,13 +98,26 @@ class LearnConfig:
     overwrite: bool = False
     connect: str | None = None
     backend: str = "numpy"
+    posterior: bool = False
+    samples: int = 1000
+    posterior_method: str = "mcmc"
 
     def __post_init__(self) -> None:
         from irl.experiments import METHODS
         from irl.inference import check_backend
+        from irl.posterior import METHODS as POSTERIOR_METHODS
 
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
+        if self.posterior and self.method not in BAYESIAN_METHODS:
+            raise ValueError(f"a posterior needs a Bayesian method ({', '.join(BAYESIAN_METHODS)}"
+                             f"); {self.method} gives a point estimate only")
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) \
+                or self.samples < 10:
+            raise ValueError(f"samples must be an int >= 10; got {self.samples!r}")
+        if self.posterior_method not in POSTERIOR_METHODS:
+            raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
+                             f"{self.posterior_method!r}")
         check_backend(self.backend)
         if not self.sessions:
             raise ValueError("sessions must name at least one session file; got none")
@@ -186,6 +215,10 @@ def learn(config: LearnConfig) -> dict:
             "n_iter": int(getattr(estimator, "n_iter_", 0)),
             "model_mismatch_allowed": mismatch,
         }
+        confidence = None
+        if config.posterior:
+            confidence = _sample_posterior(config, estimator, demos, domain, out)
+            model["posterior"] = {k: confidence[k] for k in ("method", "n_samples", "risk")}
         history = list(getattr(estimator, "history_", []))
         write_json(out / "learning_curve.json", history)
         write_json(out / MODEL_FILE, model)
@@ -196,8 +229,67 @@ def learn(config: LearnConfig) -> dict:
             from recordings.rerun.common import rerun_targets
 
             log_learning(rerun_targets(out / "learn.rrd" if config.rerun else None,
-                                       config.connect), model, history)
+                                       config.connect), model, history, confidence=confidence)
     return model
+
+
+def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) -> dict:
+    """Sample the posterior; write posterior.npz, policy_confidence.json and .png; return the
+    confidence document."""
+    from irl.domains.onion_sorting import describe_state
+    from irl.posterior import map_policy_risk, sample_posterior
+    from onionsort.plots import confidence_figure
+
+    post = sample_posterior(estimator, demos, n_samples=config.samples, seed=config.seed,
+                            method=config.posterior_method)
+    post.save(out / POSTERIOR_FILE)
+    risk = map_policy_risk(post, domain.mdp)
+    conf = post.action_confidence()
+    actions = domain.action_names
+    doc = {
+        "format": CONFIDENCE_FORMAT, "method": config.posterior_method,
+        "n_samples": post.n_samples, "diagnostics": post.diagnostics.to_dict(),
+        "risk": risk.to_dict(),
+        "states": [
+            {"state": domain.state_names[s], "description": describe_state(s),
+             "map_action": actions[int(post.map_policy[s])],
+             "confidence": {a: round(float(c), 4) for a, c in zip(actions, row, strict=True)},
+             "credible_90": [actions[a] for a in credible]}
+            for s, (row, credible) in enumerate(zip(conf, post.credible_actions(0.9),
+                                                    strict=True))],
+    }
+    write_json(out / CONFIDENCE_FILE, doc)
+    confidence_figure(conf, post.map_policy, domain.state_names, actions,
+                      out / "policy_confidence.png")
+    logger.info("posterior (%s, %d samples): P(the MAP policy is optimal) %.3f, expected ILE "
+                "%.3f, max R-hat %s", config.posterior_method, post.n_samples, risk.p_optimal,
+                risk.expected_ile, doc["diagnostics"]["r_hat"])
+    return doc
+
+
+def load_confidence(run_dir: Path, task: TaskDescription | None = None) -> np.ndarray:
+    """``confidence[s]`` (S,): a learning run's confidence in its policy's action in each
+    state, from ``policy_confidence.json`` (``onionsort learn --posterior``)."""
+    import json
+
+    from irl.domains.onion_sorting import SORTING_TASK
+
+    task = SORTING_TASK if task is None else task
+    path = Path(run_dir) / CONFIDENCE_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} holds no posterior (no {CONFIDENCE_FILE}); learn "
+                                "with `onionsort learn ... --posterior` first")
+    try:
+        doc = json.loads(path.read_text())
+        if doc.get("format") != CONFIDENCE_FORMAT:
+            raise ValueError(f"format {doc.get('format')!r}")
+        conf = np.array([row["confidence"][row["map_action"]] for row in doc["states"]], float)
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{path} is not a policy confidence file ({exc})") from None
+    if conf.shape != (task.n_states,) or np.any((conf < 0) | (conf > 1)):
+        raise ValueError(f"{path}: one confidence in [0, 1] per {task.name} state is needed; "
+                         f"got {conf.size}")
+    return conf
 
 
 def load_policy(run_dir: Path, task: TaskDescription | None = None):

@@ -6,6 +6,10 @@ Entity paths::
                         ``log_likelihood``, whichever the history records), one send_columns
     learn/theta         TextDocument (static): the learned reward weights
     learn/policy        TextDocument (static): the learned policy, ``state -> action``
+    learn/confidence    BarChart (static), with a posterior: the confidence in the policy's
+                        action per state index
+    learn/least_sure   TextDocument (static): per state, its action's confidence, the
+                        least sure first
 
 Timeline: ``iteration``.
 """
@@ -43,6 +47,10 @@ def learn_blueprint() -> rrb.Blueprint:
             rrb.Vertical(
                 rrb.TextDocumentView(origin=f"{LEARN_ROOT}/theta", name="reward weights"),
                 rrb.TextDocumentView(origin=f"{LEARN_ROOT}/policy", name="policy"),
+                rrb.BarChartView(origin=f"{LEARN_ROOT}/confidence",
+                                 name="confidence per state"),
+                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/least_sure",
+                                     name="least sure states"),
             ),
             column_shares=[3, 2],
         ),
@@ -51,7 +59,8 @@ def learn_blueprint() -> rrb.Blueprint:
 
 
 def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
-                 application_id: str = "onionsort_learn") -> None:
+                 application_id: str = "onionsort_learn", confidence: dict | None = None
+                 ) -> None:
     """Log a learned model and its learning curve to a new recording.
 
     Parameters
@@ -65,6 +74,9 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
     history : sequence of dict
         One entry per iteration, with the objective under ``value`` or ``log_likelihood``.
     application_id : str
+    confidence : dict, optional
+        ``policy_confidence.json``'s document (``onionsort learn --posterior``): ``states``,
+        each with ``state``, ``description``, ``map_action`` and ``confidence``.
 
     Raises
     ------
@@ -89,5 +101,13 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
             f"{name}: {float(w):+.3f}" for name, w in model["theta"].items())), static=True)
         rec.log(f"{LEARN_ROOT}/policy", rr.TextDocument("\n".join(
             f"{row['state']} -> {row['action']}" for row in model["policy"])), static=True)
+        if confidence is not None:
+            rows = confidence["states"]
+            sure = [row["confidence"][row["map_action"]] for row in rows]
+            rec.log(f"{LEARN_ROOT}/confidence", rr.BarChart(sure), static=True)
+            order = sorted(range(len(rows)), key=lambda i: sure[i])
+            rec.log(f"{LEARN_ROOT}/least_sure", rr.TextDocument("\n".join(
+                f"{sure[i]:.3f}  {rows[i]['map_action']:<18} {rows[i]['state']}: "
+                f"{rows[i]['description']}" for i in order)), static=True)
     finally:
         close_recording(rec)

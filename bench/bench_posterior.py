@@ -1,0 +1,107 @@
+"""Benchmark: sampling the posterior of MMAP-BIRL, Laplace against MCMC, and each against a fit.
+
+Onion sorting at noise 0.3 (``irl.domains.onion_sorting(noise=0.3)``), 12 demonstrations of 20
+steps at occlusion 0.2 (seed ``--seed``, 0), MMAP-BIRL with the domain's beta and prior and
+``--backend``. In one run the bench times, each on a fresh (unfitted) estimator, ``--repeats``
+times (the median is printed):
+
+- one MAP fit, ``est.fit(demos)``;
+- ``irl.posterior.sample_posterior(est, demos, method="laplace")``, default settings;
+- ``irl.posterior.sample_posterior(est, demos, method="mcmc")``, default settings.
+
+Both samplers find the MAP themselves, so each includes one fit. Before the clock starts, one
+fit runs as a warm-up (imports, the numba backend's compilation) and ``mici`` is imported; both
+are timed and printed apart. The bench prints seconds, max R-hat, min ESS and gradients of each,
+the ratio MCMC / Laplace and each one's ratio to the fit, and whether the floors of issue 24
+were met: MCMC with max R-hat <= 1.01 in under 30 s, Laplace in under 2 s.
+
+Example
+-------
+    python bench/bench_posterior.py                    # about a minute
+    python bench/bench_posterior.py --backend numba
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import irl
+from irl.posterior import sample_posterior
+
+NOISE, N_DEMOS, LENGTH, OCCLUSION = 0.3, 12, 20, 0.2
+MCMC_SECONDS, MCMC_R_HAT, LAPLACE_SECONDS = 30.0, 1.01, 2.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--backend", choices=("numpy", "numba"), default="numpy",
+                        help="MMAPBIRL's forward-backward kernels (numpy)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the demonstrations and the samplers (0)")
+    parser.add_argument("--repeats", type=int, default=1, help="timed runs of each (1)")
+    args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error("--repeats must be >= 1")
+
+    dom = irl.domains.onion_sorting(noise=NOISE)
+    demos, _ = dom.sample(n=N_DEMOS, length=LENGTH, occlusion=OCCLUSION, seed=args.seed)
+
+    def estimator() -> irl.MMAPBIRL:
+        return irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior,
+                            backend=args.backend)
+
+    t0 = time.perf_counter()
+    estimator().fit(demos)
+    warmup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    import mici  # noqa: F401  (the MCMC sampler's import, timed apart)
+
+    mici_import = time.perf_counter() - t0
+
+    fits, runs = [], {"laplace": [], "mcmc": []}
+    posts = {}
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        fitted = estimator().fit(demos)
+        fits.append(time.perf_counter() - t0)
+        for method in runs:
+            t0 = time.perf_counter()
+            posts[method] = sample_posterior(estimator(), demos, seed=args.seed, method=method)
+            runs[method].append(time.perf_counter() - t0)
+    fit_s = statistics.median(fits)
+    secs = {m: statistics.median(v) for m, v in runs.items()}
+
+    print(f"onion sorting, noise {NOISE}: {N_DEMOS} demonstrations x {LENGTH} steps, "
+          f"occlusion {OCCLUSION}, seed {args.seed}; MMAPBIRL backend {args.backend}; "
+          f"median of {args.repeats}")
+    print(f"warm-up fit (imports, compilation) {warmup:.2f} s; import mici {mici_import:.2f} s "
+          f"(neither counted below)")
+    print()
+    print(f"{'run':<9}{'seconds':>9}{'x fit':>8}{'max R-hat':>11}{'min ESS':>9}"
+          f"{'gradients':>11}{'accept':>8}{'diverg.':>9}")
+    print(f"{'MAP fit':<9}{fit_s:>9.2f}{1.0:>8.2f}{'':>11}{'':>9}{'':>11}{'':>8}{'':>9}"
+          f"   ({fitted.n_iter_} iterations)")
+    for method in ("laplace", "mcmc"):
+        d = posts[method].diagnostics
+        r_hat = d.max_r_hat()
+        r_hat_txt = "n/a" if not np.isfinite(r_hat) else f"{r_hat:.4f}"
+        print(f"{method:<9}{secs[method]:>9.2f}{secs[method] / fit_s:>8.2f}{r_hat_txt:>11}"
+              f"{float(np.min(d.ess)):>9.0f}{d.n_gradients:>11}{d.acceptance:>8.3f}"
+              f"{d.n_divergent:>9}")
+    print()
+    print(f"mcmc / laplace time: {secs['mcmc'] / secs['laplace']:.1f}x")
+    r_hat = posts["mcmc"].diagnostics.max_r_hat()
+    mcmc_ok = r_hat <= MCMC_R_HAT and secs["mcmc"] < MCMC_SECONDS
+    laplace_ok = secs["laplace"] < LAPLACE_SECONDS
+    print(f"mcmc: max R-hat {r_hat:.4f} <= {MCMC_R_HAT} and {secs['mcmc']:.1f} s < "
+          f"{MCMC_SECONDS:.0f} s: {'met' if mcmc_ok else 'NOT met'}")
+    print(f"laplace: {secs['laplace']:.2f} s < {LAPLACE_SECONDS:.0f} s: "
+          f"{'met' if laplace_ok else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()
