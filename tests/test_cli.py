@@ -190,10 +190,11 @@ def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built
 @pytest.mark.parametrize("posterior_method", ["laplace", "mcmc"])
 def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perceived_sessions,
                                                                   posterior_method):
+    from rerun.chunk import RrdReader
+
     from irl.posterior import load_posterior
     from onionsort.stages.learn import load_confidence
     from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
-    from rerun.chunk import RrdReader
 
     out = tmp_path / "run"
     assert main(["learn", *map(str, perceived_sessions), "--posterior", "--samples", "200",
