@@ -8,7 +8,10 @@ Each onion of the line-up ends with a *fate*: ``"bin"`` if the robot placed it i
 in :data:`robot.station.START_STATE` (the MDP's initial state, nothing claimed yet) and ends
 when every onion has a fate or the step budget ``n_onions * max_steps_per_onion`` is spent;
 onions still undecided then (never claimed, or claimed and not yet released for good) count as
-left on the line. With blemished onions the positive class:
+left on the line. With a per-state confidence and ``defer_below``, the robot defers where its
+policy's confidence in the current state is below the threshold: the onion in focus goes to a
+check tray for a person (fate ``"tray"``) and is counted apart, in ``deferred``; precision and
+recall are over the onions it sorted. With blemished onions the positive class:
 
 =====  ==============================  =====  ==============================
 TP     blemished onion in the bin      FP     good onion in the bin
@@ -65,7 +68,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-Fate = Literal["bin", "line"]
+Fate = Literal["bin", "line", "tray"]
 
 
 @dataclass(frozen=True)
@@ -80,8 +83,9 @@ class OnionOutcome:
         Its true class.
     perceived : Prediction or None
         What the classifier said when the robot inspected it (None if never inspected).
-    fate : {"bin", "line"}
-        Where it ended; undecided onions count as ``"line"``.
+    fate : {"bin", "line", "tray"}
+        Where it ended; undecided onions count as ``"line"``; ``"tray"`` if the robot deferred
+        it to a person.
     decided : bool
         False if the episode ended before the robot released it for good (or claimed it).
     p_blemished : float or None
@@ -140,13 +144,20 @@ class SortingResult(_PrecisionRecall):
     n_steps: int
     undecided: int
     onions: tuple[OnionOutcome, ...] = field(repr=False)
+    deferred: int = 0
 
     def __post_init__(self) -> None:
-        if self.tp + self.fp + self.tn + self.fn != len(self.onions):
+        if self.tp + self.fp + self.tn + self.fn + self.deferred != len(self.onions):
             raise ValueError(
-                f"tp + fp + tn + fn must equal the number of onions {len(self.onions)}; got "
-                f"{self.tp} + {self.fp} + {self.tn} + {self.fn}"
+                f"tp + fp + tn + fn + deferred must equal the number of onions "
+                f"{len(self.onions)}; got {self.tp} + {self.fp} + {self.tn} + {self.fn} + "
+                f"{self.deferred}"
             )
+
+    @property
+    def deferral_rate(self) -> float:
+        """The share of the line-up deferred to a person."""
+        return _ratio(self.deferred, len(self.onions))
 
     def to_dict(self) -> dict:
         """A JSON-ready dict: counts, precision, recall, steps, the inspection views taken and
@@ -155,6 +166,7 @@ class SortingResult(_PrecisionRecall):
             "tp": self.tp, "fp": self.fp, "tn": self.tn, "fn": self.fn,
             "precision": self.precision, "recall": self.recall,
             "n_onions": len(self.onions), "n_steps": self.n_steps, "undecided": self.undecided,
+            "deferred": self.deferred, "deferral_rate": self.deferral_rate,
             "views_taken": self.views_taken, "onions": [o.to_dict() for o in self.onions],
         }
 
@@ -172,6 +184,9 @@ class SortingResult(_PrecisionRecall):
             f"precision {self.precision:.3f}   recall {self.recall:.3f}   "
             f"({len(self.onions)} onions, {self.n_steps} steps, {self.undecided} undecided)",
         ]
+        if self.deferred:
+            rows.append(f"deferred to a person: {self.deferred} "
+                        f"(rate {self.deferral_rate:.3f}; not in the counts above)")
         return "\n".join(rows)
 
 
@@ -322,6 +337,8 @@ def evaluate_policy(
     on_start: Callable[[StationView], None] | None = None,
     inspection_views: int = INSPECTION_VIEWS,
     stop_when_settled: bool = True,
+    confidence: np.ndarray | None = None,
+    defer_below: float = 0.0,
 ) -> SortingResult:
     """Let the Sawyer sort a line-up of onions with the greedy policy ``actions``.
 
@@ -359,6 +376,13 @@ def evaluate_policy(
     stop_when_settled : bool
         Stop showing an onion once its call is settled (a sequential ``classify``; see
         :class:`robot.station.SawyerStation`): each onion's call from fewer views.
+    confidence : ndarray of shape (48,), optional
+        How sure the policy is of its action in each state (e.g. the posterior share of reward
+        samples whose greedy policy agrees, ``onionsort learn --posterior``).
+    defer_below : float
+        With ``confidence``: where the current state's confidence is below this, the onion in
+        focus is deferred to the check tray (:meth:`robot.station.SawyerStation.defer`) instead
+        of acted on; 0 never defers.
 
     Returns
     -------
@@ -378,6 +402,13 @@ def evaluate_policy(
     for name, callback in (("on_step", on_step), ("on_start", on_start)):
         if callback is not None and not callable(callback):
             raise TypeError(f"{name} must be callable or None; got {type(callback).__name__}")
+    if confidence is not None:
+        confidence = np.asarray(confidence, float)
+        if confidence.shape != (N_STATES,) or not np.all((confidence >= 0) & (confidence <= 1)):
+            raise ValueError(f"confidence must hold one value in [0, 1] per state ({N_STATES}); "
+                             f"got shape {confidence.shape}")
+    if not isinstance(defer_below, int | float) or not 0.0 <= defer_below <= 1.0:
+        raise ValueError(f"defer_below must be in [0, 1]; got {defer_below!r}")
     budget = n_onions * max_steps_per_onion
     with SawyerStation(classify, n_onions=n_onions, n_blemished=n_blemished, seed=seed,
                        move_steps=move_steps, render_every_step=render,
@@ -394,6 +425,11 @@ def evaluate_policy(
         n_steps = 0
         while n_steps < budget and not tally.complete:
             s = station.state
+            if (confidence is not None and station.focus is not None
+                    and tally.fates[station.focus] is None
+                    and confidence[encode_state(s)] < defer_below):
+                tally.defer(station.defer())  # not an action of the MDP: no step counted
+                continue
             a = SortAction(int(policy[encode_state(s)]))
             done = station.step(a)
             fate = tally.record(done)
@@ -458,6 +494,10 @@ class SortingTally:
         """Whether every onion has a fate (the episode is over)."""
         return all(f is not None for f in self.fates)
 
+    def defer(self, index: int) -> None:
+        """Onion ``index`` went to the check tray: decided, and counted apart."""
+        self.fates[index] = "tray"
+
     def record(self, done: StationStep) -> Fate | None:
         """Count the fate ``done`` gave the onion in focus, and keep the probability its
         inspection gave; return the fate (None if it gave none)."""
@@ -492,8 +532,10 @@ class SortingTally:
         )
         final = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
         for o in outcomes:
-            final[_cell(o.blemished, o.fate)] += 1
-        result = SortingResult(**final, n_steps=n_steps, undecided=undecided, onions=outcomes)
+            if o.fate != "tray":
+                final[_cell(o.blemished, o.fate)] += 1
+        result = SortingResult(**final, n_steps=n_steps, undecided=undecided, onions=outcomes,
+                               deferred=sum(o.fate == "tray" for o in outcomes))
         logger.info("sorted %d onions in %d steps: precision %.3f, recall %.3f", n_onions,
                     n_steps, result.precision, result.recall)
         return result

@@ -201,6 +201,9 @@ _GATE_FACE = GATE_X - 0.02  # upstream face of the raised stop gate
 _PLACE_X = GATE_X + 0.12  # where the robot sets inspected onions back on the belt
 _PARKED = (0.0, 0.0, -10.0)  # bodies off the belt (not yet arrived, or ridden away)
 _SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions after a move
+#: The check tray on the floor beside the bin, where deferred onions wait for a person: its
+#: first slot; the others follow along x.
+_TRAY = np.array([BIN_CENTER[0] + 0.42, BIN_CENTER[1], 0.0])
 _BIN_SLOTS = 9  # onions per layer in the bin (3 x 3)
 _BIN_LAYERS = 4
 _GRIPPER_RGB = (72.0, 72.0, 78.0)  # the suction gripper's grey, drawn over a held onion
@@ -460,6 +463,7 @@ class SawyerStation:
         self.last_labels: list[list[InspectionLabel]] = []
         self._travel = -_SPACING  # belt travel; onion k waits at the gate at travel k*_SPACING
         self._in_bin = 0
+        self._on_tray = 0
         self._arrange_belt()
         return self
 
@@ -571,7 +575,7 @@ class SawyerStation:
         return np.array(pos)
 
     def place_of(self, index: int) -> str:
-        """Where line-up onion ``index`` is: queued, waiting, held, belt, bin or gone."""
+        """Where line-up onion ``index`` is: queued, waiting, held, belt, bin, tray or gone."""
         return self._onions[int(index)].place
 
     def perceived(self, index: int) -> Prediction | None:
@@ -821,6 +825,34 @@ class SawyerStation:
                                    BIN_CENTER[1] + grid[1] + jitter[1],
                                    floor + onion.appearance.radius + 0.07 * layer]))
         return errs
+
+    def defer(self) -> int:
+        """Set the onion in focus aside on the check tray for a person to sort (the robot was
+        not sure enough of its policy's action); nothing is then in focus, and the policy goes
+        on from :data:`START_STATE`. Returns the onion's line-up index.
+
+        Raises
+        ------
+        RuntimeError
+            If no onion is in focus.
+        """
+        self._require_client()
+        if self.focus is None:
+            raise RuntimeError("no onion is in focus to defer")
+        onion = self._onions[self.focus]
+        self._clock += STEP_DURATION_S
+        if onion.place != "held":
+            self._pick(onion)
+        self._move(ROBOT_TARGETS[Location.HOVER])
+        self.arm.release()
+        onion.place = "tray"
+        self._put(onion, _TRAY + np.array([0.09 * (self._on_tray % 6), 0.09 * (self._on_tray // 6),
+                                           onion.appearance.radius]))
+        self._on_tray += 1
+        self.gate.set(True)
+        self._move(ROBOT_TARGETS[Location.CONVEYOR], self.move_steps // 2)
+        self.focus = None
+        return onion.index
 
     def step(self, action: SortAction | int) -> StationStep:
         """Execute ``action`` and check that the world reached the MDP's next state.

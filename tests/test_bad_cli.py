@@ -222,6 +222,9 @@ CASES = [
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--connect",
       "rerun+http://host/proxy", "--out", "{d}/x"], ["connect must be", "no port",
                                                      "'rerun+http://host/proxy'"]),
+    # suggest
+    (["suggest", "{d}/run_nomodel"], ["run_nomodel holds no posterior", "--posterior"]),
+    (["suggest", "{d}/run_nomodel", "--top", "0"], ["top must be an int >= 1", "0"]),
     # evaluate
     (["evaluate", "{d}/run_nomodel"], ["run_nomodel holds no learned model", "onionsort learn"]),
     (["evaluate", "{d}/run_bad"], ["run_bad/model.json is not a learned model"]),

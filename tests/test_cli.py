@@ -189,7 +189,7 @@ def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built
 
 @pytest.mark.parametrize("posterior_method", ["laplace", "mcmc"])
 def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perceived_sessions,
-                                                                  posterior_method):
+                                                                  posterior_method, capsys):
     from rerun.chunk import RrdReader
 
     from irl.posterior import load_posterior
@@ -201,6 +201,7 @@ def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perc
                  "--posterior-method", posterior_method, "--observation-model",
                  str(DEFAULT_MODELS / CALIBRATION_FILE), "--allow-model-mismatch",
                  "--out", str(out)]) == 0
+    assert "P(the policy is optimal)" in capsys.readouterr().out
     model = json.loads((out / "model.json").read_text())
     doc = json.loads((out / "policy_confidence.json").read_text())
     post = load_posterior(out / "posterior.npz")
@@ -215,3 +216,15 @@ def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perc
     assert (out / "policy_confidence.png").stat().st_size > 10_000
     paths = {c.entity_path for c in RrdReader(out / "learn.rrd").store().stream()}
     assert {"/learn/confidence", "/learn/least_sure"} <= paths
+    # suggest: the states ranked by the expected regret of the learned action
+    from irl.domains import onion_sorting
+    from irl.posterior import expected_regret
+
+    assert main(["suggest", str(out), "--top", "3", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    regret = expected_regret(post, onion_sorting().mdp)
+    assert [r["state"] for r in rows] == [int(s) for s in regret.argsort()[::-1][:len(rows)]]
+    assert all(r["expected_regret"] > 0 and r["confidence"] < 1 for r in rows)
+    assert rows and rows[0]["description"].startswith(("a ", "an "))
+    assert main(["suggest", str(out)]) == 0
+    assert "where another demonstration would help most" in capsys.readouterr().out

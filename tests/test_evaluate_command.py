@@ -142,3 +142,58 @@ def test_the_threshold_follows_the_costs_given(tmp_path):
     assert summary["threshold"] == 0.25
     for onion in summary["onions"]:
         assert (onion["perceived"] == "bad") == (onion["p_blemished"] >= 0.25)
+
+
+def _confidence_file(run, actions, unsure: dict[int, float]) -> None:
+    """A policy_confidence.json sure of every action but those of the states in ``unsure``."""
+    dom = onion_sorting()
+    names = dom.action_names
+    states = []
+    for s, a in enumerate(actions):
+        c = unsure.get(s, 1.0)
+        conf = dict.fromkeys(names, 0.0)
+        conf[names[a]] = c
+        conf[names[(a + 1) % len(names)]] += 1.0 - c
+        states.append({"state": dom.state_names[s], "map_action": names[a], "confidence": conf})
+    (run / "policy_confidence.json").write_text(json.dumps(
+        {"format": "onionsort.policy-confidence/1", "states": states}))
+
+
+def test_defer_below_sends_the_onions_of_unsure_states_to_the_tray(tmp_path, capsys):
+    from irl.domains.onion_sorting import Location, Prediction, SortingState, encode_state
+
+    expert = onion_sorting().expert_policy().argmax(axis=1)
+    run = _run_dir(tmp_path, expert)
+    unsure = encode_state(SortingState(Location.FACE, Location.FACE, Prediction.BAD))
+    _confidence_file(run, expert, {unsure: 0.6})
+    argv = ["evaluate", str(run), "--onions", "6", "--blemished", "4",
+            "--ground-truth-inspection", "--json", "--no-rerun"]
+    assert main([*argv, "--defer-below", "0.5"]) == 0  # 0.6 is sure enough: nothing deferred
+    printed = json.loads(capsys.readouterr().out)
+    assert (printed["tp"], printed["tn"], printed["deferred"]) == (4, 2, 0)
+    assert main([*argv, "--defer-below", "0.9"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    # every blemished onion, once inspected, is where the policy is unsure: all four deferred
+    assert (printed["tp"], printed["fp"], printed["tn"], printed["fn"]) == (0, 0, 2, 0)
+    assert printed["deferred"] == 4 and printed["deferral_rate"] == 4 / 6
+    saved = json.loads((run / "evaluation.json").read_text())
+    assert [o["fate"] for o in saved["onions"] if o["blemished"]] == ["tray"] * 4
+    assert saved["defer_below"] == 0.9
+    from recordings import open_session
+
+    session = open_session(run / "evaluation.mcap")
+    assert session.n_frames == saved["n_steps"]
+
+
+def test_defer_below_needs_a_posterior_and_a_probability(tmp_path, capsys):
+    run = _run_dir(tmp_path, onion_sorting().expert_policy().argmax(axis=1))
+    assert main(["evaluate", str(run), "--defer-below", "0.9", "--ground-truth-inspection"]) == 2
+    err = capsys.readouterr().err
+    assert "holds no posterior" in err and "--posterior" in err and err.count("\n") == 1
+    for bad in ("0", "1.5", "nan"):
+        assert main(["evaluate", str(run), "--defer-below", bad]) == 2
+        err = capsys.readouterr().err
+        assert "defer_below must be in (0, 1]" in err and err.count("\n") == 1
+    assert main(["evaluate", "--policy", "expert", "--out", str(tmp_path / "x"),
+                 "--defer-below", "0.9"]) == 2
+    assert "the expert policy has none" in capsys.readouterr().err

@@ -17,5 +17,6 @@ COMMAND_MODULES = [
     "onionsort.commands.eval_perception",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",
+    "onionsort.commands.suggest",
     "onionsort.commands.demo",
 ]

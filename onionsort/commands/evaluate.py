@@ -28,6 +28,8 @@ Examples
     onionsort evaluate runs/learn-mmap --ground-truth-inspection --json
     onionsort evaluate runs/learn-mmap --inspection-views 6 --miss-cost 3 --waste-cost 1
     onionsort evaluate runs/learn-mmap --no-rerun --no-mcap   # evaluation.json only
+    onionsort evaluate runs/learn-mmap --defer-below 0.9   # a RUN_DIR of `onionsort learn --posterior`:
+        # unsure states send the onion to a check tray, counted apart (deferred, deferral_rate)
 """
 
 from __future__ import annotations
@@ -75,6 +77,10 @@ def register(subparsers) -> None:
                         help="take every inspection view of every onion, even once its call "
                              "is settled (each onion's call is what its first views settled; "
                              "later onions see the image noise drawn otherwise)")
+    parser.add_argument("--defer-below", type=float, default=None, metavar="P",
+                        help="defer to a person where the learned policy's confidence in the "
+                             "current state is below P (needs a RUN_DIR of `onionsort learn "
+                             "--posterior`): the onion goes to a check tray, counted apart")
     add_device_argument(parser)
     parser.set_defaults(func=run)
 
@@ -92,11 +98,11 @@ def run(args) -> int:
         connect=args.connect, policy=args.policy, out=args.out,
         inspection_views=args.inspection_views, every_view=args.every_view,
         miss_cost=args.miss_cost, waste_cost=args.waste_cost, fusion=args.fusion,
-        device=args.device)
+        device=args.device, defer_below=args.defer_below)
     result, out = evaluate(config)
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
-                                              "recall")}))
+                                              "recall", "deferred", "deferral_rate")}))
         return 0
     how = ("ground truth" if args.ground_truth_inspection else
            f"{'' if args.every_view else 'up to '}{out['inspection_views']} views "

@@ -13,6 +13,7 @@ perceive           :class:`PerceiveConfig`      :func:`perceive`
 calibrate          :class:`CalibrateConfig`     :func:`calibrate`, :func:`eval_perception`
 learn              :class:`LearnConfig`         :func:`learn` -> model.json content
 evaluate           :class:`EvaluateConfig`      :func:`evaluate`
+suggest            :class:`SuggestConfig`       :func:`suggest` -> states worth a demonstration
 demo               :class:`DemoConfig`          :func:`demo` (composes the stages above)
 experiment         :class:`ExperimentConfig`    :func:`run_experiment` (synthetic sweeps)
 =================  ===========================  ==========================================
@@ -37,6 +38,7 @@ from onionsort.stages.learn import LearnConfig, learn
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
+from onionsort.stages.suggest import SuggestConfig, suggest
 
 __all__ = [
     "CalibrateConfig",
@@ -51,6 +53,7 @@ __all__ = [
     "PerceptionEvalConfig",
     "PerceptionModels",
     "RecordConfig",
+    "SuggestConfig",
     "calibrate",
     "demo",
     "eval_perception",
@@ -63,4 +66,5 @@ __all__ = [
     "perceive",
     "record",
     "run_experiment",
+    "suggest",
 ]

@@ -96,6 +96,10 @@ class EvaluateConfig:
         classifier's own rule).
     device : str
         Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    defer_below : float or None
+        Defer to a person where the learned policy's confidence in the current state is below
+        this (``policy_confidence.json`` of ``onionsort learn --posterior``): the onion goes to
+        a check tray and is counted apart. None never defers.
     """
 
     run: Path | None = None
@@ -116,6 +120,7 @@ class EvaluateConfig:
     waste_cost: float | None = None
     fusion: str | None = None
     device: str = "auto"
+    defer_below: float | None = None
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
@@ -148,6 +153,12 @@ class EvaluateConfig:
             from recordings.rerun.common import check_viewer_url
 
             check_viewer_url(self.connect)
+        if self.defer_below is not None:
+            if isinstance(self.defer_below, bool) or not 0.0 < self.defer_below <= 1.0:
+                raise ValueError(f"defer_below must be in (0, 1]; got {self.defer_below!r}")
+            if self.policy == "expert":
+                raise ValueError("--defer-below reads a learned policy's confidence; the expert "
+                                 "policy has none (evaluate a RUN_DIR of `onionsort learn --posterior`)")
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:
@@ -235,6 +246,11 @@ def evaluate(config: EvaluateConfig, models=None):
     """
     resolved = log_config("evaluate", config)
     actions, doc = _policy(config)
+    confidence = None
+    if config.defer_below is not None:
+        from onionsort.stages.learn import load_confidence
+
+        confidence = load_confidence(config.run)
     folder = config.folder
     check_output_folder(folder, "--out" if config.out is not None else "RUN_DIR")
     if config.connect is not None:
@@ -296,7 +312,8 @@ def evaluate(config: EvaluateConfig, models=None):
                 difficulty=config.difficulty, on_step=each_step if on_step else None,
                 on_start=None if recorder is None else recorder.on_start,
                 inspection_views=config.inspection_views,
-                stop_when_settled=not config.every_view)
+                stop_when_settled=not config.every_view, confidence=confidence,
+                defer_below=config.defer_below or 0.0)
         if recorder is not None:
             partial.replace(session)
     finally:
@@ -307,6 +324,7 @@ def evaluate(config: EvaluateConfig, models=None):
                               "detector + inspection classifier"),
                "inspection_views": config.inspection_views,
                "every_view": config.every_view,
+               "defer_below": config.defer_below,
                "threshold": None if inspector is None else inspector.threshold,
                "fusion": None if inspector is None else inspector.rule,
                **result.to_dict()}

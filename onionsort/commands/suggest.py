@@ -1,0 +1,49 @@
+"""``onionsort suggest``: the states where another demonstration would help most.
+
+Reads ``posterior.npz`` of a run learned with ``onionsort learn --posterior`` and lists the
+states, in the task's words, ranked by the expected regret of the learned action there under
+the posterior (the value of perfect information about the best action; see
+:mod:`onionsort.stages.suggest`).
+
+Examples
+--------
+    onionsort suggest runs/learn-mmap
+    onionsort suggest runs/learn-mmap --top 10 --json
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from onionsort.commands._args import subcommand
+
+
+def register(subparsers) -> None:
+    parser = subcommand(subparsers, "suggest", __doc__,
+                        "the states where another demonstration would help the robot most")
+    parser.add_argument("run", type=Path, metavar="RUN_DIR",
+                        help="a folder of `onionsort learn --posterior`")
+    parser.add_argument("--top", type=int, default=5, help="states to list (5)")
+    parser.add_argument("--json", action="store_true", help="print the list as JSON")
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from onionsort.stages.suggest import SuggestConfig, suggest
+
+    rows = suggest(SuggestConfig(run=args.run, top=args.top))
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    if not rows:
+        print("every posterior sample agrees with the learned policy in every state: no "
+              "demonstration is expected to change it")
+        return 0
+    print("where another demonstration would help most (expected regret of the learned "
+          "action under the posterior, reward units):")
+    for i, row in enumerate(rows, 1):
+        print(f"{i:>2}. {row['description']} {row['name']}: learned {row['action']} "
+              f"(confidence {row['confidence']:.2f}), expected regret "
+              f"{row['expected_regret']:.3f}")
+    return 0
