@@ -28,8 +28,9 @@ Examples
     onionsort evaluate runs/learn-mmap --ground-truth-inspection --json
     onionsort evaluate runs/learn-mmap --inspection-views 6 --miss-cost 3 --waste-cost 1
     onionsort evaluate runs/learn-mmap --no-rerun --no-mcap   # evaluation.json only
-    onionsort evaluate runs/learn-mmap --defer-below 0.9   # a RUN_DIR of `onionsort learn --posterior`:
-        # unsure states send the onion to a check tray, counted apart (deferred, deferral_rate)
+    onionsort evaluate runs/learn-mmap --defer-below 0.9
+        # (a RUN_DIR of `onionsort learn --posterior`) unsure states send the onion to a
+        # check tray, counted apart (deferred, deferral_rate)
 """
 
 from __future__ import annotations

@@ -158,7 +158,8 @@ class EvaluateConfig:
                 raise ValueError(f"defer_below must be in (0, 1]; got {self.defer_below!r}")
             if self.policy == "expert":
                 raise ValueError("--defer-below reads a learned policy's confidence; the expert "
-                                 "policy has none (evaluate a RUN_DIR of `onionsort learn --posterior`)")
+                                 "policy has none (evaluate a RUN_DIR of `onionsort learn "
+                                 "--posterior`)")
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:
