@@ -132,7 +132,8 @@ def main() -> None:
               f"(floor {AUROC_FLOOR:.2f}: {'met' if area >= AUROC_FLOOR else 'NOT met'}; "
               f"{n_pos} positives, {n_neg} negatives)")
     if np.isfinite(mean_r_hat):
-        print(f"max R-hat per problem: mean {mean_r_hat:.4f}, worst {worst_r_hat:.4f}; "
+        print(f"max R-hat per problem: mean {mean_r_hat:.4f}, worst {worst_r_hat:.4f}, "
+              f"{int(np.sum(r_hats > 1.01))} of {args.problems} above 1.01; "
               f"divergences {sum(r['n_divergent'] for r in results)}")
     else:
         print("max R-hat: n/a (Laplace draws are independent)")
@@ -152,6 +153,7 @@ def main() -> None:
             "mean_set_size": {f"{lv:.2f}": round(mean_size[lv], 6) for lv in LEVELS},
             "auroc": finite(area), "n_positives": n_pos, "n_negatives": n_neg,
             "mean_max_r_hat": finite(mean_r_hat), "worst_max_r_hat": finite(worst_r_hat),
+            "max_r_hat_per_problem": [finite(v) for v in r_hats],
             "n_divergent": sum(r["n_divergent"] for r in results),
             "seconds": round(total, 3),
             "seconds_per_problem": [round(s, 3) for s in per_problem],

@@ -222,6 +222,8 @@ CASES = [
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--connect",
       "rerun+http://host/proxy", "--out", "{d}/x"], ["connect must be", "no port",
                                                      "'rerun+http://host/proxy'"]),
+    (["demo", "--quick", "--out", "{d}/x", "--defer-below", "2"],
+     ["defer_below must be in (0, 1]", "2.0"]),
     # suggest
     (["suggest", "{d}/run_nomodel"], ["run_nomodel holds no posterior", "--posterior"]),
     (["suggest", "{d}/run_nomodel", "--top", "0"], ["top must be an int >= 1", "0"]),

@@ -171,3 +171,34 @@ def test_quick_demo_with_repeats_reports_per_repeat_results_and_intervals(tmp_pa
         assert r["precision_ci"][0] <= r["precision"] <= r["precision_ci"][1]
         assert r["recall_ci"][0] <= r["recall"] <= r["recall_ci"][1]
     assert (out / "repeat_1" / "map-birl" / "evaluation.json").is_file()
+
+
+@pytest.mark.slow
+@SHIPPED
+def test_quick_demo_deferring_sorts_the_same_line_up_twice_and_reports_both(tmp_path, capsys):
+    from onionsort.stages.demo import METHODS
+
+    out = tmp_path / "demo"
+    assert main(["demo", "--quick", "--sessions", "2", "--defer-below", "0.9",
+                 "--posterior-method", "laplace", "--out", str(out)]) == 0
+    assert "deferring below 0.9" in capsys.readouterr().out
+    results = json.loads((out / "results.json").read_text())
+    assert results["defer_below"] == 0.9
+    assert set(results["deferring"]) == {"mmap-birl", "map-birl"}
+    for method in METHODS:
+        run = out / method
+        plain = json.loads((run / "evaluation.json").read_text())
+        if method not in results["deferring"]:
+            assert not (run / "deferring").exists() and not (run / "posterior.npz").exists()
+            continue
+        deferring = json.loads((run / "deferring" / "evaluation.json").read_text())
+        # the same line-up, sorted twice
+        assert [o["blemished"] for o in deferring["onions"]] == \
+            [o["blemished"] for o in plain["onions"]]
+        pooled = results["deferring"][method]
+        sorted_ = [o for o in deferring["onions"] if o["fate"] != "tray"]
+        assert {c: pooled[c] for c in CELLS} == _recount(sorted_)
+        assert pooled["deferred"] == deferring["deferred"] == \
+            sum(o["fate"] == "tray" for o in deferring["onions"])
+        assert pooled["deferral_rate"] == pooled["deferred"] / len(deferring["onions"])
+        assert (run / "policy_confidence.json").is_file()

@@ -77,6 +77,21 @@ def add_backend_argument(parser: argparse.ArgumentParser) -> None:
                              "mmap-birl; the other learners ignore it")
 
 
+def add_posterior_method_argument(parser: argparse.ArgumentParser) -> None:
+    """``--posterior-method {mcmc,laplace}``: how the posterior over rewards is sampled."""
+    parser.add_argument("--posterior-method", choices=("mcmc", "laplace"), default="mcmc",
+                        help="HMC chains on the exact gradient (mcmc), or a Gaussian at the MAP "
+                             "(laplace, fast)")
+
+
+def add_defer_argument(parser: argparse.ArgumentParser, *, needs: str) -> None:
+    """``--defer-below P``: the robot defers where its policy's confidence is below P."""
+    parser.add_argument("--defer-below", type=float, default=None, metavar="P",
+                        help="defer to a person where the learned policy's confidence in the "
+                             f"current state is below P ({needs}): the onion goes to a check "
+                             "tray, counted apart")
+
+
 def subcommand(subparsers, name: str, doc: str, help_: str) -> argparse.ArgumentParser:
     """A subparser whose description is the command module's docstring."""
     return subparsers.add_parser(name, help=help_, description=doc,

@@ -25,10 +25,12 @@ from pathlib import Path
 from onionsort.commands._args import (
     add_backend_argument,
     add_connect_argument,
+    add_defer_argument,
     add_device_argument,
     add_inspection_arguments,
     add_models_argument,
     add_parallel_arguments,
+    add_posterior_method_argument,
     parallel_options,
     subcommand,
 )
@@ -55,6 +57,9 @@ def register(subparsers) -> None:
     add_backend_argument(parser)
     add_inspection_arguments(parser)
     add_device_argument(parser)
+    add_defer_argument(parser, needs="MMAP-BIRL and MAP-BIRL then also learn the posterior, "
+                                     "and sort the same line-up once more deferring")
+    add_posterior_method_argument(parser)
     add_parallel_arguments(parser, pieces="repeats' recordings and methods")
     parser.set_defaults(func=run)
 
@@ -70,6 +75,8 @@ def run(args) -> int:
                               inspection_views=args.inspection_views,
                               miss_cost=args.miss_cost, waste_cost=args.waste_cost,
                               fusion=args.fusion, device=args.device,
+                              defer_below=args.defer_below,
+                              posterior_method=args.posterior_method,
                               **parallel_options(args)))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")

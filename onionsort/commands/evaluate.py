@@ -40,6 +40,7 @@ from pathlib import Path
 
 from onionsort.commands._args import (
     add_connect_argument,
+    add_defer_argument,
     add_device_argument,
     add_inspection_arguments,
     add_models_argument,
@@ -78,10 +79,7 @@ def register(subparsers) -> None:
                         help="take every inspection view of every onion, even once its call "
                              "is settled (each onion's call is what its first views settled; "
                              "later onions see the image noise drawn otherwise)")
-    parser.add_argument("--defer-below", type=float, default=None, metavar="P",
-                        help="defer to a person where the learned policy's confidence in the "
-                             "current state is below P (needs a RUN_DIR of `onionsort learn "
-                             "--posterior`): the onion goes to a check tray, counted apart")
+    add_defer_argument(parser, needs="a RUN_DIR of `onionsort learn --posterior`")
     add_device_argument(parser)
     parser.set_defaults(func=run)
 

@@ -22,7 +22,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_backend_argument, add_connect_argument, subcommand
+from onionsort.commands._args import (
+    add_backend_argument,
+    add_connect_argument,
+    add_posterior_method_argument,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -46,9 +51,7 @@ def register(subparsers) -> None:
                              "map-birl): posterior.npz, policy_confidence.json and .png")
     parser.add_argument("--samples", type=int, default=1000, metavar="N",
                         help="posterior samples (1000)")
-    parser.add_argument("--posterior-method", choices=("mcmc", "laplace"), default="mcmc",
-                        help="HMC chains on the exact gradient (mcmc), or a Gaussian at the MAP "
-                             "(laplace, fast)")
+    add_posterior_method_argument(parser)
     add_backend_argument(parser)
     add_connect_argument(parser, what="the learning run (learn.rrd)")
     parser.set_defaults(func=run)

@@ -52,7 +52,7 @@ from onionsort.stages.base import check_difficulty, check_output_folder, log_con
 from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
-from onionsort.stages.learn import LearnConfig, learn
+from onionsort.stages.learn import BAYESIAN_METHODS, LearnConfig, learn
 from onionsort.stages.models import PerceptionModels, sorting_threshold
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
@@ -93,6 +93,10 @@ class DemoConfig(ParallelOptions):
     (:class:`~onionsort.stages.parallel.ParallelOptions`) run the repeats' recordings, and
     then every (repeat, method)'s learning and sorting, as pieces; with fewer repeats than
     workers the recording and perception of a repeat run their sessions in parallel instead.
+    ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
+    the posterior (``posterior_method``) and sort the same line-up a second time deferring
+    where their policy's confidence is below it (:class:`EvaluateConfig`'s ``defer_below``);
+    both results are reported.
     """
 
     out: Path = Path("runs/demo")
@@ -110,9 +114,12 @@ class DemoConfig(ParallelOptions):
     waste_cost: float | None = None
     fusion: str | None = None
     device: str = "auto"
+    defer_below: float | None = None
+    posterior_method: str = "mcmc"
 
     def __post_init__(self) -> None:
         from irl.inference import check_backend
+        from irl.posterior import METHODS as POSTERIOR_METHODS
 
         super().__post_init__()
         check_backend(self.backend)
@@ -121,6 +128,11 @@ class DemoConfig(ParallelOptions):
                                  inspection_views=self.inspection_views,
                                  miss_cost=self.miss_cost, waste_cost=self.waste_cost,
                                  fusion=self.fusion, device=self.device)
+        if self.defer_below is not None:
+            EvaluateConfig(run=self.out, defer_below=self.defer_below)  # checks the value
+        if self.posterior_method not in POSTERIOR_METHODS:
+            raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
+                             f"{self.posterior_method!r}")
         object.__setattr__(self, "inspection_views", checked.inspection_views)
         if self.repeats < 1:
             raise ValueError(f"repeats must be >= 1; got {self.repeats}")
@@ -210,6 +222,10 @@ def demo(config: DemoConfig) -> dict:
                                                              config.waste_cost),
                               "fusion": config.fusion or models.inspection.rule},
                "seconds": round(time.perf_counter() - start, 1)}
+    if config.defer_below is not None:
+        results["defer_below"] = config.defer_below
+        results["deferring"] = {m: _pooled([r["deferring"] for r in runs], config.seed)
+                                for m, runs in per_repeat.items() if m in BAYESIAN_METHODS}
     write_json(out / "results.json", results)
     return results
 
@@ -221,7 +237,9 @@ def _settings(config: DemoConfig, size: dict) -> dict:
             "sessions": size["sessions"], "repeats": config.repeats,
             "difficulty": config.difficulty, "inspection_views": config.inspection_views,
             "miss_cost": config.miss_cost, "waste_cost": config.waste_cost,
-            "fusion": config.fusion}
+            "fusion": config.fusion,
+            **({} if config.defer_below is None else {
+                "defer_below": config.defer_below, "posterior_method": config.posterior_method})}
 
 
 class _Progress:
@@ -353,14 +371,17 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
                     models: PerceptionModels) -> dict:
     """Learn with one method, let the Sawyer sort with its policy (two stages of repeat
     ``k``); one repeat's result."""
+    deferring = config.defer_below is not None and method in BAYESIAN_METHODS
+
     def learn_stage() -> dict:
         t0 = time.perf_counter()
         learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
                           method=method, seed=seed, overwrite=config.resume,
-                          connect=config.connect, backend=config.backend))
+                          connect=config.connect, backend=config.backend, posterior=deferring,
+                          posterior_method=config.posterior_method))
         return {"learn_seconds": round(time.perf_counter() - t0, 3)}
 
-    def evaluate_stage() -> dict:
+    def evaluate_stage(defer_below: float | None = None) -> dict:
         result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
                                             blemished=size["blemished"], seed=seed,
                                             models=config.models,
@@ -369,18 +390,25 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
                                             inspection_views=config.inspection_views,
                                             miss_cost=config.miss_cost,
                                             waste_cost=config.waste_cost,
-                                            fusion=config.fusion), models)
+                                            fusion=config.fusion, defer_below=defer_below,
+                                            out=None if defer_below is None
+                                            else run_dir / "deferring"), models)
         return {"tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
                 "precision": result.precision, "recall": result.recall,
-                "undecided": result.undecided}
+                "undecided": result.undecided, "deferred": result.deferred}
 
     learned = progress.run(f"learn-{k}-{method}", learn_stage)
     scored = progress.run(f"evaluate-{k}-{method}", evaluate_stage)
     model = json.loads((run_dir / "model.json").read_text())
-    return {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
-                                                     "recall")},
-            "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
-            "theta": model["theta"], "ile": _ile(model), "undecided": scored["undecided"]}
+    one = {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
+                                                    "recall")},
+           "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
+           "theta": model["theta"], "ile": _ile(model), "undecided": scored["undecided"]}
+    if deferring:
+        one["posterior"] = model["posterior"]
+        one["deferring"] = progress.run(f"evaluate-deferring-{k}-{method}",
+                                        lambda: evaluate_stage(config.defer_below))
+    return one
 
 
 def _pooled(runs: list[dict], seed: int) -> dict:
@@ -391,11 +419,17 @@ def _pooled(runs: list[dict], seed: int) -> dict:
     counts = np.array([[r["tp"], r["fp"], r["tn"], r["fn"]] for r in runs])
     tp, fp, tn, fn = (int(c) for c in counts.sum(axis=0))
     (p_lo, p_hi), (r_lo, r_hi) = precision_recall_intervals(counts, seed=seed)
-    return {"tp": tp, "fp": fp, "tn": tn, "fn": fn,
-            "precision": tp / (tp + fp) if tp + fp else 0.0,
-            "recall": tp / (tp + fn) if tp + fn else 0.0,
-            "precision_ci": [p_lo, p_hi], "recall_ci": [r_lo, r_hi],
-            "ile": float(np.mean([r["ile"] for r in runs])), "per_repeat": runs}
+    pooled = {"tp": tp, "fp": fp, "tn": tn, "fn": fn,
+              "precision": tp / (tp + fp) if tp + fp else 0.0,
+              "recall": tp / (tp + fn) if tp + fn else 0.0,
+              "precision_ci": [p_lo, p_hi], "recall_ci": [r_lo, r_hi], "per_repeat": runs}
+    if all("ile" in r for r in runs):
+        pooled["ile"] = float(np.mean([r["ile"] for r in runs]))
+    if all("deferred" in r for r in runs):
+        deferred = sum(r.get("deferred", 0) for r in runs)
+        pooled["deferred"] = deferred
+        pooled["deferral_rate"] = deferred / (deferred + tp + fp + tn + fn)
+    return pooled
 
 
 def precision_recall_intervals(counts, *, seed: int = 0, n_resamples: int = 2000,
@@ -454,12 +488,18 @@ def _ile(model: dict) -> float:
 
 
 def table(results: dict) -> str:
-    """The paper's Table 1 beside ours, as Markdown (ours with 95% intervals)."""
+    """The paper's Table 1 beside ours, as Markdown (ours with 95% intervals; with deferral,
+    the same line-ups sorted deferring, precision and recall over the onions not deferred)."""
     rows = ["| method | source | TP | FP | TN | FN | precision | recall | ILE |",
             "|---|---|---|---|---|---|---|---|---|"]
     ours = f"ours (simulation, {results.get('repeats', 1)} repeat(s))"
     for method in METHODS:
         sources = [(ours, results["methods"][method])]
+        if method in results.get("deferring", {}):
+            deferring = results["deferring"][method]
+            sources.append((f"ours, deferring below {results['defer_below']:g} "
+                            f"({deferring['deferred']} deferred, rate "
+                            f"{deferring['deferral_rate']:.3f})", deferring))
         if method in PAPER_TABLE_1:
             sources.insert(0, ("paper (physical robot)", PAPER_TABLE_1[method]))
         for source, r in sources:
