@@ -227,3 +227,18 @@ def test_chains_that_disagree_have_a_large_rhat_and_few_effective_draws():
     apart = agree + np.arange(4)[:, None]
     assert split_rhat(agree) < 1.01 and split_rhat(apart) > 1.5
     assert effective_sample_size(agree) > 1500 and effective_sample_size(apart) < 100
+
+
+def test_map_birl_has_mmap_birls_posterior_where_nothing_is_hidden():
+    """With the identity observation model and no occlusion the two learners' log posteriors
+    differ by a constant: the same seed gives the same draws."""
+    mdp = two_state_mdp()
+    om = irl.identity_observation_model(2, 2)
+    rng = np.random.default_rng(0)
+    demos = [irl.Demonstration(rng.integers(0, 4, size=12).tolist()) for _ in range(2)]
+    kw = {"beta": 1.0, "prior": irl.GaussianPrior(0.0, 2.0)}
+    posts = [sample_posterior(cls(mdp, om, **kw), demos, n_samples=300, seed=4, method=m,
+                              n_draws=100, n_warmup=50)
+             for m in ("laplace", "mcmc") for cls in (irl.MMAPBIRL, irl.MAPBIRL)]
+    np.testing.assert_allclose(posts[1].theta, posts[0].theta, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(posts[3].theta, posts[2].theta, rtol=1e-6, atol=1e-6)
