@@ -266,9 +266,11 @@ def _greedy_policies(mdp: TabularMDP, theta: np.ndarray) -> np.ndarray:
     return np.stack([solver.solve(t).policy for t in theta]).astype(np.int64)
 
 
-def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, rng):
-    """HMC chains (mici's dynamic multinomial sampler) on ``z`` with ``theta = mean + chol z``;
-    returns ``(theta[chains, draws, K], statistics, n_gradients)``."""
+def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, max_draws, rng):
+    """HMC chains (mici's dynamic multinomial sampler) on ``z`` with ``theta = mean + chol z``,
+    extended by ``n_draws`` at a time, at the warm-up's step size, while the split R-hat of a
+    weight exceeds 1.01 and fewer than ``max_draws`` draws a chain are held. Returns
+    ``(theta[chains, draws, K], statistics of every main draw, n_gradients)``."""
     import mici
 
     counter = [0]
@@ -283,11 +285,22 @@ def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, rng)
 
     K = mean.size
     starts = [rng.standard_normal(K) for _ in range(n_chains)]
-    _, traces, statistics = mici.sample_hmc_chains(
+    states, traces, stats = mici.sample_hmc_chains(
         n_warmup, n_draws, starts, neg_log_density, grad_neg_log_dens=grad_neg_log_density,
         seed=rng, display_progress=False)
     z = np.asarray(traces["pos"], dtype=float)  # (chains, draws, K)
-    return mean + z @ chol.T, statistics, counter[0]
+    stats = {k: np.asarray(stats[k]) for k in ("accept_stat", "diverging", "step_size")}
+    step_size = float(np.mean(stats["step_size"][:, -1]))
+    while (z.shape[1] + n_draws <= max_draws
+           and max(split_rhat(z[:, :, k]) for k in range(K)) > 1.01):
+        logger.info("extending the chains by %d draws (max R-hat above 1.01)", n_draws)
+        states, more, more_stats = mici.sample_hmc_chains(
+            0, n_draws, states, neg_log_density, grad_neg_log_dens=grad_neg_log_density,
+            seed=rng, display_progress=False, integrator_kwargs={"step_size": step_size})
+        z = np.concatenate([z, np.asarray(more["pos"], dtype=float)], axis=1)
+        stats = {k: np.concatenate([v, np.asarray(more_stats[k])], axis=1)
+                 for k, v in stats.items()}
+    return mean + z @ chol.T, stats, counter[0]
 
 
 def sample_posterior(
@@ -300,6 +313,7 @@ def sample_posterior(
     n_chains: int = 4,
     n_warmup: int = 200,
     n_draws: int | None = None,
+    max_draws: int | None = None,
     step: float = 1e-4,
 ) -> Posterior:
     """Draw reward weights from the estimator's exact posterior given the demonstrations.
@@ -323,6 +337,10 @@ def sample_posterior(
         Warm-up (step-size adaptation) iterations per chain, discarded.
     n_draws : int, optional
         Main draws per chain; by default ``max(400, ceil(n_samples / n_chains))``.
+    max_draws : int, optional
+        While the chains disagree (a weight's split R-hat above 1.01), they are extended by
+        ``n_draws`` at a time up to this many draws each; by default ``3 * n_draws``. Equal
+        to ``n_draws``, never.
     step : float, default 1e-4
         Relative step of the differences that give the Hessian at the MAP.
 
@@ -339,6 +357,8 @@ def sample_posterior(
     if n_draws is None:
         n_draws = max(400, -(-n_samples // n_chains))
     n_draws = check_int(n_draws, "n_draws", low=4)
+    max_draws = check_int(3 * n_draws if max_draws is None else max_draws, "max_draws",
+                          low=n_draws)
     step = check_real(step, "step", low=0.0, high=0.1, low_open=True)
     rng = check_random_state(seed)
     mdp = estimator.mdp
@@ -359,21 +379,22 @@ def sample_posterior(
         else:
             chains, stats, n_chain_grad = _run_chains(
                 value_and_grad, map_theta, chol, n_chains=n_chains, n_warmup=n_warmup,
-                n_draws=n_draws, rng=rng)
+                n_draws=n_draws, max_draws=max_draws, rng=rng)
             diagnostics = Diagnostics(
                 r_hat=np.array([split_rhat(chains[:, :, k]) for k in range(map_theta.size)]),
                 ess=np.array([effective_sample_size(chains[:, :, k])
                               for k in range(map_theta.size)]),
                 acceptance=float(np.mean(stats["accept_stat"])), n_chains=n_chains,
-                n_warmup=n_warmup, n_draws=n_draws,
+                n_warmup=n_warmup, n_draws=chains.shape[1],
                 n_divergent=int(np.sum(stats["diverging"])),
                 n_gradients=n_grad + n_chain_grad, hessian_clipped=clipped)
             pooled = chains.reshape(-1, map_theta.size)
             keep = np.linspace(0, pooled.shape[0] - 1, n_samples).round().astype(int)
             theta = pooled[keep]
             if diagnostics.max_r_hat() > 1.01:
-                logger.warning("the chains disagree (max R-hat %.3f > 1.01): raise n_draws or "
-                               "n_warmup", diagnostics.max_r_hat())
+                logger.warning("the chains still disagree after %d draws each (max R-hat %.3f "
+                               "> 1.01): raise max_draws or n_warmup", chains.shape[1],
+                               diagnostics.max_r_hat())
     policies = _greedy_policies(mdp, theta)
     return Posterior(theta=theta, policies=policies, map_theta=map_theta,
                      map_policy=_greedy_policies(mdp, map_theta[None])[0], covariance=cov,

@@ -242,3 +242,15 @@ def test_map_birl_has_mmap_birls_posterior_where_nothing_is_hidden():
              for m in ("laplace", "mcmc") for cls in (irl.MMAPBIRL, irl.MAPBIRL)]
     np.testing.assert_allclose(posts[1].theta, posts[0].theta, rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(posts[3].theta, posts[2].theta, rtol=1e-6, atol=1e-6)
+
+
+def test_chains_that_disagree_are_extended_up_to_max_draws():
+    _mdp, est, demos = noisy_two_state_problem(seed=3)
+    short = sample_posterior(est, demos, n_samples=20, seed=0, n_draws=8, n_warmup=20,
+                             max_draws=8)
+    assert short.diagnostics.n_draws == 8 and short.diagnostics.max_r_hat() > 1.01
+    longer = sample_posterior(est, demos, n_samples=20, seed=0, n_draws=8, n_warmup=20,
+                              max_draws=40)
+    assert longer.diagnostics.n_draws > 8 and longer.diagnostics.n_draws <= 40
+    assert longer.diagnostics.n_gradients > short.diagnostics.n_gradients
+    assert longer.diagnostics.n_draws == 40 or longer.diagnostics.max_r_hat() <= 1.01
