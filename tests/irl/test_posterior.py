@@ -41,7 +41,7 @@ def noisy_two_state_problem(seed=0, occluded=0.3):
     return mdp, est, demos
 
 
-def quadrature(est, demos, lo=-12.0, hi=12.0, n=4001):
+def quadrature(est, demos, lo=-12.0, hi=12.0, n=2001):
     """The exact posterior of the single weight on a grid: its density and the grid."""
     grid = np.linspace(lo, hi, n)
     logp = np.array([est.log_posterior(np.array([t]), demos) for t in grid])
@@ -133,7 +133,7 @@ def test_confidence_rows_sum_to_one_and_credible_sets_are_the_fewest_actions():
 @pytest.mark.parametrize("method", ["laplace", "mcmc"])
 def test_a_seed_reproduces_the_samples(method):
     _mdp, est, demos = noisy_two_state_problem(seed=2)
-    kw = {"n_samples": 200, "method": method, "n_draws": 60, "n_warmup": 30}
+    kw = {"n_samples": 200, "method": method, "n_draws": 60, "n_warmup": 30, "max_draws": 60}
     a = sample_posterior(est, demos, seed=11, **kw)
     b = sample_posterior(est, demos, seed=11, **kw)
     c = sample_posterior(est, demos, seed=12, **kw)
