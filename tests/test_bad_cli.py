@@ -224,6 +224,10 @@ CASES = [
                                                      "'rerun+http://host/proxy'"]),
     (["demo", "--quick", "--out", "{d}/x", "--defer-below", "2"],
      ["defer_below must be in (0, 1]", "2.0"]),
+    (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--method",
+      "mmap-birl,svm", "--out", "{d}/x"], ["--method", "invalid choice", "'svm'"]),
+    (["evaluate", "{d}/run_nomodel", "{d}/run_bad", "--out", "{d}/x"],
+     ["--out takes one run's outputs", "their own folder"]),
     # suggest
     (["suggest", "{d}/run_nomodel"], ["run_nomodel holds no posterior", "--posterior"]),
     (["suggest", "{d}/run_nomodel", "--top", "0"], ["top must be an int >= 1", "0"]),

@@ -250,3 +250,26 @@ def test_dataset_on_two_workers_writes_the_same_files(tmp_path):
     meta = [json.loads((tmp_path / d / "dataset.json").read_text()) for d in ("d1", "d2")]
     assert {k: v for k, v in meta[0].items() if k != "created_utc"} == {
         k: v for k, v in meta[1].items() if k != "created_utc"}
+
+
+def test_learn_and_evaluate_several_on_two_workers_write_what_one_writes(recorded, tmp_path):
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+
+    (sessions,) = _perceived_copies(recorded, tmp_path, ["--workers", "2"])
+    methods = ["mmap-birl", "map-birl", "hidden-data-em"]
+    written = {}
+    for workers in ("1", "2"):
+        out = tmp_path / f"learn{workers}"
+        assert main(["learn", *map(str, sessions), "--method", ",".join(methods),
+                     "--observation-model", str(DEFAULT_MODELS / CALIBRATION_FILE),
+                     "--allow-model-mismatch", "--workers", workers, "--out", str(out)]) == 0
+        runs = [out / m for m in methods]
+        assert main(["evaluate", *map(str, runs), "--onions", "4", "--blemished", "2",
+                     "--ground-truth-inspection", "--no-rerun", "--no-mcap",
+                     "--workers", workers]) == 0
+        written[workers] = {m: (json.loads((run / "model.json").read_text()),
+                                json.loads((run / "evaluation.json").read_text()))
+                            for m, run in zip(methods, runs, strict=True)}
+    assert written["2"] == written["1"]
+    for method, (model, evaluation) in written["1"].items():
+        assert model["method"] == evaluation["method"] == method

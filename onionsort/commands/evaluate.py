@@ -28,6 +28,7 @@ Examples
     onionsort evaluate runs/learn-mmap --ground-truth-inspection --json
     onionsort evaluate runs/learn-mmap --inspection-views 6 --miss-cost 3 --waste-cost 1
     onionsort evaluate runs/learn-mmap --no-rerun --no-mcap   # evaluation.json only
+    onionsort evaluate runs/learn/mmap-birl runs/learn/map-birl   # in parallel, one line-up
     onionsort evaluate runs/learn-mmap --defer-below 0.9
         # (a RUN_DIR of `onionsort learn --posterior`) unsure states send the onion to a
         # check tray, counted apart (deferred, deferral_rate)
@@ -44,6 +45,8 @@ from onionsort.commands._args import (
     add_device_argument,
     add_inspection_arguments,
     add_models_argument,
+    add_parallel_arguments,
+    parallel_options,
     subcommand,
 )
 
@@ -51,8 +54,10 @@ from onionsort.commands._args import (
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "evaluate", __doc__,
                         "the Sawyer sorts onions with a learned policy: precision and recall")
-    parser.add_argument("run", type=Path, metavar="RUN_DIR", nargs="?", default=None,
-                        help="folder of `onionsort learn` (not with --policy expert)")
+    parser.add_argument("run", type=Path, metavar="RUN_DIR", nargs="*", default=[],
+                        help="folder(s) of `onionsort learn` (not with --policy expert); "
+                             "several are sorted in parallel, each on the same line-up, each "
+                             "writing into its own folder")
     parser.add_argument("--policy", choices=("learned", "expert"), default="learned",
                         help="the run's learned policy (default), or the task's own: the "
                              "robot's perception measured apart from learning")
@@ -81,28 +86,43 @@ def register(subparsers) -> None:
                              "later onions see the image noise drawn otherwise)")
     add_defer_argument(parser, needs="a RUN_DIR of `onionsort learn --posterior`")
     add_device_argument(parser)
+    add_parallel_arguments(parser, pieces="runs")
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
     from onionsort.stages import EvaluateConfig, evaluate
+    from onionsort.stages.evaluate import evaluate_runs
+    from onionsort.stages.parallel import ParallelOptions
 
-    if args.policy == "expert" and args.run is not None:
+    if args.policy == "expert" and args.run:
         raise ValueError(f"--policy expert sorts by the task's own policy; it takes no RUN_DIR "
-                         f"(got {args.run}); give --out DIR")
-    config = EvaluateConfig(
-        run=args.run, onions=args.onions, blemished=args.blemished, seed=args.seed,
+                         f"(got {', '.join(map(str, args.run))}); give --out DIR")
+    if len(args.run) > 1 and args.out is not None:
+        raise ValueError("--out takes one run's outputs; several RUN_DIRs each write into "
+                         "their own folder")
+    configs = [EvaluateConfig(
+        run=run, onions=args.onions, blemished=args.blemished, seed=args.seed,
         models=args.models, ground_truth_inspection=args.ground_truth_inspection,
         rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap,
         connect=args.connect, policy=args.policy, out=args.out,
         inspection_views=args.inspection_views, every_view=args.every_view,
         miss_cost=args.miss_cost, waste_cost=args.waste_cost, fusion=args.fusion,
-        device=args.device, defer_below=args.defer_below)
-    result, out = evaluate(config)
+        device=args.device, defer_below=args.defer_below) for run in (args.run or [None])]
+    if len(configs) == 1:
+        done = [evaluate(configs[0])]
+    else:
+        done = evaluate_runs(configs, ParallelOptions(**parallel_options(args)))
+    for config, (result, out) in zip(configs, done, strict=True):
+        _report(args, config, result, out)
+    return 0
+
+
+def _report(args, config, result, out: dict) -> None:
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
                                               "recall", "deferred", "deferral_rate")}))
-        return 0
+        return
     how = ("ground truth" if args.ground_truth_inspection else
            f"{'' if args.every_view else 'up to '}{out['inspection_views']} views "
            f"({out['views_taken'] / max(sum(o['views'] > 0 for o in out['onions']), 1):.1f} "
@@ -114,4 +134,3 @@ def run(args) -> int:
     written = ["evaluation.json", *(["evaluation.rrd"] if not args.no_rerun else []),
                *(["evaluation.mcap"] if not args.no_mcap else [])]
     print(f"wrote {', '.join(str(config.folder / name) for name in written)}")
-    return 0

@@ -16,16 +16,23 @@ Examples
         --out runs/learn-mmap --backend numba       # compiled forward-backward (the fast extra)
     onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \
         --out runs/learn-mmap --posterior            # + posterior.npz, policy_confidence.json
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \
+        --method mmap-birl,map-birl,hidden-data-em --out runs/learn   # runs/learn/<method>,
+        # the methods in parallel (--workers, --executor ray)
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 from pathlib import Path
 
 from onionsort.commands._args import (
     add_backend_argument,
     add_connect_argument,
+    add_parallel_arguments,
     add_posterior_method_argument,
+    parallel_options,
     subcommand,
 )
 
@@ -36,8 +43,10 @@ def register(subparsers) -> None:
     parser = subcommand(subparsers, "learn", __doc__,
                         "learn the sorter's reward from perceived sessions (offline run)")
     parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
-    parser.add_argument("--method", choices=METHODS, default="mmap-birl",
-                        help="the learner (mmap-birl)")
+    parser.add_argument("--method", type=_methods(METHODS), default=("mmap-birl",),
+                        metavar="METHOD[,METHOD...]",
+                        help=f"the learner ({', '.join(METHODS)}; default mmap-birl); several, "
+                             "comma-separated, learn in parallel, each into OUT/METHOD")
     parser.add_argument("--observation-model", type=Path, required=True, metavar="FILE",
                         help="calibration.json written by `onionsort calibrate`")
     parser.add_argument("--out", type=Path, required=True, help="run folder")
@@ -54,26 +63,52 @@ def register(subparsers) -> None:
     add_posterior_method_argument(parser)
     add_backend_argument(parser)
     add_connect_argument(parser, what="the learning run (learn.rrd)")
+    add_parallel_arguments(parser, pieces="methods")
     parser.set_defaults(func=run)
+
+
+def _methods(choices):
+    """``--method``'s type: one learner or several, comma-separated, each of ``choices``."""
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(t.strip() for t in text.split(","))
+        for name in names:
+            if name not in choices:
+                raise argparse.ArgumentTypeError(
+                    f"invalid choice: {name!r} (choose from {', '.join(choices)})")
+        return names
+
+    return parse
 
 
 def run(args) -> int:
     from onionsort.stages import LearnConfig, learn
+    from onionsort.stages.learn import learn_methods
+    from onionsort.stages.parallel import ParallelOptions
 
-    model = learn(LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
-                              out=args.out, method=args.method, seed=args.seed,
-                              allow_model_mismatch=args.allow_model_mismatch,
-                              overwrite=args.overwrite, connect=args.connect,
-                              backend=args.backend, posterior=args.posterior,
-                              samples=args.samples, posterior_method=args.posterior_method))
-    print(f"{args.method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
-          f"steps, {model['n_occluded']} occluded)")
-    print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
-    if "posterior" in model:
-        risk = model["posterior"]["risk"]
-        print(f"  posterior ({args.posterior_method}, {model['posterior']['n_samples']} "
-              f"samples): P(the policy is optimal) {risk['p_map_optimal']:.3f}, expected ILE "
-              f"{risk['expected_ile']:.3f}")
-        print(f"wrote {args.out / 'policy_confidence.json'}")
-    print(f"wrote {args.out / 'model.json'}")
+    methods = args.method
+    config = LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
+                         out=args.out, method=methods[0], seed=args.seed,
+                         allow_model_mismatch=args.allow_model_mismatch,
+                         overwrite=args.overwrite, connect=args.connect,
+                         backend=args.backend, posterior=args.posterior,
+                         samples=args.samples, posterior_method=args.posterior_method)
+    if len(methods) == 1:
+        models = {methods[0]: learn(config)}
+        folders = {methods[0]: args.out}
+    else:
+        for method in methods:  # each method's config checked before any piece starts
+            dataclasses.replace(config, method=method)
+        models = learn_methods(config, methods, ParallelOptions(**parallel_options(args)))
+        folders = {m: args.out / m for m in methods}
+    for method, model in models.items():
+        print(f"{method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
+              f"steps, {model['n_occluded']} occluded)")
+        print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
+        if "posterior" in model:
+            risk = model["posterior"]["risk"]
+            print(f"  posterior ({args.posterior_method}, {model['posterior']['n_samples']} "
+                  f"samples): P(the policy is optimal) {risk['p_map_optimal']:.3f}, expected "
+                  f"ILE {risk['expected_ile']:.3f}")
+            print(f"wrote {folders[method] / 'policy_confidence.json'}")
+        print(f"wrote {folders[method] / 'model.json'}")
     return 0

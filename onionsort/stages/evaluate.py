@@ -42,7 +42,7 @@ from onionsort.stages.base import (
 )
 from onionsort.stages.learn import load_policy
 
-__all__ = ["POLICIES", "EvaluateConfig", "evaluate"]
+__all__ = ["POLICIES", "EvaluateConfig", "evaluate", "evaluate_runs"]
 
 logger = logging.getLogger(__name__)
 
@@ -331,3 +331,33 @@ def evaluate(config: EvaluateConfig, models=None):
                **result.to_dict()}
     write_json(folder / "evaluation.json", summary)
     return result, summary
+
+
+def evaluate_runs(configs: list[EvaluateConfig], options=None) -> list[tuple[Any, dict]]:
+    """Evaluate several runs as parallel pieces (:mod:`onionsort.stages.parallel`), each
+    writing into its own folder what :func:`evaluate` alone writes; the models load once per
+    worker. Returns ``(result, summary)`` per config, in order."""
+    from onionsort.stages.parallel import ParallelOptions, run_pieces
+
+    folders = [c.folder.resolve() for c in configs]
+    if len(set(folders)) != len(folders):
+        raise ValueError("each evaluation needs a folder of its own; got "
+                         + ", ".join(str(c.folder) for c in configs))
+    for c in configs:  # refused before any piece starts
+        check_output_folder(c.folder, "--out" if c.out is not None else "RUN_DIR")
+        _policy(c)
+    out: list[Any] = [None] * len(configs)
+    for i, done in run_pieces(_evaluate_piece, configs, options or ParallelOptions(workers=1),
+                              names=[str(c.folder) for c in configs], desc="evaluate",
+                              unit="run"):
+        out[i] = done
+    return out
+
+
+def _evaluate_piece(config: EvaluateConfig):
+    """One evaluation, with the models this worker loaded once."""
+    from onionsort.stages.models import PerceptionModels
+
+    models = None if config.ground_truth_inspection else \
+        PerceptionModels.load_cached(config.models, config.device)
+    return evaluate(config, models)

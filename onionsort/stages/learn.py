@@ -23,7 +23,9 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -32,12 +34,13 @@ import numpy as np
 
 from onionsort.stages.base import log_config, output_folder, refuse_existing, write_json
 from onionsort.stages.models import model_mismatch
+from onionsort.stages.parallel import ParallelOptions
 
 if TYPE_CHECKING:
     from irl.domains.task import TaskDescription
 
 __all__ = ["CONFIDENCE_FILE", "MODEL_FILE", "POSTERIOR_FILE", "LearnConfig", "learn",
-           "load_confidence", "load_policy"]
+           "learn_methods", "load_confidence", "load_policy"]
 
 logger = logging.getLogger(__name__)
 
@@ -161,8 +164,6 @@ def _check_provenance(session, calibration, calibration_path: Path) -> None:
 
 def learn(config: LearnConfig) -> dict:
     """Fit the learner on the perceived sessions; write the run folder; return ``model.json``."""
-    import dataclasses
-
     from irl.domains.onion_sorting import onion_sorting
     from irl.experiments import make_estimator
     from irl.learners.optimize import objective_curve
@@ -231,6 +232,28 @@ def learn(config: LearnConfig) -> dict:
             log_learning(rerun_targets(out / "learn.rrd" if config.rerun else None,
                                        config.connect), model, history, confidence=confidence)
     return model
+
+
+def learn_methods(config: LearnConfig, methods: Sequence[str],
+                  options: ParallelOptions | None = None) -> dict[str, dict]:
+    """Learn with several methods from the same sessions, each into ``config.out / method``,
+    as parallel pieces (:mod:`onionsort.stages.parallel`); return each method's model.json.
+    Each method's run is the one ``learn`` alone writes (its seed is ``config.seed``)."""
+    from onionsort.stages.parallel import run_pieces
+
+    methods = list(dict.fromkeys(methods))
+    if not methods:
+        raise ValueError("methods must name at least one learner; got none")
+    configs = [dataclasses.replace(config, method=m, out=Path(config.out) / m) for m in methods]
+    for c in configs:  # refused before any piece starts
+        refuse_existing(c.out / MODEL_FILE, c.overwrite)
+    models: dict[str, dict] = {}
+    for i, model in run_pieces(learn, configs, options or ParallelOptions(workers=1),
+                               names=[f"{m} ({c.out})" for m, c in zip(methods, configs,
+                                                                       strict=True)],
+                               desc="learn", unit="method"):
+        models[methods[i]] = model
+    return {m: models[m] for m in methods}
 
 
 def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) -> dict:
