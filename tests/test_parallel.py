@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -273,3 +274,49 @@ def test_learn_and_evaluate_several_on_two_workers_write_what_one_writes(recorde
     assert written["2"] == written["1"]
     for method, (model, evaluation) in written["1"].items():
         assert model["method"] == evaluation["method"] == method
+
+
+def sleep_then_write(path: str) -> int:
+    """A piece that outlives its command if nothing stops it: it writes ``path`` after 30 s."""
+    import time
+
+    Path(path + ".started").write_text(str(os.getpid()))
+    time.sleep(30)
+    Path(path).write_text("written by a worker whose command was gone")
+    return os.getpid()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="finds the workers in /proc")
+def test_workers_stop_when_their_command_is_killed(tmp_path):
+    """A SIGKILLed command leaves no worker writing on alone: each stops its piece."""
+    import subprocess
+    import time
+
+    marks = [str(tmp_path / f"piece{i}") for i in range(2)]
+    script = (
+        "from onionsort.stages.parallel import ParallelOptions, run_pieces\n"
+        "from tests.test_parallel import sleep_then_write\n"
+        f"list(run_pieces(sleep_then_write, {marks!r}, ParallelOptions(workers=2), "
+        "names=['a', 'b'], desc='t', progress=False))\n")
+    command = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parent.parent)
+    deadline = time.monotonic() + 120
+    while not all(Path(m + ".started").exists() for m in marks):
+        assert time.monotonic() < deadline and command.poll() is None, "the pieces never started"
+        time.sleep(0.1)
+    workers = [int(Path(m + ".started").read_text()) for m in marks]
+    command.kill()
+    command.wait()
+    deadline = time.monotonic() + 25  # well before the pieces would write (30 s)
+    while any(Path(f"/proc/{w}").exists() and "Z" not in _state(w) for w in workers):
+        assert time.monotonic() < deadline, "a worker outlived its command"
+        time.sleep(0.2)
+    time.sleep(1)
+    assert not any(Path(m).exists() for m in marks)
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"

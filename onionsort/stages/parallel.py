@@ -36,6 +36,8 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -112,9 +114,11 @@ def worker_threads() -> int | None:
 _RUNNING = None
 
 
-def _start_worker(running=None) -> None:
+def _start_worker(running=None, parent: int | None = None) -> None:
     """A worker's initializer: one thread for torch, OpenMP and BLAS (set before any of them
-    loads, a local worker being a fresh process), and the pool's table of running pieces."""
+    loads, a local worker being a fresh process), the pool's table of running pieces, and a
+    watch on the ``parent`` process: a local worker whose command died (killed, or ended
+    without shutting its pool) stops its piece as on Ctrl-C instead of writing on alone."""
     global _WORKER_THREADS, _RUNNING
     _WORKER_THREADS = 1
     _RUNNING = running
@@ -128,6 +132,24 @@ def _start_worker(running=None) -> None:
         threadpool_limits(1)
     if running is not None:  # a local worker stops its piece on SIGTERM as on Ctrl-C
         signal.signal(signal.SIGTERM, _interrupt)
+    if parent is not None:
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                         name="watch-parent").start()
+
+
+def _watch_parent(pid: int, every: float = 1.0, grace: float = 10.0) -> None:
+    """Once process ``pid`` is gone (polled every ``every`` s), stop this worker: SIGTERM
+    first, which ends its piece as Ctrl-C does (files finished, partial names removed), then,
+    ``grace`` s later, exit (the pool's loop would wait for work from no one)."""
+    while True:
+        time.sleep(every)
+        try:
+            os.kill(pid, 0)
+        except (ProcessLookupError, PermissionError):  # gone, or its number reused
+            break
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(grace)
+    os._exit(1)
 
 
 def _interrupt(signum, _frame):
@@ -229,7 +251,7 @@ def _executor(options: ParallelOptions, n_pieces: int):
         running = context.Array("q", 2 * workers)
         _POOLS[workers] = (ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                                initializer=_start_worker,
-                                               initargs=(running,)), running)
+                                               initargs=(running, os.getpid())), running)
     return _POOLS[workers]
 
 
