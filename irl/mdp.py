@@ -144,6 +144,18 @@ class TabularMDP:
         out = np.asarray(self._flat_T @ flat_mass.T).T if self._sparse else flat_mass @ self._flat
         return out.reshape((*lead, self.n_states))
 
+    def reachable_states(self) -> np.ndarray:
+        """``(S,)`` bool: the states some sequence of actions reaches with positive probability
+        from the initial distribution (those a demonstration can show)."""
+        reached = self.initial > 0
+        for _ in range(self.n_states):
+            mass = np.repeat(reached[:, None].astype(float), self.n_actions, axis=1)
+            grown = reached | (self.push_forward(mass) > 0)
+            if np.array_equal(grown, reached):
+                break
+            reached = grown
+        return reached
+
     def expect_next_batch(self, values: np.ndarray) -> np.ndarray:
         """``sum_s' T[s, a, s'] values[n, s']`` for a batch ``values[n, s']``, shape (N, S, A).
 

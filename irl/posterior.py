@@ -231,13 +231,12 @@ def _check_estimator(estimator):
 
 
 def _fitted_map(estimator, demos) -> tuple[np.ndarray, object]:
-    """The MAP of these demonstrations, and the ``theta -> (log posterior, gradient)`` of
-    the estimator. A fitted estimator's ``theta_`` starts the search; it is not refitted in
-    place."""
-    params = estimator.get_params()
+    """The MAP and the ``theta -> (log posterior, gradient)`` of the estimator. A fitted
+    estimator's ``theta_`` is the MAP (the policy the robot runs is its greedy one, and the
+    confidence is about that policy); an unfitted one is fitted on a copy."""
     if hasattr(estimator, "theta_"):
-        params["init"] = estimator.theta_
-    fitted = type(estimator)(**params).fit(demos)
+        return np.asarray(estimator.theta_, float), estimator.log_posterior_function(demos)
+    fitted = type(estimator)(**estimator.get_params()).fit(demos)
     return np.asarray(fitted.theta_, float), fitted.log_posterior_function(demos)
 
 
@@ -322,8 +321,9 @@ def sample_posterior(
     ----------
     estimator : MMAPBIRL or MAPBIRL
         Its model (MDP, observation model of any kind, beta, prior, backend) defines the
-        posterior. If it is fitted, its ``theta_`` starts the search for the MAP; it is not
-        changed.
+        posterior. If it is fitted (on these demonstrations), its ``theta_`` is the MAP the
+        samples are drawn around and its greedy policy the one the confidence is about;
+        otherwise a copy is fitted. It is not changed.
     demonstrations : sequence of Demonstration
     n_samples : int, default 1000
         Samples returned (the main draws of all chains, thinned evenly to this many).

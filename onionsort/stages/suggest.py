@@ -5,7 +5,8 @@ ranks the task's states by the expected regret of the learned policy's action th
 ``E[max_a Q(s, a) - Q(s, pi(s))]`` under the posterior (:func:`irl.posterior.expected_regret`):
 the value of perfect information about the best action in that state. A demonstration that
 shows the sorter in that state is worth at most that much to the robot there; states where
-every posterior sample agrees with the policy are worth nothing and are not listed.
+every posterior sample agrees with the policy are worth nothing and are not listed, nor are
+states no sequence of actions reaches from the start (no demonstration can show them).
 
 Example::
 
@@ -61,7 +62,9 @@ def suggest(config: SuggestConfig) -> list[dict]:
     domain = onion_sorting()
     regret = expected_regret(posterior, domain.mdp)
     confidence = posterior.map_confidence()
-    order = [int(s) for s in regret.argsort()[::-1] if regret[s] > 1e-12][:config.top]
+    reachable = domain.mdp.reachable_states()
+    order = [int(s) for s in regret.argsort(kind="stable")[::-1]
+             if regret[s] > 1e-12 and reachable[s]][:config.top]
     return [{"state": s, "name": domain.state_names[s], "description": describe_state(s),
              "action": domain.action_names[int(posterior.map_policy[s])],
              "confidence": float(confidence[s]), "expected_regret": float(regret[s])}

@@ -141,13 +141,22 @@ def test_a_seed_reproduces_the_samples(method):
     assert not np.array_equal(a.theta, c.theta)
 
 
-def test_a_fitted_estimator_is_left_as_it_was():
-    _mdp, est, demos = noisy_two_state_problem(seed=2)
-    est.fit(demos[:1])
+def test_a_fitted_estimators_map_and_policy_are_the_ones_the_confidence_is_about():
+    """The policy the robot runs (the fitted estimator's) is the one the confidence scores,
+    even where another optimizer's run would stop a rounding away, across a policy border."""
+    dom = irl.domains.onion_sorting(noise=0.45)
+    demos, _ = dom.sample(n=2, length=10, occlusion=0.2, seed=5)
+    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
+    est.fit(demos)
     before = est.theta_.copy()
-    post = sample_posterior(est, demos, n_samples=20, method="laplace")
-    np.testing.assert_array_equal(est.theta_, before)
-    assert not np.allclose(post.map_theta, before)  # the MAP of all the demonstrations
+    post = sample_posterior(est, demos, n_samples=50, method="laplace")
+    np.testing.assert_array_equal(est.theta_, before)  # left as it was
+    np.testing.assert_array_equal(post.map_theta, est.theta_)
+    np.testing.assert_array_equal(post.map_policy, est.policy_)
+    unfitted = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
+    again = sample_posterior(unfitted, demos, n_samples=50, method="laplace")
+    assert not hasattr(unfitted, "theta_")
+    np.testing.assert_allclose(again.map_theta, est.theta_, atol=1e-4)
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
@@ -254,3 +263,15 @@ def test_chains_that_disagree_are_extended_up_to_max_draws():
     assert longer.diagnostics.n_draws > 8 and longer.diagnostics.n_draws <= 40
     assert longer.diagnostics.n_gradients > short.diagnostics.n_gradients
     assert longer.diagnostics.n_draws == 40 or longer.diagnostics.max_r_hat() <= 1.01
+
+
+def test_reachable_states_are_those_some_actions_reach():
+    mdp = two_state_mdp()
+    assert mdp.reachable_states().tolist() == [True, True]
+    T = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+                  [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]])
+    island = irl.TabularMDP(transitions=T, features=np.zeros((3, 2, 1)), discount=0.9,
+                            initial=[1.0, 0.0, 0.0])
+    assert island.reachable_states().tolist() == [True, True, False]
+    reach = irl.domains.onion_sorting().mdp.reachable_states()
+    assert reach.sum() == 10  # the sorter's loop; a held onion is where the gripper is
