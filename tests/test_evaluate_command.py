@@ -197,3 +197,14 @@ def test_defer_below_needs_a_posterior_and_a_probability(tmp_path, capsys):
     assert main(["evaluate", "--policy", "expert", "--out", str(tmp_path / "x"),
                  "--defer-below", "0.9"]) == 2
     assert "the expert policy has none" in capsys.readouterr().err
+
+
+def test_defer_below_refuses_a_confidence_file_about_another_policy(tmp_path, capsys):
+    expert = onion_sorting().expert_policy().argmax(axis=1)
+    run = _run_dir(tmp_path, expert)
+    other = expert.copy()
+    other[0] = (other[0] + 1) % 5
+    _confidence_file(run, other, {})
+    assert main(["evaluate", str(run), "--defer-below", "0.9", "--ground-truth-inspection"]) == 2
+    err = capsys.readouterr().err
+    assert "about another policy" in err and err.count("\n") == 1

@@ -251,7 +251,7 @@ def evaluate(config: EvaluateConfig, models=None):
     if config.defer_below is not None:
         from onionsort.stages.learn import load_confidence
 
-        confidence = load_confidence(config.run)
+        confidence = load_confidence(config.run, policy=actions)
     folder = config.folder
     check_output_folder(folder, "--out" if config.out is not None else "RUN_DIR")
     if config.connect is not None:

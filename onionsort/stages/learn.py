@@ -290,9 +290,11 @@ def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) 
     return doc
 
 
-def load_confidence(run_dir: Path, task: TaskDescription | None = None) -> np.ndarray:
+def load_confidence(run_dir: Path, task: TaskDescription | None = None,
+                    policy: np.ndarray | None = None) -> np.ndarray:
     """``confidence[s]`` (S,): a learning run's confidence in its policy's action in each
-    state, from ``policy_confidence.json`` (``onionsort learn --posterior``)."""
+    state, from ``policy_confidence.json`` (``onionsort learn --posterior``). With ``policy``
+    (the run's actions per state), a file about another policy is refused."""
     import json
 
     from irl.domains.onion_sorting import SORTING_TASK
@@ -307,8 +309,13 @@ def load_confidence(run_dir: Path, task: TaskDescription | None = None) -> np.nd
         if doc.get("format") != CONFIDENCE_FORMAT:
             raise ValueError(f"format {doc.get('format')!r}")
         conf = np.array([row["confidence"][row["map_action"]] for row in doc["states"]], float)
+        named = [row["map_action"] for row in doc["states"]]
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path} is not a policy confidence file ({exc})") from None
+    if policy is not None and len(named) == len(policy) and \
+            named != [task.action_names[int(a)] for a in policy]:
+        raise ValueError(f"{path} is about another policy than {Path(run_dir) / MODEL_FILE}; "
+                         "learn again with `onionsort learn ... --posterior`")
     if conf.shape != (task.n_states,) or np.any((conf < 0) | (conf > 1)):
         raise ValueError(f"{path}: one confidence in [0, 1] per {task.name} state is needed; "
                          f"got {conf.size}")
