@@ -395,10 +395,10 @@ def sample_posterior(
                 logger.warning("the chains still disagree after %d draws each (max R-hat %.3f "
                                "> 1.01): raise max_draws or n_warmup", chains.shape[1],
                                diagnostics.max_r_hat())
-    policies = _greedy_policies(mdp, theta)
-    return Posterior(theta=theta, policies=policies, map_theta=map_theta,
-                     map_policy=_greedy_policies(mdp, map_theta[None])[0], covariance=cov,
-                     n_actions=mdp.n_actions, method=method, diagnostics=diagnostics)
+    map_policy, *policies = _greedy_policies(mdp, np.vstack([map_theta, theta]))
+    return Posterior(theta=theta, policies=np.stack(policies), map_theta=map_theta,
+                     map_policy=map_policy, covariance=cov, n_actions=mdp.n_actions,
+                     method=method, diagnostics=diagnostics)
 
 
 # -- what the posterior says about the MAP policy ----------------------------------------------

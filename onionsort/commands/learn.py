@@ -24,7 +24,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 from onionsort.commands._args import (
@@ -95,9 +94,7 @@ def run(args) -> int:
     if len(methods) == 1:
         models = {methods[0]: learn(config)}
         folders = {methods[0]: args.out}
-    else:
-        for method in methods:  # each method's config checked before any piece starts
-            dataclasses.replace(config, method=method)
+    else:  # learn_methods checks every method's config before any piece starts
         models = learn_methods(config, methods, ParallelOptions(**parallel_options(args)))
         folders = {m: args.out / m for m in methods}
     for method, model in models.items():

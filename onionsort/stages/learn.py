@@ -290,28 +290,39 @@ def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) 
     return doc
 
 
+def _read_run_json(run_dir: Path, name: str, missing: str, what: str, read):
+    """``(path, read(document))`` of a run folder's JSON file ``name``, with one-line errors:
+    ``missing`` says how to make it, ``what`` names it when it cannot be read."""
+    import json
+
+    path = Path(run_dir) / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} holds no {missing}")
+    try:
+        return path, read(json.loads(path.read_text()))
+    except (json.JSONDecodeError, AttributeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{path} is not {what} ({exc})") from None
+
+
 def load_confidence(run_dir: Path, task: TaskDescription | None = None,
                     policy: np.ndarray | None = None) -> np.ndarray:
     """``confidence[s]`` (S,): a learning run's confidence in its policy's action in each
     state, from ``policy_confidence.json`` (``onionsort learn --posterior``). With ``policy``
     (the run's actions per state), a file about another policy is refused."""
-    import json
-
     from irl.domains.onion_sorting import SORTING_TASK
 
-    task = SORTING_TASK if task is None else task
-    path = Path(run_dir) / CONFIDENCE_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} holds no posterior (no {CONFIDENCE_FILE}); learn "
-                                "with `onionsort learn ... --posterior` first")
-    try:
-        doc = json.loads(path.read_text())
+    def read(doc: dict) -> tuple[np.ndarray, list[str]]:
         if doc.get("format") != CONFIDENCE_FORMAT:
             raise ValueError(f"format {doc.get('format')!r}")
-        conf = np.array([row["confidence"][row["map_action"]] for row in doc["states"]], float)
-        named = [row["map_action"] for row in doc["states"]]
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path} is not a policy confidence file ({exc})") from None
+        return (np.array([row["confidence"][row["map_action"]] for row in doc["states"]],
+                         float),
+                [row["map_action"] for row in doc["states"]])
+
+    task = SORTING_TASK if task is None else task
+    path, (conf, named) = _read_run_json(
+        run_dir, CONFIDENCE_FILE,
+        f"posterior (no {CONFIDENCE_FILE}); learn with `onionsort learn ... --posterior` first",
+        "a policy confidence file", read)
     if policy is not None and len(named) == len(policy) and \
             named != [task.action_names[int(a)] for a in policy]:
         raise ValueError(f"{path} is about another policy than {Path(run_dir) / MODEL_FILE}; "
@@ -326,21 +337,15 @@ def load_policy(run_dir: Path, task: TaskDescription | None = None):
     """The greedy policy ``actions[s]`` (S,) of a learning run and its model.json, with clear
     errors; ``task`` (the onion-sorting task by default) gives the numbers of states and
     actions."""
-    import json
-
     from irl.domains.onion_sorting import SORTING_TASK
 
     task = SORTING_TASK if task is None else task
     n_states, n_actions = task.n_states, task.n_actions
-    path = Path(run_dir) / MODEL_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} holds no learned model (no {MODEL_FILE}); run "
-                                "`onionsort learn ... --out RUN_DIR` first")
-    try:
-        doc = json.loads(path.read_text())
-        actions = np.asarray(doc["policy_indices"], dtype=np.int64)
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path} is not a learned model ({exc})") from None
+    path, (doc, actions) = _read_run_json(
+        run_dir, MODEL_FILE,
+        f"learned model (no {MODEL_FILE}); run `onionsort learn ... --out RUN_DIR` first",
+        "a learned model",
+        lambda doc: (doc, np.asarray(doc["policy_indices"], dtype=np.int64)))
     if actions.shape != (n_states,) or actions.min() < 0 or actions.max() >= n_actions:
         raise ValueError(f"{path}: the policy must give one action in [0, {n_actions}) for each "
                          f"of the {n_states} {task.name} states; got shape {actions.shape}")

@@ -41,6 +41,14 @@ def noisy_two_state_problem(seed=0, occluded=0.3):
     return mdp, est, demos
 
 
+def sorting_posterior(seed: int, n_samples: int, noise: float = 0.45):
+    """The domain and the Laplace posterior of MMAP-BIRL on two short sorting demonstrations."""
+    dom = irl.domains.onion_sorting(noise=noise)
+    demos, _ = dom.sample(n=2, length=10, occlusion=0.2, seed=seed)
+    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
+    return dom, sample_posterior(est, demos, n_samples=n_samples, seed=0, method="laplace")
+
+
 def quadrature(est, demos, lo=-12.0, hi=12.0, n=2001):
     """The exact posterior of the single weight on a grid: its density and the grid."""
     grid = np.linspace(lo, hi, n)
@@ -111,13 +119,16 @@ def test_every_observation_model_and_backend(kind, backend):
     post = sample_posterior(est, demos, n_samples=50, seed=0, method="laplace")
     assert post.theta.shape == (50, 6) and np.all(np.isfinite(post.theta))
     np.testing.assert_allclose(post.action_confidence().sum(axis=1), 1.0)
+    # centred on this model's MAP, and the same draws as the numpy reference
+    np.testing.assert_allclose(post.map_theta, est.fit(demos).theta_, atol=1e-4)
+    reference = irl.MMAPBIRL(dom.mdp, om, beta=dom.beta, prior=dom.prior, backend="numpy")
+    np.testing.assert_allclose(
+        post.theta, sample_posterior(reference, demos, n_samples=50, seed=0,
+                                     method="laplace").theta, rtol=1e-5, atol=1e-6)
 
 
 def test_confidence_rows_sum_to_one_and_credible_sets_are_the_fewest_actions():
-    dom = irl.domains.onion_sorting(noise=0.45)
-    demos, _ = dom.sample(n=2, length=10, occlusion=0.2, seed=5)
-    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
-    post = sample_posterior(est, demos, n_samples=400, seed=0, method="laplace")
+    _, post = sorting_posterior(seed=5, n_samples=400)
     conf = post.action_confidence()
     assert conf.shape == (48, 5)
     np.testing.assert_allclose(conf.sum(axis=1), 1.0)
@@ -180,10 +191,7 @@ def test_only_bayesian_learners_have_a_posterior():
 
 
 def test_the_map_policy_risk_is_the_ile_under_each_sample():
-    dom = irl.domains.onion_sorting(noise=0.45)
-    demos, _ = dom.sample(n=2, length=10, occlusion=0.2, seed=8)
-    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
-    post = sample_posterior(est, demos, n_samples=60, seed=0, method="laplace")
+    dom, post = sorting_posterior(seed=8, n_samples=60)
     risk = map_policy_risk(post, dom.mdp)
     expected = [irl.inverse_learning_error(dom.mdp, t, post.map_theta) for t in post.theta]
     np.testing.assert_allclose(risk.ile, expected, rtol=1e-7, atol=1e-7)
@@ -193,10 +201,7 @@ def test_the_map_policy_risk_is_the_ile_under_each_sample():
 
 
 def test_expected_regret_is_zero_where_every_sample_agrees():
-    dom = irl.domains.onion_sorting(noise=0.45)
-    demos, _ = dom.sample(n=2, length=10, occlusion=0.2, seed=9)
-    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior)
-    post = sample_posterior(est, demos, n_samples=80, seed=0, method="laplace")
+    dom, post = sorting_posterior(seed=9, n_samples=80)
     regret = expected_regret(post, dom.mdp)
     solver = OptimalQSolver(dom.mdp)
     Q = np.stack([solver.q_values(t) for t in post.theta])
