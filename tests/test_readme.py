@@ -1,4 +1,5 @@
-"""The README's code stays true: its library example runs as written."""
+"""The documented code stays true: the README's library example and the docs' examples run as
+written."""
 
 import doctest
 import re
@@ -33,12 +34,12 @@ def test_package_docstring_example():
 
 @pytest.mark.slow
 def test_readme_stages_example_runs(tmp_path, monkeypatch):
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "api.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     example = next(b for b in blocks if "onionsort.stages import" in b)
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
-    exec(compile(example, "README.md", "exec"), scope)
+    exec(compile(example, "docs/api.md", "exec"), scope)
     assert len(scope["sessions"]) == 4
     assert len(scope["model"]["policy_indices"]) == 48
     assert (tmp_path / "runs/study/mmap/model.json").is_file()
@@ -49,11 +50,11 @@ def test_readme_gymnasium_example_matches_evaluate(capsys):
     from irl.domains.onion_sorting import onion_sorting
     from robot.evaluation import evaluate_policy
 
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "api.md").read_text()
     example = next(b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S)
                    if "Sorting-v0" in b)
     scope: dict = {}
-    exec(compile(example, "README.md", "exec"), scope)
+    exec(compile(example, "docs/api.md", "exec"), scope)
     counts = [int(x) for x in capsys.readouterr().out.split()[-4:]]
     result = evaluate_policy(onion_sorting().expert_policy(), n_onions=6, n_blemished=3, seed=0,
                              classify=scope["inspector"])
@@ -62,14 +63,14 @@ def test_readme_gymnasium_example_matches_evaluate(capsys):
 
 @pytest.mark.slow
 def test_readme_scale_example_runs_and_backends_agree(capsys):
-    """The 10,000-state example of the Performance section: its fit recovers the true weights'
-    signs and order (as the README prints), and the default backend finds the same weights."""
+    """The 10,000-state example of docs/performance.md: its fit recovers the true weights'
+    signs and order (as the page prints), and the default backend finds the same weights."""
     pytest.importorskip("numba")
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "performance.md").read_text()
     example = next(b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S)
                    if "grid_mdp" in b)
     scope: dict = {}
-    exec(compile(example, "README.md", "exec"), scope)
+    exec(compile(example, "docs/performance.md", "exec"), scope)
     theta = scope["est"].theta_
     np.testing.assert_allclose(theta, [1.09, -0.59, 0.54, -0.41], atol=0.005)
     numpy_fit = irl.MMAPBIRL(scope["mdp"], scope["sensor"]).fit(scope["demos"])

@@ -1,4 +1,4 @@
-"""The shipped perception models against the floors the README states, on frames rendered fresh
+"""The shipped perception models against the floors docs/perception.md states, on frames rendered fresh
 for this test (a seed no model, threshold or calibration was chosen on)."""
 
 import re
@@ -10,7 +10,7 @@ ROOT = Path(__file__).parents[1]
 #: the seed of the frames rendered here; used for nothing else
 FRESH_SEED = 4242
 
-#: README row label (before "(floor ...)") -> how to read the metric from eval-perception
+#: docs/perception.md row label (before "(floor ...)") -> how to read the metric from eval-perception
 METRICS = {
     "detector mAP@0.5": lambda r: r["map50"],
     "onion location, unoccluded steps": lambda r: r["accuracy"]["onion"],
@@ -28,23 +28,23 @@ def _robot_call(result: dict) -> dict:
     return inspection["levels"]["clean"]["robot"]["fused"][inspection["rule"]]
 
 
-def readme_floors() -> dict[str, float]:
-    text = (ROOT / "README.md").read_text()
+def documented_floors() -> dict[str, float]:
+    text = (ROOT / "docs" / "perception.md").read_text()
     return {label.strip(): float(floor)
             for label, floor in re.findall(r"^\| ([^|\n]*?)\(floor ([0-9.]+)\)", text, re.M)}
 
 
-def test_the_readme_states_a_floor_for_every_checked_metric():
-    assert set(readme_floors()) == set(METRICS)
+def test_the_docs_state_a_floor_for_every_checked_metric():
+    assert set(documented_floors()) == set(METRICS)
 
 
 @pytest.mark.slow
-def test_the_shipped_models_meet_the_readme_floors_on_fresh_frames(tmp_path):
+def test_the_shipped_models_meet_the_documented_floors_on_fresh_frames(tmp_path):
     from onionsort.stages import DatasetConfig, PerceptionEvalConfig, eval_perception, make_dataset
 
     data = tmp_path / "fresh"
     make_dataset(DatasetConfig(out=data, frames=600, robot_onions=30, seed=FRESH_SEED))
     result = eval_perception(PerceptionEvalConfig(data=data, split="all"))
     below = {label: (round(METRICS[label](result), 3), floor)
-             for label, floor in readme_floors().items() if METRICS[label](result) < floor}
-    assert not below, f"below the README's floors (measured, floor): {below}"
+             for label, floor in documented_floors().items() if METRICS[label](result) < floor}
+    assert not below, f"below the documented floors (measured, floor): {below}"

@@ -14,9 +14,9 @@ Examples
         --out runs/learn-mmap --connect rerun+http://192.168.1.20:9876/proxy
     onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --out runs/learn-mmap --backend numba       # compiled forward-backward (the fast extra)
-    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --out runs/learn-mmap --posterior            # + posterior.npz, policy_confidence.json
-    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --method mmap-birl,map-birl,hidden-data-em --out runs/learn   # runs/learn/<method>,
         # the methods in parallel (--workers, --executor ray)
 """
