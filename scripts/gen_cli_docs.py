@@ -309,7 +309,6 @@ def cli_reference(build=None) -> str:
     dependent = machine_dependent_defaults(build)
     commands = list(iter_commands(build()))
     out = ["# Command-line reference", "",
-           f"<!-- Generated from the argparse parsers by `{REGENERATE}`: do not edit. -->",
            f"_Generated from the parsers of `onionsort.cli`; do not edit by hand. Regenerate it "
            f"with `{REGENERATE}` (`--check` tells whether it is stale)._", "",
            "Every command also takes `-h`/`--help`, which prints its usage and options. "
