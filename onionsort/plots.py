@@ -340,3 +340,53 @@ def precision_recall_figure(report: dict, folder: Path) -> list[Path]:
             ax.legend(fontsize=7, loc="lower left")
         written.append(_save(fig, Path(folder) / f"inspection_pr_{source}.png", plt))
     return written
+
+
+def sorting_scores_figure(rows: Sequence[dict], path: Path, *, title: str = "") -> Path:
+    """Precision and recall of the Sawyer's sort per method, as a PNG: two bars per row
+    (precision, recall), with their 95% intervals where a row has them (``precision_ci``,
+    ``recall_ci``: ``[low, high]``), and the paper's values (a row's ``paper``: a dict of
+    ``precision`` and ``recall``) as black diamonds.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        One per bar group: ``label``, ``precision``, ``recall``, optionally ``precision_ci``,
+        ``recall_ci`` and ``paper``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not rows:
+        raise ValueError("rows must hold at least one method's scores; got none")
+    width = 0.36
+    fig, ax = plt.subplots(figsize=(max(4.8, 1.5 * len(rows) + 1.6), 3.8))
+    for j, (key, color) in enumerate((("precision", "C0"), ("recall", "C1"))):
+        xs = np.arange(len(rows)) + (j - 0.5) * width
+        values = np.array([r[key] for r in rows], float)
+        low = np.array([r.get(f"{key}_ci", (v, v))[0] for r, v in zip(rows, values, strict=True)],
+                       float)
+        high = np.array([r.get(f"{key}_ci", (v, v))[1] for r, v in zip(rows, values,
+                                                                         strict=True)], float)
+        ax.bar(xs, values, width, color=color, label=key)
+        has_ci = np.array([f"{key}_ci" in r for r in rows])
+        if has_ci.any():
+            ax.errorbar(xs[has_ci], values[has_ci],
+                        yerr=[np.clip(values - low, 0, None)[has_ci],
+                              np.clip(high - values, 0, None)[has_ci]],
+                        fmt="none", ecolor="0.2", capsize=4, lw=1)
+        paper = [(x, r["paper"][key]) for x, r in zip(xs, rows, strict=True) if r.get("paper")]
+        if paper:
+            ax.plot(*zip(*paper, strict=True), "D", color="black", ms=5,
+                    label="paper (physical robot)" if j == 0 else None)
+    ax.set_xticks(range(len(rows)), [r["label"] for r in rows], fontsize=8)
+    ax.set_ylim(0, 1.22)  # room for the legend above the bars
+    ax.set_yticks(np.linspace(0, 1, 6))
+    ax.set_ylabel("fraction")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper center", ncol=3, frameon=False)
+    ax.set_title(title or "the Sawyer's sort: precision and recall (95% interval where known)",
+                 fontsize=9)
+    return _save(fig, path, plt)

@@ -271,6 +271,13 @@ CASES = [
      ["connect must be", "the path must be /proxy", "'rerun+http://h:1/viewer'"]),
     (["demo", "--quick", "--backend", "cuda", "--out", "{d}/x"],
      ["--backend", "invalid choice", "'cuda'", "'numba'"]),
+    # report
+    (["report", "{d}/nofile"], ["RUN_DIR", "nofile does not exist", "onionsort demo"]),
+    (["report", "{d}/afile"], ["afile is a file, not a folder"]),
+    (["report", "{d}/data_none"], ["data_none is no run folder (it is empty)",
+                                   "onionsort experiment", "summary.json"]),
+    (["report", "{d}/run_done"], ["run_done is no run folder (it holds model.json)"]),
+    (["report", "{d}/data_bad"], ["data_bad is no run folder (it holds dataset.json)"]),
     # the top level
     (["sort-onions"], ["invalid choice", "'sort-onions'"]),
     (["--debug"], ["required", "COMMAND"]),

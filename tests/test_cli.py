@@ -138,32 +138,6 @@ def test_experiment_backend_reaches_the_learners_and_agrees_with_numpy(tmp_path,
             (b["method"], b["n_iter"], b["exact_policy"])
 
 
-@pytest.fixture(scope="module")
-def perceived_sessions(tmp_path_factory):
-    """Two perceived sessions of 10 steps (20% occluded) without the simulator: sensor frames
-    of plain arrays, observations drawn from the sorting expert through a 30%-noise sensor."""
-    from irl.demonstrations import observe, sample_trajectory
-    from irl.domains import onion_sorting
-    from recordings.perception import add_perception
-    from tests.test_bad_cli import _sensor_session
-
-    folder, dom, paths = tmp_path_factory.mktemp("perceived"), onion_sorting(noise=0.3), []
-    for i in range(2):
-        rng = np.random.default_rng(i)
-        demo = observe(sample_trajectory(dom.mdp, dom.expert_policy(), 10, rng),
-                       dom.observation_model, 0.2, rng)
-        obs = demo.as_array()
-        path = _sensor_session(folder / f"session_{i:03d}.mcap", frames_per_step=1,
-                               steps=len(obs))
-        steps = [{"step": t, "frame": t, "occluded": bool(o < 0),
-                  "observation": None if o < 0 else int(o)} for t, o in enumerate(obs)]
-        add_perception(path, steps, detections={}, inspection={},
-                       frame_times={t: t * 10**8 for t in range(len(obs))},
-                       models={"folder": "test"})
-        paths.append(path)
-    return paths
-
-
 @pytest.mark.parametrize("method", ["mmap-birl", "hidden-data-em", "maxent"])
 def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built, method,
                                                                   perceived_sessions):

@@ -33,16 +33,14 @@ def _recount(onions: list[dict]) -> dict[str, int]:
 
 
 @SHIPPED
-def test_quick_demo_runs_end_to_end(tmp_path, capsys):
+def test_quick_demo_runs_end_to_end(quick_demo, capsys):
     from irl.domains.onion_sorting import onion_sorting
     from irl.metrics import inverse_learning_error
     from onionsort.stages.demo import METHODS, SIZES
     from recordings import open_session
     from state_abstraction.calibration import load_calibration
 
-    out = tmp_path / "demo"
-    assert main(["demo", "--quick", "--out", str(out)]) == 0
-    said = capsys.readouterr().out
+    out, said = quick_demo  # `onionsort demo --quick --out OUT` and what it printed
     results = json.loads((out / "results.json").read_text())
     size = SIZES[True]
     assert set(results["methods"]) == set(METHODS)

@@ -19,4 +19,5 @@ COMMAND_MODULES = [
     "onionsort.commands.evaluate",
     "onionsort.commands.suggest",
     "onionsort.commands.demo",
+    "onionsort.commands.report",
 ]

@@ -5,7 +5,7 @@ them with the shipped models, calibrates the observation model on fresh held-out
 the sorter's reward with MMAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions with each
 learned policy (its inspection as ``onionsort evaluate``'s: ``--inspection-views``,
 ``--miss-cost``, ``--waste-cost``, ``--fusion``) and prints the paper's Table 1 beside ours.
-``--quick`` runs it small.
+``--quick`` runs it small. It ends by writing ``report.md`` in --out (``onionsort report``).
 ``--resume`` continues an interrupted demo in its --out from the last finished stage (same
 results as an uninterrupted run); ``--connect URL`` streams the Rerun recordings to a viewer on
 another machine as well.
@@ -82,4 +82,5 @@ def run(args) -> int:
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     print(table(results))
     print(f"wrote {args.out / 'results.json'} ({results['seconds']:.0f} s)")
+    print(f"report: {args.out / 'report.md'}")
     return 0

@@ -73,4 +73,5 @@ def run(args) -> int:
     print(format_table(summary["points"]))
     print(f"wrote results.csv, summary.json and {len(summary['plots'])} plots to "
           f"{config.folder}")
+    print(f"report: {summary['report']}")
     return 0

@@ -16,6 +16,7 @@ evaluate           :class:`EvaluateConfig`      :func:`evaluate`
 suggest            :class:`SuggestConfig`       :func:`suggest` -> states worth a demonstration
 demo               :class:`DemoConfig`          :func:`demo` (composes the stages above)
 experiment         :class:`ExperimentConfig`    :func:`run_experiment` (synthetic sweeps)
+report             :class:`ReportConfig`        :func:`report` -> ``RUN/report.md``
 =================  ===========================  ==========================================
 
 The CLI's commands parse arguments into these configs and call the function; scripts do the
@@ -38,6 +39,7 @@ from onionsort.stages.learn import LearnConfig, learn
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
+from onionsort.stages.report import ReportConfig, report
 from onionsort.stages.suggest import SuggestConfig, suggest
 
 __all__ = [
@@ -53,6 +55,7 @@ __all__ = [
     "PerceptionEvalConfig",
     "PerceptionModels",
     "RecordConfig",
+    "ReportConfig",
     "SuggestConfig",
     "calibrate",
     "demo",
@@ -65,6 +68,7 @@ __all__ = [
     "make_dataset",
     "perceive",
     "record",
+    "report",
     "run_experiment",
     "suggest",
 ]

@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["DEVICES", "check_device", "check_difficulty", "check_output_folder", "log_config",
-           "output_folder", "refuse_existing", "resolve_device", "write_json"]
+           "output_folder", "refuse_existing", "resolve_device", "write_json", "write_text"]
 
 #: Where torch runs: ``auto`` takes CUDA when a device is present, else the CPU.
 DEVICES = ("auto", "cpu", "cuda")
@@ -51,6 +51,18 @@ def write_json(path: Path, doc) -> Path:
     tmp = path.with_name(path.name + ".partial")
     try:
         tmp.write_text(json.dumps(doc, indent=1))
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary name, then rename it."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        tmp.write_text(text)
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -9,7 +9,9 @@
    and with HiddenDataEM;
 5. let the Sawyer sort 50 onions (30 blemished) with each learned policy, inspection by the
    detector;
-6. write ``results.json`` with the paper's Table 1 beside ours (:func:`table`).
+6. write ``results.json`` with the paper's Table 1 beside ours (:func:`table`), and
+   ``report.md`` (:mod:`onionsort.stages.report`): the settings, Table 1, the calibration, the
+   learning curves and the recordings, with a precision/recall figure.
 
 ``repeats`` runs steps 1, 2, 4 and 5 again with other seeds (repeat ``k`` uses seed
 ``seed + k``; one calibration serves all). ``results.json`` then holds the counts summed over
@@ -57,6 +59,7 @@ from onionsort.stages.models import PerceptionModels, sorting_threshold
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
+from onionsort.stages.report import ReportConfig, report
 
 __all__ = ["METHODS", "PAPER_TABLE_1", "DemoConfig", "demo", "table"]
 
@@ -147,7 +150,7 @@ class DemoConfig(ParallelOptions):
 
 def demo(config: DemoConfig) -> dict:
     """Run the whole job (with ``config.resume``, the stages not finished yet); write
-    ``config.out/results.json`` and return its content."""
+    ``config.out/results.json`` and ``config.out/report.md``; return the results."""
     import torch
 
     from state_abstraction.calibration import load_calibration
@@ -166,6 +169,7 @@ def demo(config: DemoConfig) -> dict:
     progress = _Progress(out, _settings(config, size), resume=config.resume)
     if config.resume and (out / "results.json").is_file():
         logger.info("%s holds a finished demo; nothing to resume", out)
+        report(ReportConfig(run=out))
         return json.loads((out / "results.json").read_text())
     progress.start()
     models = PerceptionModels.load_cached(config.models, config.device)
@@ -227,6 +231,7 @@ def demo(config: DemoConfig) -> dict:
         results["deferring"] = {m: _pooled([r["deferring"] for r in runs], config.seed)
                                 for m, runs in per_repeat.items() if m in BAYESIAN_METHODS}
     write_json(out / "results.json", results)
+    report(ReportConfig(run=out))
     return results
 
 

@@ -3,8 +3,9 @@ data-efficiency and misspecified-beta sweeps with bootstrap intervals.
 
 Writes ``results.csv`` (one row per method, occlusion, noise, number of demonstrations, length,
 learner setting and batch), ``summary.json`` (means with 95% percentile-bootstrap intervals over
-batches) and the plots into the run folder. Rows go to ``results.csv.partial`` as trials finish,
-beside ``results.csv.partial.json`` (the sweep they belong to); ``resume=True`` keeps those rows
+batches), the plots and ``report.md`` (:mod:`onionsort.stages.report`) into the run folder.
+Rows go to ``results.csv.partial`` as trials finish, beside ``results.csv.partial.json`` (the
+sweep they belong to); ``resume=True`` keeps those rows
 and runs only the missing trials, so the final ``results.csv`` (rows in trial order) equals that
 of an uninterrupted run, timings aside. Trials run on the stages' executor
 (:class:`~onionsort.stages.parallel.ParallelOptions`): a local process pool
@@ -41,6 +42,7 @@ from pathlib import Path
 
 from onionsort.stages.base import check_output_folder, log_config, write_json
 from onionsort.stages.parallel import ParallelOptions, RayExecutor
+from onionsort.stages.report import ReportConfig, report
 
 __all__ = ["CSV_COLUMNS", "ExperimentConfig", "format_table", "parse_list",
            "run_experiment"]
@@ -171,7 +173,8 @@ class ExperimentConfig(ParallelOptions):
 
 
 def run_experiment(config: ExperimentConfig) -> dict:
-    """Run the sweep; write the CSV, ``summary.json`` and plots; return the summary.
+    """Run the sweep; write the CSV, ``summary.json``, plots and ``report.md``; return the
+    summary (with the paths of the plots, ``plots``, and of the report, ``report``).
 
     A ``results.csv.partial`` left in the folder by an interrupted run is continued with
     ``resume=True`` (refused if it is from a sweep with other parameters) and is otherwise
@@ -238,6 +241,7 @@ def run_experiment(config: ExperimentConfig) -> dict:
     write_json(out / "summary.json", summary)
     summary["plots"] = [str(p) for p in plot_sweep(ordered, out, title=config.domain,
                                                    points=points)]
+    summary["report"] = str(report(ReportConfig(run=out)))
     return summary
 
 
