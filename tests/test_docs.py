@@ -121,11 +121,11 @@ def test_a_default_computed_from_the_machine_is_not_written_as_this_machines():
 
 
 def test_the_reference_picks_up_every_registered_command(monkeypatch):
-    """A command module registered later (e.g. ``report``) appears without any change here."""
-    module = types.ModuleType("fake_report_command")
+    """A command module registered later (a made-up ``summarize``) appears with no change here."""
+    module = types.ModuleType("fake_summarize_command")
 
     def register(subparsers):
-        p = subparsers.add_parser("report", help="write a report", description="A report.")
+        p = subparsers.add_parser("summarize", help="write a summary", description="A summary.")
         p.add_argument("run", metavar="RUN_DIR")
         p.add_argument("--format", choices=("md", "html"), default="md")
 
@@ -136,8 +136,8 @@ def test_the_reference_picks_up_every_registered_command(monkeypatch):
     monkeypatch.setattr(onionsort.cli, "COMMAND_MODULES",
                         [*onionsort.cli.COMMAND_MODULES, module.__name__])
     text = gen.cli_reference()
-    assert "- [onionsort report](#onionsort-report): write a report" in text
-    assert "usage: onionsort report [-h] [--format {md,html}] RUN_DIR" in text
+    assert "- [onionsort summarize](#onionsort-summarize): write a summary" in text
+    assert "usage: onionsort summarize [-h] [--format {md,html}] RUN_DIR" in text
     assert "| `--format` | `{md,html}` | `md` |" in text
 
 
@@ -216,7 +216,7 @@ onionsort train detecter --data D --out D
 onionsort evaluate RUN_DIR --onions many
 onionsort demo --difficulty hardest
 onionsort learn runs/rec/*.mcap --out runs/learn
-onionsort --verbose report runs/x
+onionsort --verbose summarize runs/x
 ```
 
 Inline: `onionsort demo --repeat 3`, `onionsort train detecter`,
@@ -256,7 +256,7 @@ def test_the_command_checker_names_each_fault(tmp_path, parser):
         (8, "invalid int value: 'many'"),
         (9, "invalid choice: 'hardest'"),
         (10, "the following arguments are required: --observation-model"),
-        (11, "`report` is not a command of `onionsort`"),
+        (11, "`summarize` is not a command of `onionsort`"),
         (14, "`--repeat` is not an option of `onionsort demo`"),
         (14, "`detecter` is not a command of `onionsort train`"),
         (15, "`--tops` is not an option of `onionsort suggest`"),

@@ -1,5 +1,5 @@
-"""The shipped perception models against the floors docs/perception.md states, on frames rendered fresh
-for this test (a seed no model, threshold or calibration was chosen on)."""
+"""The shipped perception models against the floors docs/perception.md states, on frames
+rendered fresh for this test (a seed no model, threshold or calibration was chosen on)."""
 
 import re
 from pathlib import Path
@@ -10,7 +10,7 @@ ROOT = Path(__file__).parents[1]
 #: the seed of the frames rendered here; used for nothing else
 FRESH_SEED = 4242
 
-#: docs/perception.md row label (before "(floor ...)") -> how to read the metric from eval-perception
+#: docs/perception.md's row label (before "(floor ...)") -> how eval-perception gives it
 METRICS = {
     "detector mAP@0.5": lambda r: r["map50"],
     "onion location, unoccluded steps": lambda r: r["accuracy"]["onion"],

@@ -173,7 +173,7 @@ def test_the_train_stage_reads_the_dataset_and_trains_through_the_cli(fresh_data
 
 
 def test_the_shipped_model_reads_the_camera_factors_with_and_without_depth(fresh_steps):
-    """Floors: 0.95 with depth is the documented floor (docs/perception.md) for the location factors. Without depth
+    """Floors: 0.95 with depth is docs/perception.md's floor for the location factors. Without depth
     the floor is 0.90, set before measuring: the classifier must be usable on plain video (at
     most 1 error in 10 on what the camera shows, far below the ~30 % observer noise the paper
     assumed), while ~35 unoccluded steps leave room for a step or two of bad luck."""
