@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
+import re
 import sys
 import types
 from pathlib import Path
@@ -303,6 +304,16 @@ def test_code_spans_and_fences():
 def test_every_link_resolves_inside_the_repository():
     problems = [p for path in markdown_files(ROOT) for p in link_problems(path, ROOT)]
     assert not problems, "broken or external links:\n" + "\n".join(problems)
+
+
+def test_the_readme_is_short_and_shows_pictures():
+    """Issue 25's shape: a README a newcomer reads in two minutes, with at least two pictures
+    that are image files in the repository (the link check above says they exist)."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    images = re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text)
+    assert len(images) >= 2 and all(Path(i).suffix == ".png" for i in images), images
+    assert all((ROOT / i).is_file() for i in images), images
 
 
 def test_github_slugs():
