@@ -3,7 +3,7 @@
 - ``pipeline.png``: the pipeline, from the PyBullet world to the Sawyer's precision and recall,
   drawn with matplotlib (no data);
 - ``efficiency.png``: normalized ILE and exact-policy rate against the number of
-  demonstrations, per method, at two noise levels: the data-efficiency sweep of the README's
+  demonstrations, per method, at two noise levels: the data-efficiency sweep of docs/results.md's
   Results (``onionsort experiment sorting --trajectories 1,2,4,8 ...``, read from its
   ``summary.json``);
 - ``workcell.png``: stills of the work cell rendered by the project's own cameras (TinyRenderer):
@@ -96,7 +96,7 @@ EFFICIENCY = RunSpec(
     {**_EFFICIENCY_EXPECT, "trajectories": [1, 2, 4, 8], "batches": 20,
      "points": [[0.2, 0.3], [0.2, 0.45]]},
 )
-"""The README's data-efficiency sweep (about 3 min on 2 cores)."""
+"""The data-efficiency sweep of docs/results.md (about 3 min on 2 cores)."""
 EFFICIENCY_QUICK = RunSpec(
     "efficiency-quick",
     ("experiment", "sorting", "--trajectories", "1,2", "--noise", "0.3,0.45",
@@ -245,8 +245,9 @@ def pipeline_figure():
     ax.axis("off")
     ax.text(1, 55, "onionsort: from a person's demonstrations to a robot that sorts",
             fontsize=12, weight="bold", va="top")
-    ax.text(1, 51.3, "each box is a stage (`onionsort COMMAND`, `onionsort.stages`); dashed: "
-            "side inputs and logging", fontsize=8.5, color="0.35", va="top")
+    ax.text(1, 51.3, "record, perceive, calibrate, learn, evaluate and import are commands "
+            "(`onionsort COMMAND`) and stages (`onionsort.stages`); dashed: side inputs and "
+            "logging", fontsize=8.5, color="0.35", va="top")
     for x, y, w, title, body, kind in PIPELINE_BOXES.values():
         face, edge = _BOX_COLORS[kind]
         ax.add_patch(FancyBboxPatch(
@@ -543,7 +544,7 @@ def make_figures(runs: Path, out: Path, *, quick: bool = False, allow_run: bool 
     entries.append({"file": path.name, "commands": [spec.command(runs)],
                     "seeds": {"sweep seed": summary["config"]["seed"]}, "what": (
         "Normalized ILE (%) and exact-policy rate against the number of demonstrations, per "
-        "method, at 30% and 45% observation noise and 20% occlusion (the README's "
+        "method, at 30% and 45% observation noise and 20% occlusion (docs/results.md's "
         "data-efficiency table), with 95% percentile-bootstrap intervals over batches.")})
 
     image, about = workcell_image((240, 180) if quick else (480, 360), quick=quick)

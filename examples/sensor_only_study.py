@@ -16,7 +16,7 @@ It reports, for each, the learned reward's ILE and normalized ILE, whether the g
 the expert's on every reachable state, and how many states' actions differ from the RGB-D
 policy; and the step-boundary precision and recall (within one frame) of the perceived-change
 segmentation against the true step boundaries. Every dataset and session is rendered here from
-its own seed. The segmentation was developed on ``--seed 100``; the README reports the default,
+its own seed. The segmentation was developed on ``--seed 100``; docs/results.md reports the default,
 ``--seed 200``, which nothing was tuned on.
 
 Usage::

@@ -281,9 +281,9 @@ class _Workspace(threading.local):
     the operating system as untouched pages, and faulting them in can cost more than the
     arithmetic on them (on a virtual machine, memory freed a few seconds earlier may have been
     handed back to the host, and faulting it in again took about 2 ms per MB on the 2-core VM
-    of the README's figures). Every array is kept until the pass ends, so that a pass asks for
-    each of its arrays once; then those above ``_WORKSPACE_ELEMENTS`` floats are dropped,
-    unless the caller holds them for its next passes (:func:`scratch_held`).
+    of the figures in docs/performance.md). Every array is kept until the pass ends, so that a
+    pass asks for each of its arrays once; then those above ``_WORKSPACE_ELEMENTS`` floats are
+    dropped, unless the caller holds them for its next passes (:func:`scratch_held`).
     """
 
     def __init__(self) -> None:

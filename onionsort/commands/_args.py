@@ -20,7 +20,8 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, occlusion: float) 
 def add_models_argument(parser: argparse.ArgumentParser) -> None:
     """``--models``: the perception models folder."""
     parser.add_argument("--models", type=Path, default=None,
-                        help="folder with state_classifier.pt and detector.pt (default: the "
+                        help="folder with detector.pt, state_classifier.pt and "
+                             "inspection_classifier.pt (default: the "
                              "models shipped with onionsort)")
 
 

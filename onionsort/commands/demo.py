@@ -2,8 +2,8 @@
 
 Records 12 sessions of a person sorting onions while a passer-by blocks the camera, perceives
 them with the shipped models, calibrates the observation model on fresh held-out frames, learns
-the sorter's reward with MMAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions with each
-learned policy (its inspection as ``onionsort evaluate``'s: ``--inspection-views``,
+the sorter's reward with MMAP-BIRL, MAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions
+with each learned policy (its inspection as ``onionsort evaluate``'s: ``--inspection-views``,
 ``--miss-cost``, ``--waste-cost``, ``--fusion``) and prints the paper's Table 1 beside ours.
 ``--quick`` runs it small. It ends by writing ``report.md`` in --out (``onionsort report``).
 ``--resume`` continues an interrupted demo in its --out from the last finished stage (same

@@ -2,9 +2,9 @@
 classifier, from one folder.
 
 The default models ship with the package (``onionsort/models/``); ``onionsort train`` and
-``onionsort calibrate`` reproduce them (see the README). Every output that perception produces
-records :meth:`PerceptionModels.describe` (a hash of each model), so a calibration and the
-sessions it is used with can be checked to come from the same models.
+``onionsort calibrate`` reproduce them (docs/perception.md gives the commands). Every output
+that perception produces records :meth:`PerceptionModels.describe` (a hash of each model), so a
+calibration and the sessions it is used with can be checked to come from the same models.
 """
 
 from __future__ import annotations
