@@ -96,6 +96,35 @@ def test_record_on_two_workers_writes_what_one_writes(recorded):
         assert frames_of(recorded[2] / name) == frames_of(recorded[1] / name)
 
 
+def test_a_pool_forks_only_from_a_process_without_threaded_libraries(monkeypatch):
+    from onionsort.stages import parallel
+
+    monkeypatch.setattr(sys, "platform", "linux")
+    for name in parallel._THREADED:
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    assert parallel._start_method() == "fork"
+    monkeypatch.setitem(sys.modules, "torch", object())
+    assert parallel._start_method() == "forkserver"
+    monkeypatch.setattr(sys, "platform", "darwin")
+    monkeypatch.delitem(sys.modules, "torch")
+    assert parallel._start_method() == "forkserver"
+    monkeypatch.setattr(sys, "platform", "win32")
+    assert parallel._start_method() == "spawn"
+
+
+def test_record_on_forked_workers_writes_what_one_writes(recorded, tmp_path):
+    """A fresh command has loaded no threaded library when it records, so its workers are
+    forked from it (this test process has torch loaded, so the fixture's pool was not)."""
+    import subprocess
+
+    out = tmp_path / "forked"
+    done = subprocess.run([sys.executable, "-m", "onionsort.cli", "-v", *RECORD, "--workers",
+                           "2", "--out", str(out)], capture_output=True, text=True, check=True)
+    assert "a local pool of 2 workers (fork)" in done.stderr
+    for name in ("session_000.mcap", "session_001.mcap", "session_002.mcap"):
+        assert frames_of(out / name) == frames_of(recorded[1] / name)
+
+
 def _perceived_copies(recorded, tmp_path, *runs: list[str]) -> list[list[Path]]:
     out = []
     for k, extra in enumerate(runs):

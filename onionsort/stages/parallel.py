@@ -5,8 +5,9 @@ methods to learn, repeats of a demo, trials of a sweep), each a picklable value 
 module-level function of it, and hands them to :func:`run_pieces` with the stage config's
 :class:`ParallelOptions`:
 
-- ``executor="local"``: ``workers`` processes on this machine (a ``forkserver`` pool: each
-  worker starts clean, whatever threads this process runs, and loads what its pieces need;
+- ``executor="local"``: ``workers`` processes on this machine (forked from this process while
+  it holds no library with threads of its own, else a ``forkserver`` pool: each worker starts
+  clean, whatever threads this process runs, and loads what its pieces need;
   the pool is kept for the next pieces, of this stage or the next, while this process runs);
   ``workers=1`` runs the pieces here, one after another, with no pool at all.
 - ``executor="ray"``: Ray tasks of one CPU each, on the Ray instance this process has joined,
@@ -54,6 +55,8 @@ RAY_EXTRA = 'pip install -e ".[ray]"'
 #: Threads of torch, OpenMP and BLAS in this process: 1 in a worker, else the library default.
 _WORKER_THREADS: int | None = None
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+logger = logging.getLogger(__name__)
 
 P = TypeVar("P")
 R = TypeVar("R")
@@ -244,15 +247,31 @@ def _executor(options: ParallelOptions, n_pieces: int):
     if workers <= 1:
         return None, None
     if workers not in _POOLS:
-        # forkserver: each worker starts clean, whatever threads this process runs (Rerun's,
-        # Ray's, torch's: a plain fork of them deadlocks), and imports what its pieces need
-        context = multiprocessing.get_context("forkserver" if sys.platform != "win32"
-                                              else "spawn")
+        method = _start_method()
+        logger.info("a local pool of %d workers (%s)", workers, method)
+        context = multiprocessing.get_context(method)
         running = context.Array("q", 2 * workers)
         _POOLS[workers] = (ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                                initializer=_start_worker,
                                                initargs=(running, os.getpid())), running)
     return _POOLS[workers]
+
+
+#: Libraries that run thread pools of their own once loaded (Rerun's, Ray's, torch's, OpenCV's):
+#: a child forked from a process that holds them can deadlock on a lock one of them held.
+_THREADED = ("torch", "rerun", "ray", "cv2")
+
+
+def _start_method() -> str:
+    """How a local pool starts its workers: ``fork`` on Linux while this process has loaded
+    none of :data:`_THREADED` (the workers then start at once, with this process's imports:
+    a pool forks all its workers when it starts, and never again), else ``forkserver`` (each
+    worker starts clean and imports what its pieces need), or ``spawn`` on Windows."""
+    if sys.platform == "win32":
+        return "spawn"
+    if sys.platform == "linux" and not any(name in sys.modules for name in _THREADED):
+        return "fork"
+    return "forkserver"
 
 
 #: Local pools, by worker count, kept while this process runs: the next pieces (of this
