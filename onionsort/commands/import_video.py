@@ -90,7 +90,7 @@ def run(args) -> int:
 def _print_topics(topics) -> int:
     rows = [("topic", "type", "messages", "rate (Hz)", "import can use it as")]
     rows += [(t.name, t.msgtype, str(t.count), f"{t.rate_hz:.1f}" if t.rate_hz else "-",
-              t.use or "-") for t in topics]
+              t.use or "steps (--step-topic)") for t in topics]
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     for r in rows:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=False)) + "  " + r[4])

@@ -408,7 +408,7 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
     one = {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
                                                     "recall")},
            "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
-           "theta": model["theta"], "ile": _ile(model), "undecided": scored["undecided"]}
+           "theta": model["theta"], **_ile(model), "undecided": scored["undecided"]}
     if deferring:
         one["posterior"] = model["posterior"]
         one["deferring"] = progress.run(f"evaluate-deferring-{k}-{method}",
@@ -428,8 +428,9 @@ def _pooled(runs: list[dict], seed: int) -> dict:
               "precision": tp / (tp + fp) if tp + fp else 0.0,
               "recall": tp / (tp + fn) if tp + fn else 0.0,
               "precision_ci": [p_lo, p_hi], "recall_ci": [r_lo, r_hi], "per_repeat": runs}
-    if all("ile" in r for r in runs):
-        pooled["ile"] = float(np.mean([r["ile"] for r in runs]))
+    for key in ("ile", "normalized_ile"):
+        if all(key in r for r in runs):
+            pooled[key] = float(np.mean([r[key] for r in runs]))
     if all("deferred" in r for r in runs):
         deferred = sum(r.get("deferred", 0) for r in runs)
         pooled["deferred"] = deferred
@@ -480,22 +481,26 @@ def precision_recall_intervals(counts, *, seed: int = 0, n_resamples: int = 2000
     return tuple(out)
 
 
-def _ile(model: dict) -> float:
-    """The learned reward's inverse learning error against the sorter's true reward."""
+def _ile(model: dict) -> dict[str, float]:
+    """The learned reward's inverse learning error against the sorter's true reward: raw
+    (``ile``) and in percent of the expert's value (``normalized_ile``)."""
     import numpy as np
 
     from irl.domains.onion_sorting import onion_sorting
-    from irl.metrics import inverse_learning_error
+    from irl.metrics import inverse_learning_error, normalized_inverse_learning_error
 
     domain = onion_sorting()
     theta = np.array([model["theta"][name] for name in domain.task.feature_names])
-    return float(inverse_learning_error(domain.mdp, domain.true_theta, theta))
+    return {"ile": float(inverse_learning_error(domain.mdp, domain.true_theta, theta)),
+            "normalized_ile": float(normalized_inverse_learning_error(
+                domain.mdp, domain.true_theta, theta))}
 
 
 def table(results: dict) -> str:
     """The paper's Table 1 beside ours, as Markdown (ours with 95% intervals; with deferral,
     the same line-ups sorted deferring, precision and recall over the onions not deferred)."""
-    rows = ["| method | source | TP | FP | TN | FN | precision | recall | ILE |",
+    rows = ["| method | source | TP | FP | TN | FN | precision | recall "
+            "| ILE (% of the expert's value) |",
             "|---|---|---|---|---|---|---|---|---|"]
     ours = f"ours (simulation, {results.get('repeats', 1)} repeat(s))"
     for method in METHODS:
@@ -509,6 +514,8 @@ def table(results: dict) -> str:
             sources.insert(0, ("paper (physical robot)", PAPER_TABLE_1[method]))
         for source, r in sources:
             ile = f"{r['ile']:.3f}" if "ile" in r else "-"
+            if "normalized_ile" in r:
+                ile += f" ({r['normalized_ile']:.1f}%)"
             p, rc = f"{r['precision']:.3f}", f"{r['recall']:.3f}"
             if "precision_ci" in r:
                 p += " [{:.2f}, {:.2f}]".format(*r["precision_ci"])

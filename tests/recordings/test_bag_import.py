@@ -252,6 +252,9 @@ def test_list_names_each_topic_and_its_use(session, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "/camera/depth" in printed and "sensor_msgs/msg/CameraInfo" in printed
     assert "2 colour topic(s)" in printed
+    # any other topic can still mark the steps
+    assert any(line.startswith("/step_clock") and line.endswith("steps (--step-topic)")
+               for line in printed.splitlines()), printed
 
 
 def _refused(capsys, tmp_path, *argv) -> str:
