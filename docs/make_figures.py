@@ -513,14 +513,9 @@ def write_record(out: Path, entries: list[dict], invocation: str, table: list[st
     if table:
         lines += ["## The efficiency figure's numbers", "",
                   "Mean normalized ILE (%) · exact-policy rate, per method:", "", *table, ""]
-    path = Path(out) / "FIGURES.md"
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        tmp.write_text("\n".join(lines))
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    from onionsort.stages.base import write_text
+
+    return write_text(Path(out) / "FIGURES.md", "\n".join(lines))
 
 
 def make_figures(runs: Path, out: Path, *, quick: bool = False, allow_run: bool = True,

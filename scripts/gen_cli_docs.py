@@ -350,8 +350,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.out}: stale; regenerate it with `{REGENERATE}`", file=sys.stderr)
             return 1
         return 0
+    from onionsort.stages.base import write_text
+
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
+    write_text(args.out, text)  # through a temporary name
     print(f"wrote {args.out}")
     return 0
 

@@ -47,22 +47,15 @@ def log_config(stage: str, config) -> dict:
 
 def write_json(path: Path, doc) -> Path:
     """Write ``doc`` as JSON to ``path`` through a temporary name, then rename it."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        tmp.write_text(json.dumps(doc, indent=1))
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_text(path, json.dumps(doc, indent=1))
 
 
 def write_text(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary name, then rename it."""
+    """Write ``text`` to ``path`` (UTF-8) through a temporary name, then rename it."""
     path = Path(path)
     tmp = path.with_name(path.name + ".partial")
     try:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8")
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -526,8 +526,8 @@ def _learn(folder: Path) -> list[str]:
     for sub, title, label in (("", "Evaluation: the Sawyer's sort", "sort"),
                               ("deferring/", "Evaluation, deferring", "deferring")):
         if (folder / sub / "evaluation.json").is_file():
-            lines += _evaluation(folder, sub, title, level="##")
             e = _read(folder / sub / "evaluation.json")
+            lines += _evaluation(e, title, level="##")
             rows.append({"label": f"{e.get('method') or 'policy'}\n{label}",
                          "precision": e["precision"], "recall": e["recall"]})
     if rows:
@@ -576,9 +576,8 @@ def _confidence(folder: Path, confidence: dict) -> list[str]:
     return [*lines, *_image(folder, "policy_confidence.png", "posterior confidence per state")]
 
 
-def _evaluation(folder: Path, sub: str, title: str, *, level: str) -> list[str]:
-    """Counts, precision and recall and deferral of ``folder/sub/evaluation.json``."""
-    e = _read(folder / sub / "evaluation.json")
+def _evaluation(e: dict, title: str, *, level: str) -> list[str]:
+    """Counts, precision and recall and deferral of an ``evaluation.json``'s document ``e``."""
     lines = [f"{level} {title}", "",
              *_table(("setting", "value"), [
                  (k, v) for k, v in (
@@ -605,7 +604,7 @@ def _evaluation(folder: Path, sub: str, title: str, *, level: str) -> list[str]:
 def _evaluate(folder: Path) -> list[str]:
     e = _read(folder / "evaluation.json")
     lines = _preamble("Evaluation", folder, "`evaluation.json`")
-    lines += _evaluation(folder, "", "The Sawyer's sort", level="##")
+    lines += _evaluation(e, "The Sawyer's sort", level="##")
     rows = [{"label": e.get("method") or e.get("policy") or "policy",
              "precision": e["precision"], "recall": e["recall"]}]
     lines += _pr_figure(folder, rows, title=f"{rows[0]['label']}: precision and recall "
