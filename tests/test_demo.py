@@ -120,7 +120,7 @@ def test_quick_demo_runs_end_to_end(quick_demo, capsys):
     model = json.loads((out / "mmap-birl" / "model.json").read_text())
     again = evaluate_policy(np.array(model["policy_indices"]), n_onions=size["onions"],
                             n_blemished=size["blemished"], seed=results["seed"],
-                            classify=PerceptionModels.load().inspector())
+                            classify=PerceptionModels.load().inspector(camera="robot"))
     evaluation = json.loads((out / "mmap-birl" / "evaluation.json").read_text())
     assert [o.to_dict() for o in again.onions] == evaluation["onions"]
 

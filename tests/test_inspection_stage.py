@@ -17,8 +17,8 @@ from onionsort.stages.models import PerceptionModels
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("inspection") / "data"
-    make_dataset(DatasetConfig(out=root, frames=90, steps_per_session=5, robot_onions=10,
-                               robot_views=3, seed=3))
+    make_dataset(DatasetConfig(out=root, frames=90, steps_per_session=5, robot_onions=30,
+                               robot_views=3, seed=3))  # 3 line-ups: one a split
     return root
 
 
@@ -37,9 +37,47 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
     report = measure_inspection(models, dataset, "all", views=2)
     assert set(report["levels"]) == {"clean"}  # the dataset's one level, from its records
     robot = report["levels"]["clean"]["robot"]
-    assert robot["views"] == 10 * 2  # the first 2 of each onion's 3 views
+    assert robot["views"] == 30 * 2  # the first 2 of each onion's 3 views
     assert set(robot["fused"]) == {"noisy-or", "log-odds"}
-    assert robot["fused"]["noisy-or"]["onions"] == 10
+    assert robot["fused"]["noisy-or"]["onions"] == 30
+
+
+def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(dataset,
+                                                                            tmp_path):
+    import numpy as np
+
+    metrics = train_inspection_stage(InspectionTrainStageConfig(
+        data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="log-odds", device="cpu",
+        camera="robot"))
+    assert metrics["camera"] == "robot"
+    assert (tmp_path / "robot_inspection_classifier.pt").is_file()
+    assert not (tmp_path / "inspection_classifier.pt").exists()
+    shipped = PerceptionModels.load(device="cpu")
+    for name in ("detector.pt", "state_classifier.pt", "inspection_classifier.pt"):
+        (tmp_path / name).write_bytes((shipped.folder / name).read_bytes())
+    models = PerceptionModels.load(tmp_path, device="cpu")
+    robot, sorter = models.inspector(camera="robot"), models.inspector()
+    assert robot.classifier is models.robot_inspection and robot.rule == "log-odds"
+    assert sorter.classifier is models.inspection and sorter.rule == shipped.inspection.rule
+    assert shipped.robot_inspection is None or shipped.inspector(camera="robot").classifier \
+        is shipped.robot_inspection
+    assert "robot_inspection_sha256" in models.describe()
+    # the robot's views are measured with its own classifier, the sorter's with the shared one
+    report = measure_inspection(models, dataset, "all", views=3)
+    assert report["robot_rule"] == "log-odds" and report["rule"] == shipped.inspection.rule
+    level = report["levels"]["clean"]
+    only_robot = measure_inspection(PerceptionModels(
+        classifier=None, detector=models.detector, folder=tmp_path,
+        inspection=models.robot_inspection), dataset, "all", views=3)["levels"]["clean"]
+    assert level["robot"]["fused"] == only_robot["robot"]["fused"]
+    if "human" in level:
+        only_sorter = measure_inspection(PerceptionModels(
+            classifier=None, detector=models.detector, folder=tmp_path,
+            inspection=models.inspection), dataset, "all", views=3)["levels"]["clean"]
+        assert level["human"]["fused"] == only_sorter["human"]["fused"]
+    with pytest.raises(ValueError, match="camera must be 'sorter' or 'robot'"):
+        models.inspection_for("wrist")
+    assert np.isfinite(metrics["val"]["loss"])
 
 
 def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path):
@@ -47,6 +85,8 @@ def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path
         InspectionTrainStageConfig(data=tmp_path, out=tmp_path, fusion="mean")
     with pytest.raises(ValueError, match=r"visibility must be in \(0, 1\]; got 0"):
         InspectionTrainStageConfig(data=tmp_path, out=tmp_path, visibility=0.0)
+    with pytest.raises(ValueError, match="camera must be one of"):
+        InspectionTrainStageConfig(data=tmp_path, out=tmp_path, camera="sorter")
 
 
 def test_the_clis_fusion_rules_are_the_librarys():

@@ -25,7 +25,7 @@ METRICS = {
 
 def _robot_call(result: dict) -> dict:
     inspection = result["inspection_classifier"]
-    return inspection["levels"]["clean"]["robot"]["fused"][inspection["rule"]]
+    return inspection["levels"]["clean"]["robot"]["fused"][inspection["robot_rule"]]
 
 
 def documented_floors() -> dict[str, float]:

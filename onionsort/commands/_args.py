@@ -21,8 +21,9 @@ def add_models_argument(parser: argparse.ArgumentParser) -> None:
     """``--models``: the perception models folder."""
     parser.add_argument("--models", type=Path, default=None,
                         help="folder with detector.pt, state_classifier.pt and "
-                             "inspection_classifier.pt (default: the "
-                             "models shipped with onionsort)")
+                             "inspection_classifier.pt, and optionally "
+                             "robot_inspection_classifier.pt for the Sawyer's inspection "
+                             "(default: the models shipped with onionsort)")
 
 
 def add_connect_argument(parser: argparse.ArgumentParser, *,

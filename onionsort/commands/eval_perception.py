@@ -76,8 +76,10 @@ def _print_inspection(report: dict) -> None:
     def num(x) -> str:
         return "-" if x is None else f"{x:.3f}"
 
-    print(f"inspection (threshold {report['threshold']:.2f}, the classifier's rule: "
-          f"{report['rule']}):")
+    robot = report.get("robot_rule", report["rule"])
+    rules = (f"the classifier's rule: {report['rule']}" if robot == report["rule"] else
+             f"the sorter's classifier's rule: {report['rule']}, the robot's: {robot}")
+    print(f"inspection (threshold {report['threshold']:.2f}, {rules}):")
     for level, sources in report["levels"].items():
         for source, m in sources.items():
             print(f"  {level:9s} {source:5s} {m['views']} views, onion found in "

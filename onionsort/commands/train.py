@@ -54,6 +54,11 @@ def register(subparsers) -> None:
     ins.add_argument("--fusion", choices=FUSION_RULES, default=None,
                      help="the classifier's fusion rule (default: the one of lower log-loss on "
                           "the validation onions)")
+    ins.add_argument("--camera", choices=("both", "robot"), default="both",
+                     help="whose views to learn from: both (the sorter's and the robot's; "
+                          "writes inspection_classifier.pt, which both read) or robot (the "
+                          "Sawyer's only; writes robot_inspection_classifier.pt, which its "
+                          "inspection then reads instead)")
     ins.add_argument("--visibility", type=float, default=None,
                      help="the chance that a view of a blemished onion shows its rot, as "
                           "noisy-or fusion assumes it (default: the share measured on the "
@@ -127,12 +132,14 @@ def run_inspection(args: argparse.Namespace) -> int:
         data=tuple(args.data), out=args.out, epochs=args.epochs, batch_size=args.batch_size,
         seed=args.seed, detector=args.detector, level_weights=args.level_weights,
         device=args.device, fusion=args.fusion,
-        visibility=args.visibility))
+        visibility=args.visibility, camera=args.camera))
     val = metrics["val"]
     print(f"inspection classifier, val split: rot call accuracy {val['accuracy']:.3f} on "
           f"{val['n']} views, temperature {metrics['temperature']:.3f}")
     for rule, m in metrics["rules"].items():
         print(f"  fused by {rule}: accuracy {m['accuracy']:.3f}, log-loss {m['log_loss']:.3f} "
               f"on {m['n_onions']} onions")
-    print(f"fusion rule: {metrics['rule']}; wrote {args.out / 'inspection_classifier.pt'}")
+    written = "robot_inspection_classifier.pt" if args.camera == "robot" else \
+        "inspection_classifier.pt"
+    print(f"fusion rule: {metrics['rule']}; wrote {args.out / written}")
     return 0

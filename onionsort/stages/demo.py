@@ -224,7 +224,7 @@ def demo(config: DemoConfig) -> dict:
                "inspection": {"views": config.inspection_views,
                               "threshold": sorting_threshold(config.miss_cost,
                                                              config.waste_cost),
-                              "fusion": config.fusion or models.inspection.rule},
+                              "fusion": config.fusion or models.inspection_for("robot").rule},
                "seconds": round(time.perf_counter() - start, 1)}
     if config.defer_below is not None:
         results["defer_below"] = config.defer_below

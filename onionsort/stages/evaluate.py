@@ -274,7 +274,8 @@ def evaluate(config: EvaluateConfig, models=None):
     else:
         loaded = PerceptionModels.load(config.models, config.device) if models is None \
             else models
-        inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold)
+        inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold,
+                                     camera="robot")
         classify = inspector
 
         detect = inspector.detections  # the boxes the inspection found, for the Rerun log

@@ -29,7 +29,7 @@ import numpy as np
 
 from onionsort.stages.base import check_device, check_output_folder, log_config, write_json
 
-__all__ = ["MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
+__all__ = ["INSPECTION_CAMERAS", "MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
            "inspection_views", "measure_inspection", "train_inspection_stage"]
 
 logger = logging.getLogger(__name__)
@@ -38,6 +38,8 @@ MIN_CROP_PIXELS = 300
 """A view is read only if the onion shows at least this many pixels (a rim at the edge of the
 sorter's view is no inspection)."""
 METRICS_FILE = "inspection_metrics.json"
+INSPECTION_CAMERAS = ("both", "robot")
+"""Whose inspection views a classifier learns from (:class:`InspectionTrainStageConfig`)."""
 
 
 @dataclass
@@ -199,7 +201,10 @@ class InspectionTrainStageConfig:
     ``fusion`` fixes the classifier's fusion rule (None: the rule of lower log-loss on the
     validation onions); ``visibility`` fixes the chance that a view of a blemished onion shows
     its rot, as ``noisy-or`` fusion assumes it (None: the share measured on the training
-    views).
+    views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
+    robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
+    the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
+    Sawyer's inspection then reads instead).
     """
 
     data: Path | tuple[Path, ...]
@@ -212,6 +217,7 @@ class InspectionTrainStageConfig:
     device: str = "auto"
     fusion: str | None = None
     visibility: float | None = None
+    camera: str = "both"
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
@@ -226,6 +232,9 @@ class InspectionTrainStageConfig:
             raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
         if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
             raise ValueError(f"visibility must be in (0, 1]; got {self.visibility}")
+        if self.camera not in INSPECTION_CAMERAS:
+            raise ValueError(f"camera must be one of {INSPECTION_CAMERAS}; got "
+                             f"{self.camera!r}")
         for name in ("epochs", "batch_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
@@ -260,7 +269,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     import torch
 
     from onionsort.stages.base import resolve_device
-    from onionsort.stages.models import INSPECTION_FILE
+    from onionsort.stages.models import INSPECTION_FILE, ROBOT_INSPECTION_FILE
     from perception.fusion import FUSION_RULES
     from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
 
@@ -273,6 +282,12 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     val = InspectionViews.concat([inspection_views(d, "val", detector=detector)
                                   for d in config.data])
     val = val.subset(val.found)
+    if config.camera == "robot":
+        train, val = (views.subset(views.source == "robot") for views in (train, val))
+        if not len(train) or not len(val):
+            raise ValueError(f"{', '.join(map(str, config.data))} hold no robot views in "
+                             f"their {'train' if not len(train) else 'val'} splits; render "
+                             "them with `onionsort dataset --robot-onions N`")
     logger.info("inspection views: %d train (%d show rot), %d val", len(train),
                 int((train.labels == 1).sum()), len(val))
     train_set = CropSet(train.crops, train.labels, train.classes,
@@ -293,8 +308,10 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     classifier.metadata["rules_on_val"] = rules
     metrics.update({"rules": rules, "rule": classifier.rule,
                     "level_weights": dict(config.level_weights), "device": str(device),
-                    "n_val": len(val), "data": [str(d) for d in config.data]})
-    classifier.save(config.out / INSPECTION_FILE)
+                    "n_val": len(val), "data": [str(d) for d in config.data],
+                    "camera": config.camera})
+    classifier.save(config.out / (ROBOT_INSPECTION_FILE if config.camera == "robot"
+                                  else INSPECTION_FILE))
     write_json(config.out / METRICS_FILE, metrics)
     return metrics
 
@@ -344,13 +361,19 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     if views is not None:
         keep = (data.source != "robot") | (data.view < views)
         data = data.subset(keep)
-    clf = models.inspection
-    z = np.zeros(len(data))
-    if data.found.any():
-        z[data.found] = clf.logits(data.crops[data.found])
-    p_view = {rule: clf.calibrated(z, rule) for rule in FUSION_RULES}
+    # each view read by the classifier of its camera (the robot's own, where there is one)
+    readers = {source: models.inspection_for("robot" if source == "robot" else "sorter")
+               for source in ("robot", "human")}
+    p_view = {rule: np.zeros(len(data)) for rule in FUSION_RULES}
+    for source, clf in readers.items():
+        mine = data.found & (data.source == source)
+        if mine.any():
+            z = clf.logits(data.crops[mine])
+            for rule in FUSION_RULES:
+                p_view[rule][mine] = clf.calibrated(z, rule)
     p_rot, p_class = p_view["noisy-or"], p_view["log-odds"]  # rot in view; onion's class
-    out: dict = {"threshold": threshold, "rule": clf.rule, "levels": {}}
+    out: dict = {"threshold": threshold, "rule": readers["human"].rule,
+                 "robot_rule": readers["robot"].rule, "levels": {}}
     for level in sorted(set(data.level), key=_level_order):
         at = data.level == level
         report = {}
@@ -374,7 +397,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                     for v in sorted(set(data.view[found]))}
             subset = data.subset(mine)
             for rule in FUSION_RULES:
-                fused, y, _ = _fused(clf, subset, rule, p_view[rule][mine])
+                fused, y, _ = _fused(readers[source], subset, rule, p_view[rule][mine])
                 if not len(y):
                     continue
                 called = fused >= threshold

@@ -20,6 +20,7 @@ DEFAULT_MODELS = Path(__file__).resolve().parent.parent / "models"
 CLASSIFIER_FILE = "state_classifier.pt"
 DETECTOR_FILE = "detector.pt"
 INSPECTION_FILE = "inspection_classifier.pt"
+ROBOT_INSPECTION_FILE = "robot_inspection_classifier.pt"
 CALIBRATION_FILE = "calibration.json"
 #: The keys of :meth:`PerceptionModels.describe` that identify the models.
 HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
@@ -46,6 +47,7 @@ class PerceptionModels:
     hashes: dict[str, str] | None = None
     inspection: object = None
     device: str = "cpu"
+    robot_inspection: object = None
 
     @classmethod
     def load_cached(cls, folder: Path | str | None = None, device: str = "auto"
@@ -53,7 +55,8 @@ class PerceptionModels:
         """:meth:`load`, once per process for each folder and device: a worker of a parallel
         stage loads the models once for all the pieces it runs."""
         where = DEFAULT_MODELS if folder is None else Path(folder)
-        files = tuple((name, (where / name).stat().st_mtime_ns) for name in _FILES.values()
+        files = tuple((name, (where / name).stat().st_mtime_ns)
+                      for name in (*_FILES.values(), ROBOT_INSPECTION_FILE)
                       if (where / name).is_file())  # a model trained again is loaded again
         key = (where.resolve(), device, files)
         if key not in _LOADED:
@@ -64,7 +67,8 @@ class PerceptionModels:
     def load(cls, folder: Path | str | None = None, device: str = "auto") -> PerceptionModels:
         """Load ``state_classifier.pt``, ``detector.pt`` and ``inspection_classifier.pt``
         from ``folder`` (default: shipped) onto ``device`` (``auto``, ``cpu`` or ``cuda``;
-        :func:`onionsort.stages.base.resolve_device`).
+        :func:`onionsort.stages.base.resolve_device`), and ``robot_inspection_classifier.pt``
+        where the folder has one (the Sawyer's inspection reads it instead of the shared one).
 
         Raises
         ------
@@ -90,12 +94,15 @@ class PerceptionModels:
             if not (folder / name).is_file():
                 raise FileNotFoundError(f"{folder} has no {name}; train it with `{command} "
                                         f"--data DATASET --out {folder}`")
+        robot = folder / ROBOT_INSPECTION_FILE
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
                    detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
-                   hashes={key: _digest(folder / name) for key, name in _FILES.items()},
+                   hashes=_hashes(folder),
                    inspection=InspectionClassifier.load(folder / INSPECTION_FILE,
                                                         device=where),
-                   device=str(where))
+                   device=str(where),
+                   robot_inspection=(InspectionClassifier.load(robot, device=where)
+                                     if robot.is_file() else None))
 
     @property
     def frames_per_step(self) -> int:
@@ -105,23 +112,35 @@ class PerceptionModels:
     def describe(self) -> dict:
         """Which models these are: their folder (``shipped`` for the package's own) and a hash
         of each file as loaded (for the records they write)."""
-        hashes = self.hashes or {key: _digest(self.folder / name)
-                                 for key, name in _FILES.items()}
+        hashes = self.hashes or _hashes(self.folder)
         shipped = self.folder.resolve() == DEFAULT_MODELS.resolve()
         return {"folder": "shipped" if shipped else str(self.folder), **hashes}
 
-    def inspector(self, *, rule: str | None = None, threshold: float | None = None):
-        """The inspection (:class:`perception.inspection.Inspector`): the detector finds the
-        onion, the inspection classifier reads it, views are fused by ``rule`` (the
-        classifier's own by default) and an onion called blemished from ``threshold`` (the
-        task's cost threshold by default, :func:`sorting_threshold`)."""
+    def inspection_for(self, camera: str):
+        """The inspection classifier that reads ``camera``'s views: ``"sorter"`` the shared
+        one; ``"robot"`` the Sawyer's own where one was loaded, else the shared one."""
+        if camera not in ("sorter", "robot"):
+            raise ValueError(f"camera must be 'sorter' or 'robot'; got {camera!r}")
+        if camera == "robot" and self.robot_inspection is not None:
+            return self.robot_inspection
+        return self.inspection
+
+    def inspector(self, *, rule: str | None = None, threshold: float | None = None,
+                  camera: str = "sorter"):
+        """The inspection (:class:`perception.inspection.Inspector`) of ``camera``'s views
+        (:meth:`inspection_for`): the detector finds the onion, the inspection classifier
+        reads it, views are fused by ``rule`` (the classifier's own by default) and an onion
+        called blemished from ``threshold`` (the task's cost threshold by default,
+        :func:`sorting_threshold`)."""
         from irl.domains.onion_sorting import SORTING_TASK
         from perception.inspection import Inspector
 
+        classifier = self.inspection_for(camera)
+
         values = tuple(SORTING_TASK.value_index("prediction", v)
                        for v in ("good", "bad", "unknown"))
-        return Inspector(self.detector, self.inspection,
-                         rule=self.inspection.rule if rule is None else rule,
+        return Inspector(self.detector, classifier,
+                         rule=classifier.rule if rule is None else rule,
                          threshold=sorting_threshold() if threshold is None else threshold,
                          values=values)
 
@@ -130,6 +149,15 @@ class PerceptionModels:
         from state_abstraction.perceive import perceive_steps
 
         return perceive_steps(self.classifier, steps, self.inspector(), first_step=first_step)
+
+
+def _hashes(folder: Path) -> dict[str, str]:
+    """A hash of each model file in ``folder`` (the Sawyer's inspection classifier only where
+    the folder has one)."""
+    out = {key: _digest(folder / name) for key, name in _FILES.items()}
+    if (folder / ROBOT_INSPECTION_FILE).is_file():
+        out["robot_inspection_sha256"] = _digest(folder / ROBOT_INSPECTION_FILE)
+    return out
 
 
 def sorting_threshold(miss: float | None = None, waste: float | None = None) -> float:

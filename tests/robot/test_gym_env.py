@@ -230,7 +230,7 @@ def test_the_rollout_matches_onionsort_evaluate_with_the_detector(tmp_path, seed
     expected, _ = evaluate(EvaluateConfig(run=tmp_path, onions=4, blemished=2, seed=seed,
                                           difficulty="hard"), models=models)
     env = gymnasium.make("onionsort/Sorting-v0", n_onions=4, n_blemished=2, difficulty="hard",
-                         classify=models.inspector())
+                         classify=models.inspector(camera="robot"))
     try:
         _, infos, _, _ = rollout(env, actions, seed)
     finally:
