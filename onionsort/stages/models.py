@@ -1,5 +1,6 @@
 """The perception models a stage runs: the detector, the state classifier and the inspection
-classifier, from one folder.
+classifier (and, where the folder has one, the Sawyer's own inspection classifier, which reads
+the robot's views instead of the shared one), from one folder.
 
 The default models ship with the package (``onionsort/models/``); ``onionsort train`` and
 ``onionsort calibrate`` reproduce them (docs/perception.md gives the commands). Every output
@@ -13,8 +14,14 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CALIBRATION_FILE", "DEFAULT_MODELS", "INSPECTION_FILE", "PerceptionModels",
-           "model_mismatch"]
+__all__ = [
+    "CALIBRATION_FILE",
+    "DEFAULT_MODELS",
+    "INSPECTION_FILE",
+    "ROBOT_INSPECTION_FILE",
+    "PerceptionModels",
+    "model_mismatch",
+]
 
 DEFAULT_MODELS = Path(__file__).resolve().parent.parent / "models"
 CLASSIFIER_FILE = "state_classifier.pt"
@@ -136,7 +143,6 @@ class PerceptionModels:
         from perception.inspection import Inspector
 
         classifier = self.inspection_for(camera)
-
         values = tuple(SORTING_TASK.value_index("prediction", v)
                        for v in ("good", "bad", "unknown"))
         return Inspector(self.detector, classifier,
