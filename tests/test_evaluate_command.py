@@ -84,8 +84,8 @@ def _fake_models(detector):
     classifier = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)))
     return SimpleNamespace(
         detector=detector,
-        inspector=lambda rule=None, threshold=0.5: Inspector(detector, classifier, rule=rule,
-                                                             threshold=threshold))
+        inspector=lambda rule=None, threshold=0.5, camera="sorter": Inspector(
+            detector, classifier, rule=rule, threshold=threshold))
 
 
 def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_again(

@@ -365,8 +365,9 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     readers = {source: models.inspection_for("robot" if source == "robot" else "sorter")
                for source in ("robot", "human")}
     p_view = {rule: np.zeros(len(data)) for rule in FUSION_RULES}
+    seen = data.found.astype(bool)  # an empty set's columns are float
     for source, clf in readers.items():
-        mine = data.found & (data.source == source)
+        mine = seen & (data.source == source)
         if mine.any():
             z = clf.logits(data.crops[mine])
             for rule in FUSION_RULES:
