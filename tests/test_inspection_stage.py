@@ -8,6 +8,7 @@ import pytest
 from onionsort.stages import DatasetConfig, make_dataset
 from onionsort.stages.inspection import (
     InspectionTrainStageConfig,
+    inspection_views,
     measure_inspection,
     train_inspection_stage,
 )
@@ -49,9 +50,11 @@ def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(d
     metrics = train_inspection_stage(InspectionTrainStageConfig(
         data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="log-odds", device="cpu",
         camera="robot"))
-    assert metrics["camera"] == "robot"
+    assert metrics["camera"] == "robot" and metrics["file"] == "robot_inspection_classifier.pt"
     assert (tmp_path / "robot_inspection_classifier.pt").is_file()
+    assert (tmp_path / "robot_inspection_metrics.json").is_file()
     assert not (tmp_path / "inspection_classifier.pt").exists()
+    assert not (tmp_path / "inspection_metrics.json").exists()
     shipped = PerceptionModels.load(device="cpu")
     for name in ("detector.pt", "state_classifier.pt", "inspection_classifier.pt"):
         (tmp_path / name).write_bytes((shipped.folder / name).read_bytes())
@@ -77,7 +80,10 @@ def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(d
         assert level["human"]["fused"] == only_sorter["human"]["fused"]
     with pytest.raises(ValueError, match="camera must be 'sorter' or 'robot'"):
         models.inspection_for("wrist")
-    assert np.isfinite(metrics["val"]["loss"])
+    # it validated on the robot's views the detector found, and on no view of the sorter's
+    val = inspection_views(dataset, "val", detector=models.detector)
+    robot_val = int(np.sum(val.found & (val.source == "robot")))
+    assert metrics["n_val"] == robot_val < int(np.sum(val.found))
 
 
 def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path):
@@ -94,3 +100,10 @@ def test_the_clis_fusion_rules_are_the_librarys():
     from perception.fusion import FUSION_RULES
 
     assert _args.FUSION_RULES == FUSION_RULES
+
+
+def test_the_clis_inspection_cameras_are_the_stages():
+    from onionsort.commands import _args
+    from onionsort.stages.inspection import INSPECTION_CAMERAS
+
+    assert _args.INSPECTION_CAMERAS == INSPECTION_CAMERAS

@@ -38,6 +38,8 @@ def add_connect_argument(parser: argparse.ArgumentParser, *,
 #: :data:`perception.fusion.FUSION_RULES`, repeated so that building the parser does not import
 #: torch (a test checks they agree)
 FUSION_RULES = ("noisy-or", "log-odds")
+#: :data:`onionsort.stages.inspection.INSPECTION_CAMERAS`, repeated for the same reason
+INSPECTION_CAMERAS = ("both", "robot")
 
 
 def add_device_argument(parser: argparse.ArgumentParser) -> None:

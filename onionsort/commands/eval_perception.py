@@ -76,7 +76,7 @@ def _print_inspection(report: dict) -> None:
     def num(x) -> str:
         return "-" if x is None else f"{x:.3f}"
 
-    robot = report.get("robot_rule", report["rule"])
+    robot = report["robot_rule"]
     rules = (f"the classifier's rule: {report['rule']}" if robot == report["rule"] else
              f"the sorter's classifier's rule: {report['rule']}, the robot's: {robot}")
     print(f"inspection (threshold {report['threshold']:.2f}, {rules}):")

@@ -21,7 +21,7 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     """Add the ``train`` subcommand and its models."""
-    from onionsort.commands._args import FUSION_RULES
+    from onionsort.commands._args import FUSION_RULES, INSPECTION_CAMERAS
 
     parser = subparsers.add_parser(
         "train", help="train perception models", description=__doc__,
@@ -54,7 +54,7 @@ def register(subparsers) -> None:
     ins.add_argument("--fusion", choices=FUSION_RULES, default=None,
                      help="the classifier's fusion rule (default: the one of lower log-loss on "
                           "the validation onions)")
-    ins.add_argument("--camera", choices=("both", "robot"), default="both",
+    ins.add_argument("--camera", choices=INSPECTION_CAMERAS, default="both",
                      help="whose views to learn from: both (the sorter's and the robot's; "
                           "writes inspection_classifier.pt, which both read) or robot (the "
                           "Sawyer's only; writes robot_inspection_classifier.pt, which its "
@@ -139,7 +139,5 @@ def run_inspection(args: argparse.Namespace) -> int:
     for rule, m in metrics["rules"].items():
         print(f"  fused by {rule}: accuracy {m['accuracy']:.3f}, log-loss {m['log_loss']:.3f} "
               f"on {m['n_onions']} onions")
-    written = "robot_inspection_classifier.pt" if args.camera == "robot" else \
-        "inspection_classifier.pt"
-    print(f"fusion rule: {metrics['rule']}; wrote {args.out / written}")
+    print(f"fusion rule: {metrics['rule']}; wrote {args.out / metrics['file']}")
     return 0

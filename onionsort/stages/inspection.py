@@ -37,7 +37,6 @@ logger = logging.getLogger(__name__)
 MIN_CROP_PIXELS = 300
 """A view is read only if the onion shows at least this many pixels (a rim at the edge of the
 sorter's view is no inspection)."""
-METRICS_FILE = "inspection_metrics.json"
 INSPECTION_CAMERAS = ("both", "robot")
 """Whose inspection views a classifier learns from (:class:`InspectionTrainStageConfig`)."""
 
@@ -257,19 +256,21 @@ def _load_detector(folder: Path | None, device):
 def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None) -> dict:
     """Train the inspection classifier on ``config.data``'s train splits; choose its fusion
     rule on the validation splits' onions; write ``inspection_classifier.pt`` and
-    ``inspection_metrics.json`` into ``config.out``.
+    ``inspection_metrics.json`` into ``config.out`` (with ``camera="robot"``,
+    ``robot_inspection_classifier.pt`` and ``robot_inspection_metrics.json``, so that both
+    can be trained into one models folder).
 
     Returns
     -------
     dict
         The metrics written: training history, calibration, and per rule the validation
         onions' fused log-loss and accuracy (``rules``), the ``rule`` chosen (``config.fusion``,
-        else the one of lower log-loss).
+        else the one of lower log-loss), and the classifier's ``file`` name.
     """
     import torch
 
     from onionsort.stages.base import resolve_device
-    from onionsort.stages.models import INSPECTION_FILE, ROBOT_INSPECTION_FILE
+    from onionsort.stages.models import INSPECTION_FILE
     from perception.fusion import FUSION_RULES
     from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
 
@@ -310,9 +311,11 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
                     "level_weights": dict(config.level_weights), "device": str(device),
                     "n_val": len(val), "data": [str(d) for d in config.data],
                     "camera": config.camera})
-    classifier.save(config.out / (ROBOT_INSPECTION_FILE if config.camera == "robot"
-                                  else INSPECTION_FILE))
-    write_json(config.out / METRICS_FILE, metrics)
+    # the robot's classifier and its metrics beside the shared ones: robot_inspection_...
+    prefix = "robot_" if config.camera == "robot" else ""
+    metrics["file"] = prefix + INSPECTION_FILE
+    classifier.save(config.out / metrics["file"])
+    write_json(config.out / f"{prefix}inspection_metrics.json", metrics)
     return metrics
 
 

@@ -27,7 +27,7 @@ DEFAULT_MODELS = Path(__file__).resolve().parent.parent / "models"
 CLASSIFIER_FILE = "state_classifier.pt"
 DETECTOR_FILE = "detector.pt"
 INSPECTION_FILE = "inspection_classifier.pt"
-ROBOT_INSPECTION_FILE = "robot_inspection_classifier.pt"
+ROBOT_INSPECTION_FILE = "robot_" + INSPECTION_FILE  # the Sawyer's own, where there is one
 CALIBRATION_FILE = "calibration.json"
 #: The keys of :meth:`PerceptionModels.describe` that identify the models.
 HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
