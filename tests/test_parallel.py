@@ -21,6 +21,19 @@ def square(x: int) -> tuple[int, int, int | None]:
     return x * x, os.getpid(), worker_threads()
 
 
+def evaluate_threads(out: Path) -> int:
+    """Sort two onions with the expert's policy (a stage that runs torch) with the models the
+    worker loaded, as the demo does; torch's threads after it."""
+    import torch
+
+    from onionsort.stages.evaluate import EvaluateConfig, evaluate
+    from onionsort.stages.models import PerceptionModels
+
+    evaluate(EvaluateConfig(run=None, policy="expert", out=out, onions=2, blemished=1,
+                            rerun=False, mcap=False), PerceptionModels.load_cached(None, "cpu"))
+    return torch.get_num_threads()
+
+
 def refuse_three(x: int) -> int:
     if x == 3:
         raise ValueError("three is not allowed")
@@ -48,6 +61,15 @@ def test_pieces_give_the_same_results_here_and_on_two_workers():
     assert os.getpid() not in {r[1] for r in pool.values()}
     assert {r[2] for r in pool.values()} == {1}  # each worker runs one thread
     assert worker_threads() is None  # this process is no worker: its threads are untouched
+
+
+def test_a_stage_in_a_worker_keeps_torch_on_one_thread(tmp_path):
+    """Two workers on two cores: a stage's own thread setting must not undo the worker's one
+    thread (two pools of two threads each made every evaluation of the demo three times
+    slower)."""
+    threads = run(evaluate_threads, [tmp_path / "a", tmp_path / "b"], workers=2)
+    assert set(threads.values()) == {1}
+    assert len(json.loads((tmp_path / "a" / "evaluation.json").read_text())["onions"]) == 2
 
 
 @pytest.mark.parametrize("workers", [1, 2])

@@ -56,7 +56,7 @@ from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.learn import BAYESIAN_METHODS, LearnConfig, learn
 from onionsort.stages.models import PerceptionModels, sorting_threshold
-from onionsort.stages.parallel import ParallelOptions, run_pieces
+from onionsort.stages.parallel import ParallelOptions, run_pieces, torch_threads
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
 from onionsort.stages.report import ReportConfig, report
@@ -156,7 +156,7 @@ def demo(config: DemoConfig) -> dict:
     from state_abstraction.calibration import load_calibration
 
     log_config("demo", config)
-    torch.set_num_threads(2)
+    torch.set_num_threads(torch_threads())
     start = time.perf_counter()
     out = config.out
     size = dict(SIZES[config.quick])

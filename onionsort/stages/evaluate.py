@@ -262,12 +262,13 @@ def evaluate(config: EvaluateConfig, models=None):
     import torch
 
     from onionsort.stages.models import PerceptionModels
+    from onionsort.stages.parallel import torch_threads
     from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
     from robot.station import ROBOT_INSPECTION_CAMERA, station_robot
     from robot.world import camera_pose
 
-    torch.set_num_threads(2)
+    torch.set_num_threads(torch_threads())
     inspector, detect = None, None
     if config.ground_truth_inspection:
         classify = "ground-truth"

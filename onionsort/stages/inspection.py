@@ -271,13 +271,14 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
 
     from onionsort.stages.base import resolve_device
     from onionsort.stages.models import INSPECTION_FILE
+    from onionsort.stages.parallel import torch_threads
     from perception.fusion import FUSION_RULES
     from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
 
     log_config("train inspection", config)
     device = resolve_device(config.device)
     check_output_folder(config.out)
-    torch.set_num_threads(2)
+    torch.set_num_threads(torch_threads())
     detector = _load_detector(config.detector, device)
     train = InspectionViews.concat([inspection_views(d, "train") for d in config.data])
     val = InspectionViews.concat([inspection_views(d, "val", detector=detector)

@@ -87,13 +87,13 @@ class PerceptionModels:
         import torch
 
         from onionsort.stages.base import resolve_device
-        from onionsort.stages.parallel import worker_threads
+        from onionsort.stages.parallel import torch_threads
         from perception import Detector
         from perception.inspection import InspectionClassifier
         from state_abstraction.classifier import StateClassifier
 
         where = resolve_device(device)
-        torch.set_num_threads(worker_threads() or 2)
+        torch.set_num_threads(torch_threads())
         folder = DEFAULT_MODELS if folder is None else Path(folder)
         for name, command in ((CLASSIFIER_FILE, "onionsort train state-classifier"),
                               (DETECTOR_FILE, "onionsort train detector"),

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 __all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "WorkerLost",
-           "run_pieces", "worker_threads"]
+           "run_pieces", "torch_threads", "worker_threads"]
 
 #: Where the pieces of a stage can run.
 EXECUTORS = ("local", "ray")
@@ -110,6 +110,13 @@ def worker_threads() -> int | None:
     """Threads a library may use in this process: 1 in a worker of :func:`run_pieces`, else
     None (its own default)."""
     return _WORKER_THREADS
+
+
+def torch_threads(default: int = 2) -> int:
+    """Threads a stage runs torch on: 1 in a worker of :func:`run_pieces` (N workers share N
+    cores: two torch pools of two threads each on two cores wait on each other's spinning
+    threads and run several times slower), else ``default``."""
+    return worker_threads() or default
 
 
 #: In a local worker: the pool's table of which process runs which piece (a slot per worker,

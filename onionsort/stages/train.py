@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from onionsort.stages.base import check_device, check_output_folder, log_config, resolve_device
+from onionsort.stages.parallel import torch_threads
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
            "train_detector", "train_state_classifier"]
@@ -135,7 +136,7 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     log_config("train state-classifier", config)
     meta = _metadata(config.data)
     check_output_folder(config.out)
-    torch.set_num_threads(2)
+    torch.set_num_threads(torch_threads())
     model = ClassifierConfig(frames=int(meta.get("config", {}).get("frames_per_step", 3)),
                              epochs=config.epochs, batch_size=config.batch_size,
                              seed=config.seed, depth_dropout=config.depth_dropout)
@@ -201,7 +202,7 @@ def train_detector(config: DetectorTrainConfig) -> dict:
                                 "exist")
     _metadata(config.data)
     check_output_folder(config.out)
-    torch.set_num_threads(2)
+    torch.set_num_threads(torch_threads())
     images = {split: detector_images(config.data, split, seed=config.seed,
                                      inspection_repeat=INSPECTION_REPEAT if split == "train"
                                      else 1)
