@@ -184,6 +184,10 @@ CASES = [
     (["perceive", "{d}/unperceived.mcap", "{d}/perceived.mcap"],
      ["perceived.mcap already holds perception topics", "--replace"]),
     (["perceive", "{d}/two_frames.mcap"], ["two_frames.mcap", "2 frames", "--frames-per-step 3"]),
+    (["perceive", "{d}/unperceived.mcap", "{d}/two_frames.mcap", "--workers", "2"],
+     ["two_frames.mcap", "2 frames", "--frames-per-step 3"]),  # found by the workers
+    (["perceive", "{d}/unperceived.mcap", "{d}/two_frames.mcap", "--workers", "2", "--models",
+      "{d}/data_none"], ["data_none has no state_classifier.pt", "onionsort train"]),
     # calibrate
     (["calibrate", "--data", "{d}/data_none", "--out", "{d}/x"],
      ["data_none", "not a dataset folder"]),

@@ -195,6 +195,44 @@ def test_perceive_on_two_workers_perceives_what_one_does(recorded, tmp_path):
         same_perception(a, b)
 
 
+def test_perceive_on_forked_workers_perceives_what_one_does(recorded, tmp_path):
+    """The command loads no torch when its workers perceive (they load the models), so its
+    pool forks from it, as record's does."""
+    import subprocess
+
+    (one,) = _perceived_copies(recorded, tmp_path, ["--workers", "1"])
+    paths = []
+    for src in sorted(recorded[1].glob("*.mcap")):
+        paths.append(tmp_path / src.name)
+        paths[-1].write_bytes(src.read_bytes())
+    done = subprocess.run([sys.executable, "-m", "onionsort.cli", "-v", "perceive",
+                           *map(str, paths), "--workers", "2"], capture_output=True, text=True,
+                          check=True)
+    assert "a local pool of 2 workers (fork)" in done.stderr
+    for a, b in zip(one, paths, strict=True):
+        same_perception(a, b)
+
+
+def test_a_checkpoints_config_reads_without_torch(tmp_path):
+    """The command checks the sessions' frame counts from the classifier's checkpoint without
+    loading torch (its workers load the models); what it reads is what loading gives, and a
+    file that is no checkpoint gives None (loading then says what is wrong)."""
+    import subprocess
+
+    from onionsort.stages.models import DEFAULT_MODELS, PerceptionModels
+
+    code = ("import sys; from onionsort.stages.models import PerceptionModels; "
+            "print(PerceptionModels.frames_per_step_of(None), 'torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    loaded = PerceptionModels.load_cached(None, "cpu")
+    assert done.stdout.split() == [str(loaded.frames_per_step), "False"]
+    for name in ("state_classifier.pt", "detector.pt", "inspection_classifier.pt"):
+        (tmp_path / name).write_bytes((DEFAULT_MODELS / name).read_bytes())
+    (tmp_path / "state_classifier.pt").write_bytes(b"not a checkpoint")
+    assert PerceptionModels.frames_per_step_of(tmp_path) is None
+
+
 def test_perceive_on_ray_writes_the_files_local_workers_write(recorded, tmp_path, ray):
     local, on_ray = _perceived_copies(recorded, tmp_path, ["--workers", "2"],
                                       ["--executor", "ray"])

@@ -10,7 +10,11 @@ calibration and the sessions it is used with can be checked to come from the sam
 
 from __future__ import annotations
 
+import collections
 import hashlib
+import io
+import pickle
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -94,13 +98,7 @@ class PerceptionModels:
 
         where = resolve_device(device)
         torch.set_num_threads(torch_threads())
-        folder = DEFAULT_MODELS if folder is None else Path(folder)
-        for name, command in ((CLASSIFIER_FILE, "onionsort train state-classifier"),
-                              (DETECTOR_FILE, "onionsort train detector"),
-                              (INSPECTION_FILE, "onionsort train inspection")):
-            if not (folder / name).is_file():
-                raise FileNotFoundError(f"{folder} has no {name}; train it with `{command} "
-                                        f"--data DATASET --out {folder}`")
+        folder = cls.check_folder(folder)
         robot = folder / ROBOT_INSPECTION_FILE
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
                    detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
@@ -110,6 +108,37 @@ class PerceptionModels:
                    device=str(where),
                    robot_inspection=(InspectionClassifier.load(robot, device=where)
                                      if robot.is_file() else None))
+
+    @staticmethod
+    def check_folder(folder: Path | str | None = None) -> Path:
+        """The models folder (``folder``, or the shipped one), once it holds the files
+        :meth:`load` needs.
+
+        Raises
+        ------
+        FileNotFoundError
+            Naming the missing file and the command that trains it.
+        """
+        folder = DEFAULT_MODELS if folder is None else Path(folder)
+        for name, command in ((CLASSIFIER_FILE, "onionsort train state-classifier"),
+                              (DETECTOR_FILE, "onionsort train detector"),
+                              (INSPECTION_FILE, "onionsort train inspection")):
+            if not (folder / name).is_file():
+                raise FileNotFoundError(f"{folder} has no {name}; train it with `{command} "
+                                        f"--data DATASET --out {folder}`")
+        return folder
+
+    @classmethod
+    def frames_per_step_of(cls, folder: Path | str | None = None) -> int | None:
+        """The frames of a step that the state classifier of ``folder`` reads, from its
+        checkpoint's configuration, without loading torch (a parallel stage checks its input
+        with it before its workers load the models); None where the checkpoint cannot be read
+        so (:meth:`load` then says what is wrong with it)."""
+        try:
+            return int(checkpoint_config(cls.check_folder(folder) / CLASSIFIER_FILE)["frames"])
+        except (OSError, KeyError, TypeError, ValueError, pickle.UnpicklingError,
+                zipfile.BadZipFile, StopIteration):
+            return None
 
     @property
     def frames_per_step(self) -> int:
@@ -183,3 +212,34 @@ def model_mismatch(a: dict | None, b: dict | None) -> list[str]:
     """The model hashes on which two :meth:`PerceptionModels.describe` records differ."""
     a, b = a or {}, b or {}
     return [k for k in HASH_KEYS if a.get(k) != b.get(k)]
+
+
+def checkpoint_config(path: Path | str) -> dict:
+    """The ``config`` of a checkpoint that ``torch.save`` wrote as ``{"config": {...}, ...}``
+    (every model here), read without loading torch: the archive's pickle is read with each
+    tensor left out (torch's own types become placeholders; any other type is refused).
+
+    Raises
+    ------
+    OSError, zipfile.BadZipFile, pickle.UnpicklingError, KeyError
+        Where ``path`` is no such checkpoint.
+    """
+
+    def placeholder(*args, **kwargs) -> None:
+        return None
+
+    class _ConfigReader(pickle.Unpickler):
+        def find_class(self, module: str, name: str):
+            if module == "torch" or module.startswith("torch."):
+                return placeholder
+            if (module, name) == ("collections", "OrderedDict"):
+                return collections.OrderedDict
+            raise pickle.UnpicklingError(f"unexpected type {module}.{name} in a checkpoint")
+
+        def persistent_load(self, pid) -> None:  # a tensor's storage, left out
+            return None
+
+    with zipfile.ZipFile(path) as archive:
+        name = next(n for n in archive.namelist() if n.endswith("/data.pkl"))
+        data = _ConfigReader(io.BytesIO(archive.read(name))).load()
+    return dict(data["config"])

@@ -99,11 +99,19 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
     frames_per_step = _check_sessions(config)
     here = models is not None or (min(config.n_workers, len(config.sessions)) == 1 and \
         config.executor == "local")
-    if models is None:  # the parent checks the models too, before any worker starts
-        models = PerceptionModels.load_cached(config.models, config.device)
+    if here:
+        if models is None:
+            models = PerceptionModels.load_cached(config.models, config.device)
+        classifier_frames = models.frames_per_step
+    else:  # the workers load the models: this process checks the sessions without torch
+        PerceptionModels.check_folder(config.models)
+        classifier_frames = PerceptionModels.frames_per_step_of(config.models)
+        if classifier_frames is None:  # not readable so: loading says what is wrong
+            classifier_frames = PerceptionModels.load_cached(config.models,
+                                                             config.device).frames_per_step
     for path, fps in frames_per_step.items():
-        if fps != models.frames_per_step:
-            raise ValueError(_frame_count_error(path, fps, models.frames_per_step))
+        if fps != classifier_frames:
+            raise ValueError(_frame_count_error(path, fps, classifier_frames))
     if here:  # one after another, with the models given or loaded here
         options, pieces = ParallelOptions(workers=1), [(models, p) for p in config.sessions]
     else:
