@@ -163,8 +163,9 @@ class Spy:
 def test_demo_refuses_to_resume_another_demo_or_to_mix_into_one(tmp_path, monkeypatch, capsys):
     out = tmp_path / "demo"
     with monkeypatch.context() as m:
-        Spy(m, "make_dataset", interrupt_at=1)  # stopped in its first stage
+        heldout = Spy(m, "make_dataset", interrupt_at=1)  # stopped in its first stage
         assert main([*DEMO, "--out", str(out)]) == 130
+    assert heldout.args[0].workers == 1  # the held-out frames render where the demo was told
     assert json.loads((out / "progress" / "config.json").read_text())["sessions"] == 2
     given = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert main([*DEMO, "--out", str(out)]) == 2

@@ -176,7 +176,8 @@ def demo(config: DemoConfig) -> dict:
     data = out / "heldout"
     progress.run("heldout", lambda: dataclasses.asdict(make_dataset(DatasetConfig(
         out=data, frames=size["heldout"], seed=config.seed + 1000, robot_onions=0,
-        difficulty=config.difficulty, rot_labels=False))), clear=data)
+        difficulty=config.difficulty, rot_labels=False, executor=config.executor,
+        workers=config.workers, ray_address=config.ray_address))), clear=data)
     calibration_path = out / "calibration" / "calibration.json"
 
     def calibrate_stage() -> dict:
