@@ -603,6 +603,8 @@ def test_cuda_asked_for_where_there_is_none_is_one_line(fx, capsys):
         pytest.skip("this machine has a CUDA device")
     for argv in (["evaluate", "--policy", "expert", "--out", f"{fx}/x", "--device", "cuda"],
                  ["perceive", f"{fx}/unperceived.mcap", "--device", "cuda"],
+                 ["perceive", f"{fx}/unperceived.mcap", f"{fx}/two_frames.mcap", "--device",
+                  "cuda", "--workers", "2"],  # said by the command, not by its workers
                  ["train", "inspection", "--data", f"{fx}/data_none", "--out", f"{fx}/x",
                   "--device", "cuda"]):
         code, err = _run_in_process(argv, capsys)

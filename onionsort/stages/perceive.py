@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config
+from onionsort.stages.base import check_device, check_output_folder, log_config, resolve_device
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 
@@ -104,6 +104,8 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
             models = PerceptionModels.load_cached(config.models, config.device)
         classifier_frames = models.frames_per_step
     else:  # the workers load the models: this process checks the sessions without torch
+        if config.device == "cuda":  # (but asked for CUDA, it says now if there is none)
+            resolve_device(config.device)
         PerceptionModels.check_folder(config.models)
         classifier_frames = PerceptionModels.frames_per_step_of(config.models)
         if classifier_frames is None:  # not readable so: loading says what is wrong
