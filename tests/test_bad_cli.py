@@ -64,6 +64,10 @@ def fx(tmp_path_factory) -> Path:
     (d / "cal_done").mkdir()
     (d / "cal_done" / CALIBRATION_FILE).write_text("{}")
     (d / "data_none").mkdir()
+    (d / "models_bad_detector").mkdir()
+    for name in ("state_classifier.pt", "inspection_classifier.pt"):
+        (d / "models_bad_detector" / name).write_bytes((DEFAULT_MODELS / name).read_bytes())
+    (d / "models_bad_detector" / "detector.pt").write_bytes(b"not a checkpoint")
     (d / "data_bad").mkdir()
     (d / "data_bad" / "dataset.json").write_text("{bad")
     (d / "half").mkdir()
@@ -185,9 +189,11 @@ CASES = [
      ["perceived.mcap already holds perception topics", "--replace"]),
     (["perceive", "{d}/two_frames.mcap"], ["two_frames.mcap", "2 frames", "--frames-per-step 3"]),
     (["perceive", "{d}/unperceived.mcap", "{d}/two_frames.mcap", "--workers", "2"],
-     ["two_frames.mcap", "2 frames", "--frames-per-step 3"]),  # found by the workers
+     ["two_frames.mcap", "2 frames", "--frames-per-step 3"]),  # found without torch
     (["perceive", "{d}/unperceived.mcap", "{d}/two_frames.mcap", "--workers", "2", "--models",
       "{d}/data_none"], ["data_none has no state_classifier.pt", "onionsort train"]),
+    (["perceive", "{d}/unperceived.mcap", "{d}/whole.mcap", "--workers", "2", "--models",
+      "{d}/models_bad_detector"], ["detector.pt is not a detector checkpoint"]),
     # calibrate
     (["calibrate", "--data", "{d}/data_none", "--out", "{d}/x"],
      ["data_none", "not a dataset folder"]),

@@ -229,8 +229,19 @@ def test_a_checkpoints_config_reads_without_torch(tmp_path):
     assert done.stdout.split() == [str(loaded.frames_per_step), "False"]
     for name in ("state_classifier.pt", "detector.pt", "inspection_classifier.pt"):
         (tmp_path / name).write_bytes((DEFAULT_MODELS / name).read_bytes())
-    (tmp_path / "state_classifier.pt").write_bytes(b"not a checkpoint")
-    assert PerceptionModels.frames_per_step_of(tmp_path) is None
+    for bad in (b"not a checkpoint", _zipped(b""), _zipped(b"\x80\x02}q\x00.")):
+        (tmp_path / "state_classifier.pt").write_bytes(bad)  # no zip; empty pickle; no config
+        assert PerceptionModels.frames_per_step_of(tmp_path) is None
+
+
+def _zipped(pickled: bytes) -> bytes:
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("archive/data.pkl", pickled)
+    return buffer.getvalue()
 
 
 def test_perceive_on_ray_writes_the_files_local_workers_write(recorded, tmp_path, ray):

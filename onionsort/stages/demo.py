@@ -93,9 +93,10 @@ class DemoConfig(ParallelOptions):
     ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
     inspection (:class:`~onionsort.stages.evaluate.EvaluateConfig`); ``device`` where torch
     runs the perception models. ``executor``, ``workers`` and ``ray_address``
-    (:class:`~onionsort.stages.parallel.ParallelOptions`) run the repeats' recordings, and
-    then every (repeat, method)'s learning and sorting, as pieces; with fewer repeats than
-    workers the recording and perception of a repeat run their sessions in parallel instead.
+    (:class:`~onionsort.stages.parallel.ParallelOptions`) run the held-out frames' rendering,
+    the repeats' recordings, and then every (repeat, method)'s learning and sorting, as
+    pieces; with fewer repeats than workers the recording and perception of a repeat run their
+    sessions in parallel instead.
     ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
     the posterior (``posterior_method``) and sort the same line-up a second time deferring
     where their policy's confidence is below it (:class:`EvaluateConfig`'s ``defer_below``);

@@ -24,6 +24,7 @@ __all__ = [
     "INSPECTION_FILE",
     "ROBOT_INSPECTION_FILE",
     "PerceptionModels",
+    "checkpoint_config",
     "model_mismatch",
 ]
 
@@ -132,13 +133,18 @@ class PerceptionModels:
     def frames_per_step_of(cls, folder: Path | str | None = None) -> int | None:
         """The frames of a step that the state classifier of ``folder`` reads, from its
         checkpoint's configuration, without loading torch (a parallel stage checks its input
-        with it before its workers load the models); None where the checkpoint cannot be read
-        so (:meth:`load` then says what is wrong with it)."""
+        with it before its workers load the models); None where any model's checkpoint cannot
+        be read so (:meth:`load` then says what is wrong with it)."""
+        folder = cls.check_folder(folder)
+        names = [*_FILES.values(), ROBOT_INSPECTION_FILE]
         try:
-            return int(checkpoint_config(cls.check_folder(folder) / CLASSIFIER_FILE)["frames"])
-        except (OSError, KeyError, TypeError, ValueError, pickle.UnpicklingError,
-                zipfile.BadZipFile, StopIteration):
+            configs = {name: checkpoint_config(folder / name) for name in names
+                       if (folder / name).is_file()}
+            frames = configs[CLASSIFIER_FILE]["frames"]
+        except Exception:  # any unreadable file: loading it names the fault
             return None
+        return frames if isinstance(frames, int) and not isinstance(frames, bool) \
+            and frames >= 1 else None
 
     @property
     def frames_per_step(self) -> int:
@@ -214,32 +220,43 @@ def model_mismatch(a: dict | None, b: dict | None) -> list[str]:
     return [k for k in HASH_KEYS if a.get(k) != b.get(k)]
 
 
+def _left_out(*args, **kwargs) -> None:
+    """What a tensor, or any other torch object, becomes in :func:`checkpoint_config`."""
+    return None
+
+
+class _ConfigReader(pickle.Unpickler):
+    """A checkpoint's pickle with its tensors left out: torch's types become
+    :func:`_left_out`, storages None, and any type but ``OrderedDict`` is refused (no code of
+    the file's choosing runs)."""
+
+    def find_class(self, module: str, name: str):
+        if module == "torch" or module.startswith("torch."):
+            return _left_out
+        if (module, name) == ("collections", "OrderedDict"):
+            return collections.OrderedDict
+        raise pickle.UnpicklingError(f"unexpected type {module}.{name} in a checkpoint")
+
+    def persistent_load(self, pid) -> None:
+        return None
+
+
 def checkpoint_config(path: Path | str) -> dict:
     """The ``config`` of a checkpoint that ``torch.save`` wrote as ``{"config": {...}, ...}``
-    (every model here), read without loading torch: the archive's pickle is read with each
-    tensor left out (torch's own types become placeholders; any other type is refused).
+    (every model here), read without loading torch (:class:`_ConfigReader`).
 
     Raises
     ------
-    OSError, zipfile.BadZipFile, pickle.UnpicklingError, KeyError
-        Where ``path`` is no such checkpoint.
+    ValueError
+        Where the archive holds no model configuration.
+    OSError, zipfile.BadZipFile, pickle.UnpicklingError, EOFError, ...
+        Where ``path`` is no readable checkpoint.
     """
-
-    def placeholder(*args, **kwargs) -> None:
-        return None
-
-    class _ConfigReader(pickle.Unpickler):
-        def find_class(self, module: str, name: str):
-            if module == "torch" or module.startswith("torch."):
-                return placeholder
-            if (module, name) == ("collections", "OrderedDict"):
-                return collections.OrderedDict
-            raise pickle.UnpicklingError(f"unexpected type {module}.{name} in a checkpoint")
-
-        def persistent_load(self, pid) -> None:  # a tensor's storage, left out
-            return None
-
     with zipfile.ZipFile(path) as archive:
-        name = next(n for n in archive.namelist() if n.endswith("/data.pkl"))
+        name = next((n for n in archive.namelist() if n.endswith("/data.pkl")), None)
+        if name is None:
+            raise ValueError(f"{path} is not a torch checkpoint (no data.pkl)")
         data = _ConfigReader(io.BytesIO(archive.read(name))).load()
+    if not isinstance(data, dict) or not isinstance(data.get("config"), dict):
+        raise ValueError(f"{path} holds no model configuration")
     return dict(data["config"])

@@ -113,9 +113,11 @@ def worker_threads() -> int | None:
 
 
 def torch_threads(default: int = 2) -> int:
-    """Threads a stage runs torch on: 1 in a worker of :func:`run_pieces` (N workers share N
-    cores: two torch pools of two threads each on two cores wait on each other's spinning
-    threads and run several times slower), else ``default``."""
+    """Threads a stage runs torch on: 1 in a worker of :func:`run_pieces`, else ``default``.
+
+    A pool has as many workers as the machine has cores (or fewer, with fewer pieces), so one
+    thread each keeps them from oversubscribing the cores: two torch pools of two threads each
+    on two cores wait on each other's spinning threads and run several times slower."""
     return worker_threads() or default
 
 
