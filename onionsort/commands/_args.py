@@ -40,12 +40,19 @@ def add_connect_argument(parser: argparse.ArgumentParser, *,
 FUSION_RULES = ("noisy-or", "log-odds")
 #: :data:`onionsort.stages.inspection.INSPECTION_CAMERAS`, repeated for the same reason
 INSPECTION_CAMERAS = ("both", "robot")
+#: The choices below are repeated too, so that building the parser (every command does, at
+#: start) imports neither ``irl`` (and scipy) nor every stage: :data:`onionsort.stages.base.
+#: DEVICES`, :data:`irl.inference.BACKENDS`, :data:`irl.experiments.METHODS`,
+#: :data:`onionsort.stages.export.EXPORT_FORMATS` and ``ROS2_STORAGES``
+DEVICES = ("auto", "cpu", "cuda")
+BACKENDS = ("numpy", "numba")
+METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
+EXPORT_FORMATS = ("ros2",)
+ROS2_STORAGES = ("mcap", "sqlite3")
 
 
 def add_device_argument(parser: argparse.ArgumentParser) -> None:
     """``--device {auto,cpu,cuda}``: where torch runs the perception models."""
-    from onionsort.stages.base import DEVICES
-
     parser.add_argument("--device", choices=DEVICES, default="auto",
                         help="where torch runs: auto (CUDA when present, else the CPU; "
                              "default), cpu or cuda")
@@ -73,8 +80,6 @@ def add_inspection_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_backend_argument(parser: argparse.ArgumentParser) -> None:
     """``--backend {numpy,numba}``: the forward-backward kernels of the learners that run it."""
-    from irl.inference import BACKENDS
-
     parser.add_argument("--backend", choices=BACKENDS, default="numpy",
                         help="forward-backward kernels: numpy (default) or numba, compiled "
                              "and equal to rounding (pip install -e \".[fast]\"); used by "

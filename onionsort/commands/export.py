@@ -19,12 +19,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import subcommand
+from onionsort.commands._args import EXPORT_FORMATS, ROS2_STORAGES, subcommand
 
 
 def register(subparsers) -> None:
-    from onionsort.stages.export import EXPORT_FORMATS, ROS2_STORAGES
-
     parser = subcommand(subparsers, "export", __doc__,
                         "export a session as a ROS 2 bag (rosbag2 folder)")
     parser.add_argument("session", type=Path, metavar="SESSION", help="a session file (.mcap)")

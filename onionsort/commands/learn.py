@@ -27,6 +27,7 @@ import argparse
 from pathlib import Path
 
 from onionsort.commands._args import (
+    METHODS,
     add_backend_argument,
     add_connect_argument,
     add_parallel_arguments,
@@ -37,8 +38,6 @@ from onionsort.commands._args import (
 
 
 def register(subparsers) -> None:
-    from irl.experiments import METHODS
-
     parser = subcommand(subparsers, "learn", __doc__,
                         "learn the sorter's reward from perceived sessions (offline run)")
     parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
