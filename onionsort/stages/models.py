@@ -134,11 +134,12 @@ class PerceptionModels:
         """The frames of a step that the state classifier of ``folder`` reads, from its
         checkpoint's configuration, without loading torch (a parallel stage checks its input
         with it before its workers load the models); None where any model's checkpoint cannot
-        be read so (:meth:`load` then says what is wrong with it)."""
+        be read so (:meth:`load` then says what is wrong with it). A missing file raises as in
+        :meth:`check_folder`."""
         folder = cls.check_folder(folder)
-        names = [*_FILES.values(), ROBOT_INSPECTION_FILE]
-        try:
-            configs = {name: checkpoint_config(folder / name) for name in names
+        try:  # every model's, so that a file that is no checkpoint is found here too
+            configs = {name: checkpoint_config(folder / name)
+                       for name in (*_FILES.values(), ROBOT_INSPECTION_FILE)
                        if (folder / name).is_file()}
             frames = configs[CLASSIFIER_FILE]["frames"]
         except Exception:  # any unreadable file: loading it names the fault

@@ -106,7 +106,6 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
     else:  # the workers load the models: this process checks the sessions without torch
         if config.device == "cuda":  # (but asked for CUDA, it says now if there is none)
             resolve_device(config.device)
-        PerceptionModels.check_folder(config.models)
         classifier_frames = PerceptionModels.frames_per_step_of(config.models)
         if classifier_frames is None:  # not readable so: loading says what is wrong
             classifier_frames = PerceptionModels.load_cached(config.models,
