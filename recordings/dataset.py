@@ -37,7 +37,7 @@ view.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,7 +52,7 @@ from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
            "LabelledFrame", "dataset_task", "read_metadata", "read_split", "read_steps",
-           "split_names"]
+           "split_names", "split_sessions"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -302,8 +302,10 @@ def read_metadata(root: Path | str) -> dict:
     return meta
 
 
-def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[LabelledFrame]:
-    """Iterate the frames of one split of a dataset folder, in ``view`` (see :data:`VIEWS`)."""
+def read_split(root: Path | str, split: str, view: str = "camera", *,
+               where: Callable[[dict], bool] | None = None) -> Iterator[LabelledFrame]:
+    """Iterate the frames of one split of a dataset folder, in ``view`` (see :data:`VIEWS`);
+    with ``where``, only the frames whose record it passes (the others are not read)."""
     root = Path(root)
     meta = read_metadata(root)
     if split not in SPLITS:
@@ -313,6 +315,8 @@ def read_split(root: Path | str, split: str, view: str = "camera") -> Iterator[L
         raise ValueError(f"view must be one of the dataset's views {views}; got {view!r}")
     records: Iterable[dict] = json.loads((root / split / _LABELS[view]).read_text())
     for rec in records:
+        if where is not None and not where(rec):
+            continue
         color = cv2.imread(str(root / split / rec["color"]), cv2.IMREAD_COLOR)
         depth = (cv2.imread(str(root / split / rec["depth"]), cv2.IMREAD_UNCHANGED)
                  if "depth" in rec else None)
@@ -355,26 +359,43 @@ class DatasetStep:
         return self.views[0] if self.views else None
 
 
-def read_steps(root: Path | str, split: str, frames_per_step: int) -> list[list[DatasetStep]]:
-    """The complete steps of each session of a split (or ``"all"``), sessions in order.
+def read_steps(root: Path | str, split: str, frames_per_step: int, *,
+               session: int | None = None) -> list[list[DatasetStep]]:
+    """The complete steps of each session of a split (or ``"all"``), sessions in order; with
+    ``session``, of that session of the split alone (a list of one, or none where it has no
+    complete step), its frames alone read (:func:`split_sessions` names them).
 
     Frames are grouped by :func:`recordings.steps.group_steps`; a step cut short at the end of
     the dataset (by its frame count) is left out.
     """
+    def wanted(record: dict) -> bool:
+        return session is None or record["session"] == session
+
     out = []
     for name in split_names(split):
         views = {(f.record["session"], f.record["frame"]): f.color
-                 for f in read_split(root, name, view="inspection")
-                 if f.record.get("source", "human") == "human"}
-        steps = group_steps(read_split(root, name),
+                 for f in read_split(root, name, view="inspection",
+                                     where=lambda r: r.get("source", "human") == "human"
+                                     and wanted(r))}
+        steps = group_steps(read_split(root, name, where=wanted),
                             step=lambda f: (f.record["session"], f.record["step"]),
                             phase=lambda f: f.record["phase"], frames_per_step=frames_per_step,
                             incomplete="drop", source=f"{root}/{name}")
         sessions: dict[int, list[DatasetStep]] = {}
-        for (session, _), frames in steps:
+        for (k, _), frames in steps:
             first = frames[0].record
-            sessions.setdefault(session, []).append(DatasetStep(
+            sessions.setdefault(k, []).append(DatasetStep(
                 [f.color for f in frames], [f.depth for f in frames],
-                [views.get((session, f.record["frame"])) for f in frames], first))
+                [views.get((k, f.record["frame"])) for f in frames], first))
         out.extend(sessions[k] for k in sorted(sessions))
     return out
+
+
+def split_sessions(root: Path | str, split: str) -> list[tuple[str, int]]:
+    """``(split name, session)`` of each session of a split (or ``"all"``), in the order of
+    :func:`read_steps`, from the labels alone (no frame is read)."""
+    root = Path(root)
+    read_metadata(root)
+    return [(name, session) for name in split_names(split)
+            for session in sorted({rec["session"] for rec in json.loads(
+                (root / name / _LABELS["camera"]).read_text())})]

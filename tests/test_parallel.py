@@ -353,6 +353,22 @@ def test_dataset_on_two_workers_writes_the_same_files(tmp_path):
         k: v for k, v in meta[1].items() if k != "created_utc"}
 
 
+def test_calibrate_on_two_workers_measures_what_one_does(tmp_path):
+    """Each of the dataset's sessions is a piece on the workers, who load the models; the
+    calibration and its observation model are those of one worker, which perceives them all."""
+    data = tmp_path / "data"
+    assert main(["dataset", "--frames", "36", "--robot-onions", "0", "--steps-per-session", "4",
+                 "--seed", "12", "--workers", "1", "--out", str(data)]) == 0
+    for workers in (1, 2):
+        assert main(["calibrate", "--data", str(data), "--split", "all", "--workers",
+                     str(workers), "--out", str(tmp_path / f"cal{workers}")]) == 0
+    one, two = (json.loads((tmp_path / f"cal{w}" / "calibration.json").read_text())
+                for w in (1, 2))
+    assert one == two and one["metrics"]["n_steps"] == 12
+    probs = [np.load(tmp_path / f"cal{w}" / "observation_model.npz")["probs"] for w in (1, 2)]
+    assert np.array_equal(*probs)
+
+
 def test_learn_and_evaluate_several_on_two_workers_write_what_one_writes(recorded, tmp_path):
     from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
 

@@ -17,7 +17,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from onionsort.commands._args import add_device_argument, add_models_argument, subcommand
+from onionsort.commands._args import (
+    add_device_argument,
+    add_models_argument,
+    add_parallel_arguments,
+    parallel_options,
+    subcommand,
+)
 
 
 def register(subparsers) -> None:
@@ -37,6 +43,7 @@ def register(subparsers) -> None:
                         help="replace a calibration.json already in --out")
     add_models_argument(parser)
     add_device_argument(parser)
+    add_parallel_arguments(parser, pieces="dataset's sessions")
     parser.set_defaults(func=run)
 
 
@@ -46,7 +53,7 @@ def run(args) -> int:
     calibration, metrics = calibrate(CalibrateConfig(
         data=args.data, out=args.out, split=args.split, smoothing=args.smoothing,
         models=args.models, depth=not args.no_depth, inspection=not args.no_inspection,
-        overwrite=args.overwrite, device=args.device))
+        overwrite=args.overwrite, device=args.device, **parallel_options(args)))
     mode = ("colour only" if args.no_depth else "RGB-D") + (
         ", no inspection view" if args.no_inspection else "")
     print(f"calibrated ({mode}) on {metrics['n_steps']} steps of {args.data} ({args.split}), "

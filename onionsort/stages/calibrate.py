@@ -31,8 +31,10 @@ from onionsort.stages.base import (
     log_config,
     output_folder,
     refuse_existing,
+    resolve_device,
 )
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = [
     "CalibrateConfig",
@@ -48,7 +50,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class CalibrateConfig:
+class CalibrateConfig(ParallelOptions):
     """Where to measure perception and where to write the calibration.
 
     Attributes
@@ -71,6 +73,9 @@ class CalibrateConfig:
         Replace a ``calibration.json`` already in ``out``.
     device : str
         Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    executor, workers, ray_address
+        Where the dataset's sessions are perceived
+        (:class:`~onionsort.stages.parallel.ParallelOptions`): each is a piece.
     """
 
     data: Path
@@ -84,6 +89,7 @@ class CalibrateConfig:
     device: str = "auto"
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_device(self.device)
         if self.smoothing < 0:
             raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
@@ -111,9 +117,14 @@ class PerceptionEvalConfig:
             raise ValueError(f"views must be >= 1; got {self.views}")
 
 
-def measure_perception(models: PerceptionModels, root: Path | str, split: str = "test", *,
-                       depth: bool = True, inspection: bool = True):
+def measure_perception(models: PerceptionModels | tuple, root: Path | str,
+                       split: str = "test", *, depth: bool = True, inspection: bool = True,
+                       options: ParallelOptions | None = None):
     """Perceive every step of a dataset split and compare with the truth.
+
+    ``models`` are the loaded models, which perceive the split's sessions here, one after
+    another; or ``(folder, device)``, and the sessions are perceived on ``options``'s workers
+    (each a piece, each worker loading the models once), with the same result.
 
     Returns
     -------
@@ -124,24 +135,33 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
         ``accuracy`` per factor on truly unoccluded steps, ``occlusion_recall``,
         ``occlusion_precision``, ``n_steps``, ``n_occluded``, ``depth``, ``inspection``.
     """
-    from recordings.dataset import read_steps
+    from recordings.dataset import read_steps, split_sessions
     from state_abstraction.calibration import FACTORS, calibrate
 
-    true = {k: [] for k in FACTORS}
-    pred = {k: [] for k in FACTORS}
-    truly_occluded, called_occluded, inspected_before = [], [], []
-    for steps in read_steps(root, split, models.frames_per_step):
-        perceived = models.perceive([(s.colors, s.depths if depth else None,
-                                      s.views if inspection else None) for s in steps])
-        seen_inspection = False
-        for step, seen in zip(steps, perceived, strict=True):
-            seen_inspection |= seen.inspected is not None
-            inspected_before.append(seen_inspection)
-            truly_occluded.append(bool(step.record["occluded"]))
-            called_occluded.append(seen.occluded)
-            for k in FACTORS:
-                true[k].append(int(step.record[k]))
-                pred[k].append(int(getattr(seen, k)))
+    if isinstance(models, tuple):  # the workers load the models: this process reads no torch
+        folder, device = models
+        frames = PerceptionModels.frames_per_step_of(folder)
+        if frames is None:  # not readable so: loading says what is wrong
+            frames = PerceptionModels.load_cached(folder, device).frames_per_step
+        described = PerceptionModels.describe_folder(folder)
+        sessions = split_sessions(root, split)
+        measured = [None] * len(sessions)
+        for i, result in run_pieces(
+                _measure_piece, [(models, root, name, session, frames, depth, inspection)
+                                 for name, session in sessions],
+                options or ParallelOptions(), names=[f"{root} ({name}) session {session}"
+                                                     for name, session in sessions],
+                desc="calibrate", unit="session"):
+            measured[i] = result
+    else:
+        described = models.describe()
+        measured = [_measure_session(models, steps, depth, inspection)
+                    for steps in read_steps(root, split, models.frames_per_step)]
+    true = {k: [v for m in measured for v in m["true"][k]] for k in FACTORS}
+    pred = {k: [v for m in measured for v in m["pred"][k]] for k in FACTORS}
+    truly_occluded, called_occluded, inspected_before = (
+        [v for m in measured for v in m[key]]
+        for key in ("occluded", "called_occluded", "inspected_before"))
     if not true["onion"]:
         raise ValueError(f"split {split!r} of {root} holds no complete step")
     occ, called = np.array(truly_occluded), np.array(called_occluded)
@@ -164,8 +184,43 @@ def measure_perception(models: PerceptionModels, root: Path | str, split: str = 
         "depth": depth,
         "inspection": inspection,
     }
-    return (replace(calibration, models=models.describe(), depth=depth, inspection=inspection),
+    return (replace(calibration, models=described, depth=depth, inspection=inspection),
             metrics)
+
+
+def _measure_session(models: PerceptionModels, steps, depth: bool, inspection: bool) -> dict:
+    """Perceive one dataset session's steps: per step, each factor's truth (``true``) and
+    perceived value (``pred``), whether it was occluded and called so, and whether the
+    session had shown an inspection by then."""
+    from state_abstraction.calibration import FACTORS
+
+    perceived = models.perceive([(s.colors, s.depths if depth else None,
+                                  s.views if inspection else None) for s in steps]
+                                ) if steps else []
+    out = {"true": {k: [] for k in FACTORS}, "pred": {k: [] for k in FACTORS},
+           "occluded": [], "called_occluded": [], "inspected_before": []}
+    seen_inspection = False
+    for step, seen in zip(steps, perceived, strict=True):
+        seen_inspection |= seen.inspected is not None
+        out["inspected_before"].append(seen_inspection)
+        out["occluded"].append(bool(step.record["occluded"]))
+        out["called_occluded"].append(seen.occluded)
+        for k in FACTORS:
+            out["true"][k].append(int(step.record[k]))
+            out["pred"][k].append(int(getattr(seen, k)))
+    return out
+
+
+def _measure_piece(piece: tuple) -> dict:
+    """:func:`_measure_session` of one session of a dataset split, read alone: ``piece`` is
+    ``((folder, device), root, split name, session, frames per step, depth, inspection)``."""
+    from recordings.dataset import read_steps
+
+    (folder, device), root, name, session, frames, depth, inspection = piece
+    models = PerceptionModels.load_cached(folder, device)
+    return _measure_session(models, [step for steps in read_steps(root, name, frames,
+                                                                  session=session)
+                                     for step in steps], depth, inspection)
 
 
 def _mean_or_none(values: np.ndarray, where: np.ndarray) -> float | None:
@@ -211,11 +266,16 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
     log_config("calibrate", config)
     refuse_existing(config.out / CALIBRATION_FILE, config.overwrite)
     with output_folder(config.out) as out:
-        models = (PerceptionModels.load(config.models, config.device) if models is None
-                  else models)
+        if models is None and (config.executor == "ray" or config.n_workers > 1):
+            if config.device == "cuda":  # the workers load the models; CUDA is checked now
+                resolve_device(config.device)
+            models = (config.models, config.device)
+        elif models is None:
+            models = PerceptionModels.load(config.models, config.device)
         calibration, metrics = measure_perception(models, config.data, config.split,
                                                   depth=config.depth,
-                                                  inspection=config.inspection)
+                                                  inspection=config.inspection,
+                                                  options=config.parallel_options())
         calibration = calibration.with_smoothing(config.smoothing)
         calibration.save(out / CALIBRATION_FILE, extra={
             "data": dataset_identity(config.data), "split": config.split,

@@ -56,7 +56,7 @@ from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.learn import BAYESIAN_METHODS, LearnConfig, learn
 from onionsort.stages.models import PerceptionModels, sorting_threshold
-from onionsort.stages.parallel import ParallelOptions, run_pieces, torch_threads
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
 from onionsort.stages.report import ReportConfig, report
@@ -152,12 +152,9 @@ class DemoConfig(ParallelOptions):
 def demo(config: DemoConfig) -> dict:
     """Run the whole job (with ``config.resume``, the stages not finished yet); write
     ``config.out/results.json`` and ``config.out/report.md``; return the results."""
-    import torch
-
     from state_abstraction.calibration import load_calibration
 
     log_config("demo", config)
-    torch.set_num_threads(torch_threads())
     start = time.perf_counter()
     out = config.out
     size = dict(SIZES[config.quick])
@@ -173,7 +170,10 @@ def demo(config: DemoConfig) -> dict:
         report(ReportConfig(run=out))
         return json.loads((out / "results.json").read_text())
     progress.start()
-    models = PerceptionModels.load_cached(config.models, config.device)
+    options = config.parallel_options()
+    # on one worker the models load here; on more, the workers alone load torch and them
+    here = config.executor == "local" and config.n_workers == 1
+    models = PerceptionModels.load_cached(config.models, config.device) if here else None
     data = out / "heldout"
     progress.run("heldout", lambda: dataclasses.asdict(make_dataset(DatasetConfig(
         out=data, frames=size["heldout"], seed=config.seed + 1000, robot_onions=0,
@@ -183,7 +183,8 @@ def demo(config: DemoConfig) -> dict:
 
     def calibrate_stage() -> dict:
         _, metrics = calibrate(CalibrateConfig(data=data, split="all", out=out / "calibration",
-                                               models=config.models), models)
+                                               models=config.models, device=config.device,
+                                               **dataclasses.asdict(options)), models)
         return {"n_steps": metrics["n_steps"]}
 
     measured = progress.run("calibrate", calibrate_stage, clear=out / "calibration")
@@ -193,7 +194,6 @@ def demo(config: DemoConfig) -> dict:
                 calibration.pair_error_rate)
     # the repeats' sessions, then every (repeat, method)'s learning and sorting, as pieces
     folders = [out if config.repeats == 1 else out / f"repeat_{k}" for k in range(config.repeats)]
-    options = config.parallel_options()
     spread = config.executor == "ray" or config.repeats >= config.n_workers
     inner = ParallelOptions(workers=1) if spread else options
     sessions: list[list[Path]] = [[] for _ in folders]
@@ -214,6 +214,8 @@ def demo(config: DemoConfig) -> dict:
             desc="demo: learn and sort", unit="method"):
         scored[jobs[j]] = result
     per_repeat = {m: [scored[(k, m)] for k in range(config.repeats)] for m in METHODS}
+    fusion = _fusion(config, {run.pop("fusion", None) for runs in per_repeat.values()
+                              for run in runs})
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
                "difficulty": config.difficulty, "repeats": config.repeats,
@@ -226,7 +228,7 @@ def demo(config: DemoConfig) -> dict:
                "inspection": {"views": config.inspection_views,
                               "threshold": sorting_threshold(config.miss_cost,
                                                              config.waste_cost),
-                              "fusion": config.fusion or models.inspection_for("robot").rule},
+                              "fusion": fusion},
                "seconds": round(time.perf_counter() - start, 1)}
     if config.defer_below is not None:
         results["defer_below"] = config.defer_below
@@ -235,6 +237,18 @@ def demo(config: DemoConfig) -> dict:
     write_json(out / "results.json", results)
     report(ReportConfig(run=out))
     return results
+
+
+def _fusion(config: DemoConfig, recorded: set[str | None]) -> str:
+    """The fusion rule of the demo's evaluations: ``config.fusion``, else the robot's
+    inspection classifier's own, as the evaluations ``recorded`` it."""
+    if config.fusion is not None:
+        return config.fusion
+    if len(recorded - {None}) == 1:
+        return (recorded - {None}).pop()
+    # evaluations resumed from a demo of older code did not record it: the models say it
+    return PerceptionModels.load_cached(config.models,
+                                        config.device).inspection_for("robot").rule
 
 
 def _settings(config: DemoConfig, size: dict) -> dict:
@@ -389,7 +403,7 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
         return {"learn_seconds": round(time.perf_counter() - t0, 3)}
 
     def evaluate_stage(defer_below: float | None = None) -> dict:
-        result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
+        result, summary = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
                                             blemished=size["blemished"], seed=seed,
                                             models=config.models,
                                             difficulty=config.difficulty,
@@ -402,7 +416,8 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
                                             else run_dir / "deferring"), models)
         return {"tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
                 "precision": result.precision, "recall": result.recall,
-                "undecided": result.undecided, "deferred": result.deferred}
+                "undecided": result.undecided, "deferred": result.deferred,
+                "fusion": summary["fusion"]}
 
     learned = progress.run(f"learn-{k}-{method}", learn_stage)
     scored = progress.run(f"evaluate-{k}-{method}", evaluate_stage)
@@ -410,11 +425,13 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
     one = {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
                                                     "recall")},
            "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
-           "theta": model["theta"], **_ile(model), "undecided": scored["undecided"]}
+           "theta": model["theta"], **_ile(model), "undecided": scored["undecided"],
+           "fusion": scored.get("fusion")}
     if deferring:
         one["posterior"] = model["posterior"]
-        one["deferring"] = progress.run(f"evaluate-deferring-{k}-{method}",
-                                        lambda: evaluate_stage(config.defer_below))
+        deferred = progress.run(f"evaluate-deferring-{k}-{method}",
+                                lambda: evaluate_stage(config.defer_below))
+        one["deferring"] = {key: v for key, v in deferred.items() if key != "fusion"}
     return one
 
 

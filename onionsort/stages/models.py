@@ -155,9 +155,17 @@ class PerceptionModels:
     def describe(self) -> dict:
         """Which models these are: their folder (``shipped`` for the package's own) and a hash
         of each file as loaded (for the records they write)."""
-        hashes = self.hashes or _hashes(self.folder)
-        shipped = self.folder.resolve() == DEFAULT_MODELS.resolve()
-        return {"folder": "shipped" if shipped else str(self.folder), **hashes}
+        return self.describe_folder(self.folder, self.hashes)
+
+    @staticmethod
+    def describe_folder(folder: Path | str | None = None,
+                        hashes: dict[str, str] | None = None) -> dict:
+        """:meth:`describe` of the models in ``folder`` (default: shipped), from their files,
+        without loading them (``hashes``: the files' as they were loaded)."""
+        folder = DEFAULT_MODELS if folder is None else Path(folder)
+        shipped = folder.resolve() == DEFAULT_MODELS.resolve()
+        return {"folder": "shipped" if shipped else str(folder),
+                **(hashes or _hashes(folder))}
 
     def inspection_for(self, camera: str):
         """The inspection classifier that reads ``camera``'s views: ``"sorter"`` the shared

@@ -115,3 +115,18 @@ def test_a_mix_of_levels_gives_each_session_its_level_in_turn(dataset, tmp_path,
     assert exit_.value.code == 2
     assert "unknown level 'foggy'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_session_read_alone_is_that_session_of_the_whole_read(dataset):
+    from recordings.dataset import read_steps, split_sessions
+
+    named = split_sessions(dataset, "all")
+    whole = read_steps(dataset, "all", 2)
+    alone = [steps for name, k in named for steps in read_steps(dataset, name, 2, session=k)]
+    assert len(named) == len({k for _, k in named}) > 2 and len(alone) == len(whole)
+    for a, b in zip(alone, whole, strict=True):
+        assert [s.record for s in a] == [s.record for s in b]
+        for sa, sb in zip(a, b, strict=True):
+            assert all(np.array_equal(x, y) for x, y in zip(sa.colors, sb.colors, strict=True))
+            assert [v is None for v in sa.views] == [v is None for v in sb.views]
+    assert read_steps(dataset, "train", 2, session=10_000) == []
