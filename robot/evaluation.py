@@ -8,10 +8,11 @@ Each onion of the line-up ends with a *fate*: ``"bin"`` if the robot placed it i
 in :data:`robot.station.START_STATE` (the MDP's initial state, nothing claimed yet) and ends
 when every onion has a fate or the step budget ``n_onions * max_steps_per_onion`` is spent;
 onions still undecided then (never claimed, or claimed and not yet released for good) count as
-left on the line. With a per-state confidence and ``defer_below``, the robot defers where its
-policy's confidence in the current state is below the threshold: the onion in focus goes to a
-check tray for a person (fate ``"tray"``) and is counted apart, in ``deferred``; precision and
-recall are over the onions it sorted. With blemished onions the positive class:
+left on the line. With a confidence and ``defer_below``, the robot defers where it is less sure
+than the threshold that its next action is right (:func:`confidence_in`: the policy's
+confidence, weighed over what an inspected onion may be): the onion in focus goes to a check
+tray for a person (fate ``"tray"``) and is counted apart, in ``deferred``; precision and recall
+are over the onions it sorted. With blemished onions the positive class:
 
 =====  ==============================  =====  ==============================
 TP     blemished onion in the bin      FP     good onion in the bin
@@ -43,6 +44,7 @@ from irl.domains.onion_sorting import (
     N_STATES,
     Prediction,
     SortAction,
+    SortingState,
     encode_state,
 )
 from robot.difficulty import Difficulty
@@ -62,6 +64,7 @@ __all__ = [
     "SortingResult",
     "SortingTally",
     "StationView",
+    "confidence_in",
     "evaluate_policy",
     "greedy_actions",
 ]
@@ -376,13 +379,14 @@ def evaluate_policy(
     stop_when_settled : bool
         Stop showing an onion once its call is settled (a sequential ``classify``; see
         :class:`robot.station.SawyerStation`): each onion's call from fewer views.
-    confidence : ndarray of shape (48,), optional
-        How sure the policy is of its action in each state (e.g. the posterior share of reward
-        samples whose greedy policy agrees, ``onionsort learn --posterior``).
+    confidence : ndarray of shape (48, 5) or (48,), optional
+        How sure the policy is of each action in each state (the posterior share of reward
+        samples whose greedy policy takes it, ``onionsort learn --posterior``), or of its own
+        action in each state; :func:`confidence_in` reads it.
     defer_below : float
-        With ``confidence``: where the current state's confidence is below this, the onion in
-        focus is deferred to the check tray (:meth:`robot.station.SawyerStation.defer`) instead
-        of acted on; 0 never defers.
+        With ``confidence``: where the robot's confidence in its next action
+        (:func:`confidence_in`) is below this, the onion in focus is deferred to the check tray
+        (:meth:`robot.station.SawyerStation.defer`) instead of acted on; 0 never defers.
 
     Returns
     -------
@@ -404,8 +408,10 @@ def evaluate_policy(
             raise TypeError(f"{name} must be callable or None; got {type(callback).__name__}")
     if confidence is not None:
         confidence = np.asarray(confidence, float)
-        if confidence.shape != (N_STATES,) or not np.all((confidence >= 0) & (confidence <= 1)):
-            raise ValueError(f"confidence must hold one value in [0, 1] per state ({N_STATES}); "
+        if confidence.shape not in ((N_STATES,), (N_STATES, N_ACTIONS)) \
+                or not np.all((confidence >= 0) & (confidence <= 1)):
+            raise ValueError(f"confidence must hold values in [0, 1], one per state "
+                             f"({N_STATES}) or per state and action ({N_STATES}, {N_ACTIONS}); "
                              f"got shape {confidence.shape}")
     if not isinstance(defer_below, int | float) or not 0.0 <= defer_below <= 1.0:
         raise ValueError(f"defer_below must be in [0, 1]; got {defer_below!r}")
@@ -425,12 +431,13 @@ def evaluate_policy(
         n_steps = 0
         while n_steps < budget and not tally.complete:
             s = station.state
+            a = SortAction(int(policy[encode_state(s)]))
             if (confidence is not None and station.focus is not None
                     and tally.fates[station.focus] is None
-                    and confidence[encode_state(s)] < defer_below):
+                    and confidence_in(confidence, s, a, tally.p_blemished.get(station.focus))
+                    < defer_below):
                 tally.defer(station.defer())  # not an action of the MDP: no step counted
                 continue
-            a = SortAction(int(policy[encode_state(s)]))
             done = station.step(a)
             fate = tally.record(done)
             if on_step is not None:
@@ -451,6 +458,30 @@ def evaluate_policy(
             n_steps += 1
         perceived = [station.perceived(i) for i in range(n_onions)]
     return tally.result(n_steps, perceived)
+
+
+def confidence_in(confidence: np.ndarray, state: SortingState, action: int,
+                  p_blemished: float | None = None) -> float:
+    """How sure the robot is that ``action`` is right in the state it perceives.
+
+    ``confidence[s, a]`` (48, 5) is the share of the posterior's reward samples whose greedy
+    policy takes ``a`` in ``s``. Where the onion in focus has been inspected (the state says
+    good or blemished) and the inspection gave ``p_blemished``, the state itself is uncertain:
+    the confidence is that of ``action`` in the state with a good onion and in the state with a
+    blemished one, weighed by ``1 - p_blemished`` and ``p_blemished`` (the probability that the
+    action is the best one, given the demonstrations and what the robot saw). Elsewhere, or
+    with no probability, it is ``confidence[s, action]``. A ``confidence[s]`` (48,) is the
+    policy's own action's share, read as it is.
+    """
+    s = encode_state(state)
+    if confidence.ndim == 1:
+        return float(confidence[s])
+    if p_blemished is None or state.prediction == Prediction.UNKNOWN:
+        return float(confidence[s, action])
+    good = encode_state(state._replace(prediction=Prediction.GOOD))
+    bad = encode_state(state._replace(prediction=Prediction.BAD))
+    return float((1.0 - p_blemished) * confidence[good, action]
+                 + p_blemished * confidence[bad, action])
 
 
 class SortingTally:

@@ -94,11 +94,13 @@ def add_posterior_method_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def add_defer_argument(parser: argparse.ArgumentParser, *, needs: str) -> None:
-    """``--defer-below P``: the robot defers where its policy's confidence is below P."""
+    """``--defer-below P``: the robot defers where it is less sure than P of its action."""
     parser.add_argument("--defer-below", type=float, default=None, metavar="P",
-                        help="defer to a person where the learned policy's confidence in the "
-                             f"current state is below P ({needs}): the onion goes to a check "
-                             "tray, counted apart")
+                        help="defer to a person where the robot is less sure than P that its "
+                             "next action is right: the learned policy's confidence in it "
+                             f"({needs}), weighed over what an inspected onion may be by the "
+                             "inspection's P(blemished); the onion goes to a check tray, "
+                             "counted apart")
 
 
 def subcommand(subparsers, name: str, doc: str, help_: str) -> argparse.ArgumentParser:

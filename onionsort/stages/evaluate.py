@@ -97,9 +97,10 @@ class EvaluateConfig:
     device : str
         Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
     defer_below : float or None
-        Defer to a person where the learned policy's confidence in the current state is below
-        this (``policy_confidence.json`` of ``onionsort learn --posterior``): the onion goes to
-        a check tray and is counted apart. None never defers.
+        Defer to a person where the robot is less sure than this that its next action is right
+        (:func:`robot.evaluation.confidence_in`: the confidence of ``policy_confidence.json``,
+        from ``onionsort learn --posterior``, weighed over what an inspected onion may be): the
+        onion goes to a check tray and is counted apart. None never defers.
     """
 
     run: Path | None = None
@@ -251,7 +252,7 @@ def evaluate(config: EvaluateConfig, models=None):
     if config.defer_below is not None:
         from onionsort.stages.learn import load_confidence
 
-        confidence = load_confidence(config.run, policy=actions)
+        confidence = load_confidence(config.run, policy=actions, per_action=True)
     folder = config.folder
     check_output_folder(folder, "--out" if config.out is not None else "RUN_DIR")
     if config.connect is not None:

@@ -305,20 +305,25 @@ def _read_run_json(run_dir: Path, name: str, missing: str, what: str, read):
 
 
 def load_confidence(run_dir: Path, task: TaskDescription | None = None,
-                    policy: np.ndarray | None = None) -> np.ndarray:
+                    policy: np.ndarray | None = None, *, per_action: bool = False
+                    ) -> np.ndarray:
     """``confidence[s]`` (S,): a learning run's confidence in its policy's action in each
-    state, from ``policy_confidence.json`` (``onionsort learn --posterior``). With ``policy``
-    (the run's actions per state), a file about another policy is refused."""
+    state, from ``policy_confidence.json`` (``onionsort learn --posterior``); with
+    ``per_action``, ``confidence[s, a]`` (S, A), each action's. With ``policy`` (the run's
+    actions per state), a file about another policy is refused."""
     from irl.domains.onion_sorting import SORTING_TASK
+
+    task = SORTING_TASK if task is None else task
 
     def read(doc: dict) -> tuple[np.ndarray, list[str]]:
         if doc.get("format") != CONFIDENCE_FORMAT:
             raise ValueError(f"format {doc.get('format')!r}")
-        return (np.array([row["confidence"][row["map_action"]] for row in doc["states"]],
-                         float),
-                [row["map_action"] for row in doc["states"]])
+        if per_action:
+            conf = [[row["confidence"][a] for a in task.action_names] for row in doc["states"]]
+        else:
+            conf = [row["confidence"][row["map_action"]] for row in doc["states"]]
+        return np.array(conf, float), [row["map_action"] for row in doc["states"]]
 
-    task = SORTING_TASK if task is None else task
     path, (conf, named) = _read_run_json(
         run_dir, CONFIDENCE_FILE,
         f"posterior (no {CONFIDENCE_FILE}); learn with `onionsort learn ... --posterior` first",
@@ -327,9 +332,9 @@ def load_confidence(run_dir: Path, task: TaskDescription | None = None,
             named != [task.action_names[int(a)] for a in policy]:
         raise ValueError(f"{path} is about another policy than {Path(run_dir) / MODEL_FILE}; "
                          "learn again with `onionsort learn ... --posterior`")
-    if conf.shape != (task.n_states,) or np.any((conf < 0) | (conf > 1)):
+    if conf.shape[0] != task.n_states or np.any((conf < 0) | (conf > 1)):
         raise ValueError(f"{path}: one confidence in [0, 1] per {task.name} state is needed; "
-                         f"got {conf.size}")
+                         f"got {conf.shape[0]}")
     return conf
 
 

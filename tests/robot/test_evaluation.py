@@ -294,3 +294,40 @@ def test_the_robot_stops_showing_an_onion_once_its_call_is_settled(expert_pi):
     first = stopping.onions[0]
     assert shown[True][0] == shown[False][0][:first.views]
     assert first.perceived == every.onions[0].perceived
+
+
+def _sure_of(policy: np.ndarray) -> np.ndarray:
+    """A (48, 5) confidence that is sure of ``policy``'s action in every state."""
+    confidence = np.zeros((N_STATES, N_ACTIONS))
+    confidence[np.arange(N_STATES), greedy_actions(policy)] = 1.0
+    return confidence
+
+
+def test_the_confidence_in_an_action_weighs_what_the_inspected_onion_may_be(expert_pi):
+    from irl.domains.onion_sorting import Location, SortingState, encode_state
+    from robot.evaluation import confidence_in
+
+    confidence = _sure_of(expert_pi)
+    held = SortingState(Location.FACE, Location.FACE, Prediction.BAD)
+    binned = int(SortAction.PLACE_IN_BIN)
+    # the policy is sure to bin a blemished onion and to keep a good one: how sure the robot
+    # is that binning is right is how sure it is that the onion is blemished
+    assert confidence_in(confidence, held, binned, 0.7) == pytest.approx(0.7)
+    assert confidence_in(confidence, held, binned, 1.0) == 1.0
+    assert confidence_in(confidence, held, binned, None) == 1.0
+    unknown = held._replace(prediction=Prediction.UNKNOWN)
+    confidence[encode_state(unknown)] = [0.0, 0.0, 0.8, 0.0, 0.2]
+    assert confidence_in(confidence, unknown, int(SortAction.INSPECT), 0.3) == 0.8
+    assert confidence_in(confidence[:, 0], held, binned, 0.7) == confidence[encode_state(held), 0]
+
+
+@pytest.mark.parametrize(("p", "deferred"), [(0.7, 4), (0.95, 0)])
+def test_a_robot_unsure_of_what_it_saw_defers_though_its_policy_is_sure(expert_pi, p, deferred):
+    """Every onion is read as blemished with probability ``p``: below 0.9 the robot is not
+    sure enough that binning is right, and sends each onion to the tray."""
+    def unsure(views):
+        return SimpleNamespace(prediction=Prediction.BAD, p_blemished=p)
+
+    r = evaluate_policy(expert_pi, n_onions=4, n_blemished=2, seed=5, classify=unsure,
+                        confidence=_sure_of(expert_pi), defer_below=0.9)
+    assert r.deferred == deferred and (r.tp, r.fp) == ((0, 0) if deferred else (2, 2))
