@@ -229,3 +229,20 @@ def test_building_the_parser_loads_neither_irl_torch_nor_the_stages():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_the_demos_and_evaluations_configs_load_no_torch():
+    """A demo on workers never needs torch in the command (its workers load the models): its
+    config, and the evaluation config it checks, must not load it (importing the fusion rules
+    through ``perception`` took 4 of the demo's first 5 s)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from pathlib import Path; "
+            "from onionsort.stages import DemoConfig, EvaluateConfig; "
+            "DemoConfig(out=Path('x'), fusion='noisy-or', defer_below=0.9); "
+            "EvaluateConfig(run=Path('x'), fusion='log-odds'); import perception.fusion; "
+            "print('torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.strip() == "False"

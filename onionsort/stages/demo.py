@@ -99,8 +99,8 @@ class DemoConfig(ParallelOptions):
     sessions in parallel instead.
     ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
     the posterior (``posterior_method``) and sort the same line-up a second time deferring
-    where their policy's confidence is below it (:class:`EvaluateConfig`'s ``defer_below``);
-    both results are reported.
+    where the robot is less sure than it that its next action is right
+    (:class:`EvaluateConfig`'s ``defer_below``); both results are reported.
     """
 
     out: Path = Path("runs/demo")
