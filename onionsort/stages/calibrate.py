@@ -31,7 +31,6 @@ from onionsort.stages.base import (
     log_config,
     output_folder,
     refuse_existing,
-    resolve_device,
 )
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 from onionsort.stages.parallel import ParallelOptions, run_pieces
@@ -140,9 +139,7 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
 
     if isinstance(models, tuple):  # the workers load the models: this process reads no torch
         folder, device = models
-        frames = PerceptionModels.frames_per_step_of(folder)
-        if frames is None:  # not readable so: loading says what is wrong
-            frames = PerceptionModels.load_cached(folder, device).frames_per_step
+        frames = PerceptionModels.frames_per_step_for_workers(folder, device)
         described = PerceptionModels.describe_folder(folder)
         sessions = split_sessions(root, split)
         measured = [None] * len(sessions)
@@ -267,9 +264,7 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
     refuse_existing(config.out / CALIBRATION_FILE, config.overwrite)
     with output_folder(config.out) as out:
         if models is None and (config.executor == "ray" or config.n_workers > 1):
-            if config.device == "cuda":  # the workers load the models; CUDA is checked now
-                resolve_device(config.device)
-            models = (config.models, config.device)
+            models = (config.models, config.device)  # the workers load them
         elif models is None:
             models = PerceptionModels.load(config.models, config.device)
         calibration, metrics = measure_perception(models, config.data, config.split,

@@ -214,8 +214,6 @@ def demo(config: DemoConfig) -> dict:
             desc="demo: learn and sort", unit="method"):
         scored[jobs[j]] = result
     per_repeat = {m: [scored[(k, m)] for k in range(config.repeats)] for m in METHODS}
-    fusion = _fusion(config, {run.pop("fusion", None) for runs in per_repeat.values()
-                              for run in runs})
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
                "difficulty": config.difficulty, "repeats": config.repeats,
@@ -228,7 +226,9 @@ def demo(config: DemoConfig) -> dict:
                "inspection": {"views": config.inspection_views,
                               "threshold": sorting_threshold(config.miss_cost,
                                                              config.waste_cost),
-                              "fusion": fusion},
+                              # the rule the evaluations used, as they recorded it
+                              "fusion": json.loads((folders[0] / METHODS[0] / "evaluation.json"
+                                                    ).read_text())["fusion"]},
                "seconds": round(time.perf_counter() - start, 1)}
     if config.defer_below is not None:
         results["defer_below"] = config.defer_below
@@ -237,18 +237,6 @@ def demo(config: DemoConfig) -> dict:
     write_json(out / "results.json", results)
     report(ReportConfig(run=out))
     return results
-
-
-def _fusion(config: DemoConfig, recorded: set[str | None]) -> str:
-    """The fusion rule of the demo's evaluations: ``config.fusion``, else the robot's
-    inspection classifier's own, as the evaluations ``recorded`` it."""
-    if config.fusion is not None:
-        return config.fusion
-    if len(recorded - {None}) == 1:
-        return (recorded - {None}).pop()
-    # evaluations resumed from a demo of older code did not record it: the models say it
-    return PerceptionModels.load_cached(config.models,
-                                        config.device).inspection_for("robot").rule
 
 
 def _settings(config: DemoConfig, size: dict) -> dict:
@@ -403,7 +391,7 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
         return {"learn_seconds": round(time.perf_counter() - t0, 3)}
 
     def evaluate_stage(defer_below: float | None = None) -> dict:
-        result, summary = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
+        result, _ = evaluate(EvaluateConfig(run=run_dir, onions=size["onions"],
                                             blemished=size["blemished"], seed=seed,
                                             models=config.models,
                                             difficulty=config.difficulty,
@@ -416,8 +404,7 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
                                             else run_dir / "deferring"), models)
         return {"tp": result.tp, "fp": result.fp, "tn": result.tn, "fn": result.fn,
                 "precision": result.precision, "recall": result.recall,
-                "undecided": result.undecided, "deferred": result.deferred,
-                "fusion": summary["fusion"]}
+                "undecided": result.undecided, "deferred": result.deferred}
 
     learned = progress.run(f"learn-{k}-{method}", learn_stage)
     scored = progress.run(f"evaluate-{k}-{method}", evaluate_stage)
@@ -425,13 +412,11 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
     one = {"seed": seed, **{c: scored[c] for c in ("tp", "fp", "tn", "fn", "precision",
                                                     "recall")},
            "learn_seconds": learned["learn_seconds"], "backend": model.get("backend", "numpy"),
-           "theta": model["theta"], **_ile(model), "undecided": scored["undecided"],
-           "fusion": scored.get("fusion")}
+           "theta": model["theta"], **_ile(model), "undecided": scored["undecided"]}
     if deferring:
         one["posterior"] = model["posterior"]
-        deferred = progress.run(f"evaluate-deferring-{k}-{method}",
-                                lambda: evaluate_stage(config.defer_below))
-        one["deferring"] = {key: v for key, v in deferred.items() if key != "fusion"}
+        one["deferring"] = progress.run(f"evaluate-deferring-{k}-{method}",
+                                        lambda: evaluate_stage(config.defer_below))
     return one
 
 

@@ -147,6 +147,21 @@ class PerceptionModels:
         return frames if isinstance(frames, int) and not isinstance(frames, bool) \
             and frames >= 1 else None
 
+    @classmethod
+    def frames_per_step_for_workers(cls, folder: Path | str | None = None,
+                                    device: str = "auto") -> int:
+        """The frames of a step that the state classifier of ``folder`` reads, checked in this
+        process for a stage whose workers load the models: from the checkpoints without torch
+        (:meth:`frames_per_step_of`) where they read so, else by loading them here, which names
+        what is wrong. ``device="cuda"`` is checked now, where there is none."""
+        from onionsort.stages.base import resolve_device
+
+        if device == "cuda":
+            resolve_device(device)
+        frames = cls.frames_per_step_of(folder)
+        return frames if frames is not None else cls.load_cached(folder,
+                                                                 device).frames_per_step
+
     @property
     def frames_per_step(self) -> int:
         """Frames of a step that the state classifier reads."""

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config, resolve_device
+from onionsort.stages.base import check_device, check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 
@@ -104,12 +104,8 @@ def perceive(config: PerceiveConfig, models: PerceptionModels | None = None
             models = PerceptionModels.load_cached(config.models, config.device)
         classifier_frames = models.frames_per_step
     else:  # the workers load the models: this process checks the sessions without torch
-        if config.device == "cuda":  # (but asked for CUDA, it says now if there is none)
-            resolve_device(config.device)
-        classifier_frames = PerceptionModels.frames_per_step_of(config.models)
-        if classifier_frames is None:  # not readable so: loading says what is wrong
-            classifier_frames = PerceptionModels.load_cached(config.models,
-                                                             config.device).frames_per_step
+        classifier_frames = PerceptionModels.frames_per_step_for_workers(config.models,
+                                                                         config.device)
     for path, fps in frames_per_step.items():
         if fps != classifier_frames:
             raise ValueError(_frame_count_error(path, fps, classifier_frames))
