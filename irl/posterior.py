@@ -56,10 +56,12 @@ __all__ = [
     "Diagnostics",
     "PolicyRisk",
     "Posterior",
+    "SwapComponent",
     "expected_regret",
     "load_posterior",
     "map_policy_risk",
     "sample_posterior",
+    "swap_readings",
 ]
 
 logger = logging.getLogger(__name__)
@@ -121,6 +123,30 @@ class Diagnostics:
 
 
 @dataclass(frozen=True)
+class SwapComponent:
+    """One reading of the demonstrations in the posterior of a learner with a
+    ``session_swap``: which demonstrations it reads swapped, and its share.
+
+    Attributes
+    ----------
+    swapped : tuple of int
+        The demonstrations (their indices) read through the swap.
+    weight : float
+        Its posterior probability among the readings weighed (they sum to 1).
+    log_weight : float
+        Its prior probability times its evidence, in logs: ``|z| log rate + (N - |z|)
+        log(1 - rate)`` plus the Laplace approximation of ``log p(o_z)`` at its mode.
+    n_samples : int
+        The posterior's samples drawn from it.
+    """
+
+    swapped: tuple[int, ...]
+    weight: float
+    log_weight: float
+    n_samples: int
+
+
+@dataclass(frozen=True)
 class Posterior:
     """Samples of the reward weights given the demonstrations, and their greedy policies.
 
@@ -137,6 +163,9 @@ class Posterior:
     n_actions : int
     method : str
     diagnostics : Diagnostics
+    components : tuple of SwapComponent
+        With a learner's ``session_swap``: the readings of the demonstrations weighed, and how
+        many samples each gave (empty otherwise).
     """
 
     theta: np.ndarray
@@ -147,6 +176,7 @@ class Posterior:
     n_actions: int
     method: str
     diagnostics: Diagnostics
+    components: tuple[SwapComponent, ...] = ()
     _confidence: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -191,7 +221,8 @@ class Posterior:
                 map_theta=self.map_theta, map_policy=self.map_policy,
                 covariance=self.covariance, n_actions=self.n_actions, method=self.method,
                 **{f"diag_{k}": np.asarray(getattr(self.diagnostics, k))
-                   for k in Diagnostics.__dataclass_fields__})
+                   for k in Diagnostics.__dataclass_fields__},
+                **_components_arrays(self.components))
         tmp.replace(path)
         return path
 
@@ -215,9 +246,34 @@ def load_posterior(path: Path) -> Posterior:
                     r_hat=diag["r_hat"], ess=diag["ess"], acceptance=float(diag["acceptance"]),
                     **{k: int(diag[k]) for k in ("n_chains", "n_warmup", "n_draws",
                                                  "n_divergent", "n_gradients",
-                                                 "hessian_clipped")}))
+                                                 "hessian_clipped")}),
+                components=_read_components(z))
     except (OSError, KeyError, ValueError) as exc:
         raise ValueError(f"{path} is not a posterior file ({exc})") from None
+
+
+def _components_arrays(components: tuple[SwapComponent, ...]) -> dict[str, np.ndarray]:
+    """The swap readings as arrays (``swapped`` as a padded index matrix; -1 pads)."""
+    if not components:
+        return {}
+    width = max(1, max(len(c.swapped) for c in components))
+    swapped = np.full((len(components), width), -1, dtype=np.int64)
+    for i, c in enumerate(components):
+        swapped[i, :len(c.swapped)] = c.swapped
+    return {"comp_swapped": swapped,
+            "comp_weight": np.array([c.weight for c in components]),
+            "comp_log_weight": np.array([c.log_weight for c in components]),
+            "comp_n_samples": np.array([c.n_samples for c in components], dtype=np.int64)}
+
+
+def _read_components(z) -> tuple[SwapComponent, ...]:
+    if "comp_swapped" not in z:
+        return ()
+    return tuple(SwapComponent(swapped=tuple(int(i) for i in row if i >= 0), weight=float(w),
+                               log_weight=float(lw), n_samples=int(n))
+                 for row, w, lw, n in zip(z["comp_swapped"], z["comp_weight"],
+                                          z["comp_log_weight"], z["comp_n_samples"],
+                                          strict=True))
 
 
 # -- sampling ---------------------------------------------------------------------------------
@@ -344,6 +400,14 @@ def sample_posterior(
     step : float, default 1e-4
         Relative step of the differences that give the Hessian at the MAP.
 
+    With an :class:`~irl.MMAPBIRL` whose ``session_swap`` is set, the posterior has one mode
+    per reading of the demonstrations (which of them were read swapped), and a chain started at
+    one does not cross to another (the reward read backwards is far from the reward read
+    right). So the readings of :func:`swap_readings` are weighed one by one: each is fitted
+    without the swap on the demonstrations so read, weighted by its prior probability times
+    its Laplace evidence, and drawn from as above in proportion to its weight
+    (:attr:`Posterior.components`). Readings outside that set are not weighed.
+
     Returns
     -------
     Posterior
@@ -363,42 +427,130 @@ def sample_posterior(
     rng = check_random_state(seed)
     mdp = estimator.mdp
     demonstrations = list(demonstrations)
+    draw = {"method": method, "rng": rng, "n_chains": n_chains, "n_warmup": n_warmup,
+            "n_draws": n_draws, "max_draws": max_draws, "step": step}
 
     with scratch_held():
         map_theta, value_and_grad = _fitted_map(estimator, demonstrations)
         _, std = estimator._check_model().prior._broadcast(map_theta.size)
-        cov, clipped, n_grad = _laplace_covariance(value_and_grad, map_theta, 1.0 / std**2,
-                                                   step)
-        chol = np.linalg.cholesky(cov)
-        if method == "laplace":
-            theta = map_theta + rng.standard_normal((n_samples, map_theta.size)) @ chol.T
-            diagnostics = Diagnostics(
-                r_hat=np.full(map_theta.size, np.nan), ess=np.full(map_theta.size, n_samples),
-                acceptance=1.0, n_chains=1, n_warmup=0, n_draws=n_samples, n_divergent=0,
-                n_gradients=n_grad, hessian_clipped=clipped)
+        if getattr(estimator, "session_swap", None) is None:
+            theta, diagnostics, cov = _draw(value_and_grad, map_theta, 1.0 / std**2, n_samples,
+                                            **draw)
+            components: tuple[SwapComponent, ...] = ()
         else:
-            chains, stats, n_chain_grad = _run_chains(
-                value_and_grad, map_theta, chol, n_chains=n_chains, n_warmup=n_warmup,
-                n_draws=n_draws, max_draws=max_draws, rng=rng)
-            diagnostics = Diagnostics(
-                r_hat=np.array([split_rhat(chains[:, :, k]) for k in range(map_theta.size)]),
-                ess=np.array([effective_sample_size(chains[:, :, k])
-                              for k in range(map_theta.size)]),
-                acceptance=float(np.mean(stats["accept_stat"])), n_chains=n_chains,
-                n_warmup=n_warmup, n_draws=chains.shape[1],
-                n_divergent=int(np.sum(stats["diverging"])),
-                n_gradients=n_grad + n_chain_grad, hessian_clipped=clipped)
-            pooled = chains.reshape(-1, map_theta.size)
-            keep = np.linspace(0, pooled.shape[0] - 1, n_samples).round().astype(int)
-            theta = pooled[keep]
-            if diagnostics.max_r_hat() > 1.01:
-                logger.warning("the chains still disagree after %d draws each (max R-hat %.3f "
-                               "> 1.01): raise max_draws or n_warmup", chains.shape[1],
-                               diagnostics.max_r_hat())
+            theta, diagnostics, cov, components = _draw_swap_readings(
+                estimator, demonstrations, map_theta, 1.0 / std**2, n_samples, draw)
+    if np.isfinite(diagnostics.max_r_hat()) and diagnostics.max_r_hat() > 1.01:
+        logger.warning("the chains still disagree after %d draws each (max R-hat %.3f > "
+                       "1.01): raise max_draws or n_warmup", diagnostics.n_draws,
+                       diagnostics.max_r_hat())
     map_policy, *policies = _greedy_policies(mdp, np.vstack([map_theta, theta]))
     return Posterior(theta=theta, policies=np.stack(policies), map_theta=map_theta,
                      map_policy=map_policy, covariance=cov, n_actions=mdp.n_actions,
-                     method=method, diagnostics=diagnostics)
+                     method=method, diagnostics=diagnostics, components=components)
+
+
+def _draw(value_and_grad, map_theta, prior_precision, n_samples, *, method, rng, n_chains,
+          n_warmup, n_draws, max_draws, step) -> tuple[np.ndarray, Diagnostics, np.ndarray]:
+    """``n_samples`` draws round the mode ``map_theta`` of ``value_and_grad``: ``(theta,
+    diagnostics, Laplace covariance)``."""
+    cov, clipped, n_grad = _laplace_covariance(value_and_grad, map_theta, prior_precision, step)
+    chol = np.linalg.cholesky(cov)
+    if method == "laplace":
+        theta = map_theta + rng.standard_normal((n_samples, map_theta.size)) @ chol.T
+        return theta, Diagnostics(
+            r_hat=np.full(map_theta.size, np.nan), ess=np.full(map_theta.size, n_samples),
+            acceptance=1.0, n_chains=1, n_warmup=0, n_draws=n_samples, n_divergent=0,
+            n_gradients=n_grad, hessian_clipped=clipped), cov
+    chains, stats, n_chain_grad = _run_chains(
+        value_and_grad, map_theta, chol, n_chains=n_chains, n_warmup=n_warmup,
+        n_draws=n_draws, max_draws=max_draws, rng=rng)
+    diagnostics = Diagnostics(
+        r_hat=np.array([split_rhat(chains[:, :, k]) for k in range(map_theta.size)]),
+        ess=np.array([effective_sample_size(chains[:, :, k]) for k in range(map_theta.size)]),
+        acceptance=float(np.mean(stats["accept_stat"])), n_chains=n_chains,
+        n_warmup=n_warmup, n_draws=chains.shape[1],
+        n_divergent=int(np.sum(stats["diverging"])),
+        n_gradients=n_grad + n_chain_grad, hessian_clipped=clipped)
+    pooled = chains.reshape(-1, map_theta.size)
+    keep = np.linspace(0, pooled.shape[0] - 1, n_samples).round().astype(int)
+    return pooled[keep], diagnostics, cov
+
+
+def swap_readings(p_swapped: np.ndarray) -> list[tuple[int, ...]]:
+    """The readings of N demonstrations (which of them were read swapped) whose posterior
+    weight :func:`sample_posterior` measures: the reading the MAP implies (each demonstration
+    swapped where ``p_swapped`` is above 0.5), its complement (the same data explained by the
+    reward read backwards), and every reading one demonstration away from either."""
+    base = np.asarray(p_swapped) > 0.5
+    readings: dict[tuple[int, ...], None] = {}
+    for root in (base, ~base):
+        readings[tuple(int(i) for i in np.flatnonzero(root))] = None
+        for i in range(base.size):
+            z = root.copy()
+            z[i] = ~z[i]
+            readings[tuple(int(j) for j in np.flatnonzero(z))] = None
+    return list(readings)
+
+
+def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples, draw):
+    """The posterior of a learner with a ``session_swap``: a mixture over readings of the
+    demonstrations (:func:`swap_readings`), each reading's reward posterior drawn as without a
+    swap and weighted by its prior probability times its Laplace evidence."""
+    swap = estimator.session_swap
+    plain = type(estimator)(**{**estimator.get_params(), "session_swap": None})
+    readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
+    K, N = map_theta.size, len(demos)
+    fitted = []
+    for z in readings:
+        read = [swap.apply(d) if i in z else d for i, d in enumerate(demos)]
+        est = type(plain)(**plain.get_params()).fit(read)
+        value_and_grad = est.log_posterior_function(read)
+        theta_z = np.asarray(est.theta_, float)
+        cov, _, _ = _laplace_covariance(value_and_grad, theta_z, prior_precision, draw["step"])
+        log_weight = (len(z) * np.log(swap.rate) + (N - len(z)) * np.log1p(-swap.rate)
+                      + value_and_grad(theta_z)[0] + 0.5 * K * np.log(2 * np.pi)
+                      + 0.5 * np.linalg.slogdet(cov)[1])
+        fitted.append((z, theta_z, value_and_grad, float(log_weight)))
+    logs = np.array([f[3] for f in fitted])
+    weights = np.exp(logs - logs.max())
+    weights /= weights.sum()
+    counts = _apportion(weights, n_samples)
+    thetas, diags, components, cov_map = [], [], [], None
+    for (z, theta_z, value_and_grad, log_weight), w, n in zip(fitted, weights, counts,
+                                                             strict=True):
+        components.append(SwapComponent(swapped=z, weight=float(w), log_weight=log_weight,
+                                        n_samples=int(n)))
+        if n:
+            theta, diag, cov = _draw(value_and_grad, theta_z, prior_precision, int(n), **draw)
+            thetas.append(theta)
+            diags.append(diag)
+            cov_map = cov if cov_map is None else cov_map
+    logger.info("posterior over %d readings of %d demonstrations: %s", len(readings), N,
+                ", ".join(f"swapped {list(c.swapped)} {c.weight:.3f}"
+                          for c in sorted(components, key=lambda c: -c.weight)[:4]))
+    return np.vstack(thetas), _combined(diags), cov_map, tuple(components)
+
+
+def _apportion(weights: np.ndarray, n: int) -> np.ndarray:
+    """``n`` split by ``weights`` into integers (largest remainders, ties to the first)."""
+    exact = weights * n
+    counts = np.floor(exact).astype(int)
+    order = np.argsort(-(exact - counts), kind="stable")
+    counts[order[:n - counts.sum()]] += 1
+    return counts
+
+
+def _combined(diags: list[Diagnostics]) -> Diagnostics:
+    """The diagnostics of several components' draws: the worst R-hat of each weight, summed
+    sizes and costs, the mean acceptance."""
+    return Diagnostics(
+        r_hat=np.max([d.r_hat for d in diags], axis=0), ess=np.sum([d.ess for d in diags], axis=0),
+        acceptance=float(np.mean([d.acceptance for d in diags])), n_chains=diags[0].n_chains,
+        n_warmup=diags[0].n_warmup, n_draws=max(d.n_draws for d in diags),
+        n_divergent=sum(d.n_divergent for d in diags),
+        n_gradients=sum(d.n_gradients for d in diags),
+        hessian_clipped=sum(d.hessian_clipped for d in diags))
 
 
 # -- what the posterior says about the MAP policy ----------------------------------------------

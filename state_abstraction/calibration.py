@@ -143,6 +143,10 @@ class Calibration:
     task : TaskDescription
         The task measured: its factors, in the order of the state encoding, and its sizes
         (the onion-sorting task by default).
+    session_swaps : dict or None
+        ``{"sessions": n, "swapped": k}``: of the held-out sessions with enough reads of the
+        onion's class, how many were read backwards in most of them
+        (:func:`onionsort.stages.calibrate.session_swaps`); None in files that predate it.
     """
 
     factors: dict[str, ConfusionMatrix]
@@ -153,8 +157,14 @@ class Calibration:
     depth: bool | None = None
     inspection: bool | None = None
     task: TaskDescription = SORTING_TASK
+    session_swaps: dict | None = None
 
     def __post_init__(self) -> None:
+        if self.session_swaps is not None:
+            n, k = self.session_swaps.get("sessions"), self.session_swaps.get("swapped")
+            if not (isinstance(n, int) and isinstance(k, int) and 0 <= k <= n):
+                raise ValueError(f"session_swaps must hold integers 0 <= swapped <= sessions; "
+                                 f"got {self.session_swaps}")
         expected = calibration_factors(self.task)
         if set(self.factors) != set(expected):
             raise ValueError(f"factors must be {list(expected)} (task {self.task.name!r}); "
@@ -193,6 +203,26 @@ class Calibration:
         smoothing = self.smoothing if smoothing is None else smoothing
         mats = [self.factors[name].probabilities(smoothing) for name in self.task.factor_names]
         return factored_observation_model(mats, self.factors["action"].probabilities(smoothing))
+
+    @property
+    def session_swap_rate(self) -> float | None:
+        """The probability that a session's class reads are all backwards: Laplace's rule of
+        succession on the held-out sessions, ``(swapped + 1) / (sessions + 2)`` (never 0, so
+        a learner given it can always doubt a session). None when not measured."""
+        if self.session_swaps is None:
+            return None
+        return (self.session_swaps["swapped"] + 1) / (self.session_swaps["sessions"] + 2)
+
+    def session_swap(self):
+        """The learners' :class:`irl.observation.swap.SessionSwap`: the onion's class
+        (``prediction`` good and bad) read backwards for a whole demonstration, at
+        :attr:`session_swap_rate`. A ``ValueError`` when the calibration did not measure it."""
+        from irl.observation.swap import value_swap
+
+        if self.session_swaps is None:
+            raise ValueError("this calibration did not measure how often a whole session's "
+                             "class reads are swapped; calibrate again with this version")
+        return value_swap(self.task, "prediction", ("good", "bad"), self.session_swap_rate)
 
     @property
     def n_observed(self) -> int:
@@ -254,6 +284,7 @@ class Calibration:
             "state_error_rate": self.state_error_rate,
             "pair_error_rate": self.pair_error_rate,
             "accuracy": {k: m.accuracy for k, m in self.factors.items()},
+            **({} if self.session_swaps is None else {"session_swaps": self.session_swaps}),
         }
         tmp = path.with_name(path.name + ".partial")
         tmp.write_text(json.dumps(doc, indent=1))
@@ -326,7 +357,10 @@ def load_calibration(path: Path | str, *, task: TaskDescription = SORTING_TASK) 
                              f"{task.name!r}); got {factors[k].labels}")
     joint = ConfusionMatrix(joint_counts, [str(s) for s in range(task.n_states)])
     depth, inspection = doc.get("depth"), doc.get("inspection")
-    return Calibration(factors=factors, joint_state=joint,
+    swaps = doc.get("session_swaps")
+    if swaps is not None and not isinstance(swaps, dict):
+        raise ValueError(f"{path}: session_swaps must be an object; got {swaps!r}")
+    return Calibration(session_swaps=swaps, factors=factors, joint_state=joint,
                        pair_correct=int(doc.get("pair_correct", 0)),
                        smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
                        depth=None if depth is None else bool(depth),

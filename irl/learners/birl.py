@@ -31,6 +31,7 @@ from irl.learners.base import LearnerBase
 from irl.learners.optimize import maximize_gradient_ascent, maximize_lbfgs
 from irl.mdp import TabularMDP
 from irl.observation import ObservationModel
+from irl.observation.swap import SessionSwap
 from irl.priors import GaussianPrior
 from irl.solvers import OptimalQSolver, OptimalSolution, log_boltzmann_policy
 
@@ -280,6 +281,14 @@ class MMAPBIRL(_BayesianIRL):
         Kernels of forward-backward (:data:`irl.inference.BACKENDS`): numpy and scipy, the
         default and the reference, or one compiled loop per batch (``pip install
         'onionsort[fast]'``); equal to rounding.
+    session_swap : irl.observation.swap.SessionSwap, optional
+        An observer failure that lasts a whole demonstration: with probability
+        ``session_swap.rate`` all of a demonstration's observations were read through its
+        permutation (for onion sorting, the onion's class read backwards for a whole session).
+        Each demonstration's likelihood is then the mixture of it read as recorded and read
+        swapped (:meth:`swap_probabilities` gives each one's posterior probability of having
+        been swapped). None (the default): every step's misreading is independent, as the
+        observation model says.
 
     Every parameter is stored as given and checked by ``fit`` (and by the ``log_*`` methods,
     which need ``mdp``, ``observation_model``, ``beta``, ``prior`` and ``backend``); change
@@ -317,20 +326,64 @@ class MMAPBIRL(_BayesianIRL):
         init: np.ndarray | None = None,
         seed: int | np.random.Generator | None = None,
         backend: str = "numpy",
+        session_swap: SessionSwap | None = None,
     ) -> None:
         super().__init__(mdp, observation_model, beta=beta, prior=prior, optimizer=optimizer,
                          n_restarts=n_restarts, max_iter=max_iter, tol=tol,
                          step_size=step_size, decay=decay, epsilon=epsilon, init=init,
                          seed=seed)
         self.backend = backend
+        self.session_swap = session_swap
+
+    def _check_swap(self, model) -> SessionSwap | None:
+        swap = self.session_swap
+        if swap is None:
+            return None
+        if not isinstance(swap, SessionSwap):
+            raise TypeError(f"session_swap must be an irl.observation.swap.SessionSwap or "
+                            f"None; got {describe(swap)}")
+        if swap.n_observations != model.observation_model.n_observations:
+            raise ValueError(f"session_swap permutes {swap.n_observations} observations; the "
+                             f"observation model has {model.observation_model.n_observations}")
+        return swap
 
     def _prepare(self, model, demos):
-        return pack_demonstrations(demos, model.observation_model), check_backend(self.backend)
+        swap = self._check_swap(model)
+        packed = pack_demonstrations(demos, model.observation_model)
+        swapped = (None if swap is None else
+                   pack_demonstrations([swap.apply(d) for d in demos], model.observation_model))
+        return packed, swapped, swap, check_backend(self.backend)
+
+    def _mixture(self, model, log_pi, data):
+        """Per demonstration: the log-likelihoods read as recorded and read swapped (each
+        with its prior weight), their mixture, and the occupancies of both readings."""
+        packed, swapped, swap, backend = data
+        plain = posterior_stats(model.mdp, log_pi, packed, backend=backend)
+        alt = posterior_stats(model.mdp, log_pi, swapped, backend=backend)
+        a = np.log1p(-swap.rate) + plain.log_likelihood
+        b = np.log(swap.rate) + alt.log_likelihood
+        return a, b, np.logaddexp(a, b), plain.occupancy, alt.occupancy
 
     def _pair_stats(self, model, log_pi, data):
-        packed, backend = data
-        stats = posterior_stats(model.mdp, log_pi, packed, backend=backend)
-        return float(stats.log_likelihood.sum()), stats.occupancy.sum(axis=0)
+        packed, swapped, _, backend = data
+        if swapped is None:
+            stats = posterior_stats(model.mdp, log_pi, packed, backend=backend)
+            return float(stats.log_likelihood.sum()), stats.occupancy.sum(axis=0)
+        # the mixture's gradient: each reading's, weighted by its posterior probability
+        a, _, total, occ_plain, occ_swapped = self._mixture(model, log_pi, data)
+        kept = np.exp(a - total)[:, None, None]
+        G = (kept * occ_plain + (1.0 - kept) * occ_swapped).sum(axis=0)
+        return float(total.sum()), G
+
+    def swap_probabilities(self, theta: np.ndarray,
+                           demos: Sequence[Demonstration]) -> np.ndarray:
+        """``(N,)``: each demonstration's posterior probability, at reward weights ``theta``,
+        of having been read through ``session_swap`` (zeros without one)."""
+        model, theta, data = self._check_call(theta, demos)
+        if data[1] is None:
+            return np.zeros(data[0].n_demos)
+        _, b, total, _, _ = self._mixture(model, self._log_policy(model, theta)[1], data)
+        return np.exp(b - total)
 
 
 class MAPBIRL(_BayesianIRL):

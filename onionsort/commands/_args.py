@@ -93,6 +93,15 @@ def add_posterior_method_argument(parser: argparse.ArgumentParser) -> None:
                              "(laplace, fast)")
 
 
+def add_session_swaps_argument(parser: argparse.ArgumentParser) -> None:
+    """``--session-swaps``: MMAP-BIRL doubts how each whole session was read."""
+    parser.add_argument("--session-swaps", action="store_true",
+                        help="mmap-birl: let a whole session's reads of the onion's class have "
+                             "been backwards, at the rate the calibration measured on its "
+                             "held-out sessions (a lighting cast can swap good and blemished "
+                             "for a session); its posterior weighs every such reading")
+
+
 def add_defer_argument(parser: argparse.ArgumentParser, *, needs: str) -> None:
     """``--defer-below P``: the robot defers where it is less sure than P of its action."""
     parser.add_argument("--defer-below", type=float, default=None, metavar="P",

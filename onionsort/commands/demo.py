@@ -31,6 +31,7 @@ from onionsort.commands._args import (
     add_models_argument,
     add_parallel_arguments,
     add_posterior_method_argument,
+    add_session_swaps_argument,
     parallel_options,
     subcommand,
 )
@@ -60,6 +61,7 @@ def register(subparsers) -> None:
     add_defer_argument(parser, needs="MMAP-BIRL and MAP-BIRL then also learn the posterior, "
                                      "and sort the same line-up once more deferring")
     add_posterior_method_argument(parser)
+    add_session_swaps_argument(parser)
     add_parallel_arguments(parser, pieces="repeats' recordings and methods")
     parser.set_defaults(func=run)
 
@@ -77,6 +79,7 @@ def run(args) -> int:
                               fusion=args.fusion, device=args.device,
                               defer_below=args.defer_below,
                               posterior_method=args.posterior_method,
+                              session_swaps=args.session_swaps,
                               **parallel_options(args)))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")

@@ -32,6 +32,7 @@ from onionsort.commands._args import (
     add_connect_argument,
     add_parallel_arguments,
     add_posterior_method_argument,
+    add_session_swaps_argument,
     parallel_options,
     subcommand,
 )
@@ -59,6 +60,7 @@ def register(subparsers) -> None:
     parser.add_argument("--samples", type=int, default=1000, metavar="N",
                         help="posterior samples (1000)")
     add_posterior_method_argument(parser)
+    add_session_swaps_argument(parser)
     add_backend_argument(parser)
     add_connect_argument(parser, what="the learning run (learn.rrd)")
     add_parallel_arguments(parser, pieces="methods")
@@ -80,16 +82,19 @@ def _methods(choices):
 
 def run(args) -> int:
     from onionsort.stages import LearnConfig, learn
-    from onionsort.stages.learn import learn_methods
+    from onionsort.stages.learn import SWAP_METHOD, learn_methods
     from onionsort.stages.parallel import ParallelOptions
 
     methods = args.method
+    # the swaps concern MMAP-BIRL alone; learn_methods gives them to it and to no other
+    first = SWAP_METHOD if args.session_swaps and SWAP_METHOD in methods else methods[0]
     config = LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
-                         out=args.out, method=methods[0], seed=args.seed,
+                         out=args.out, method=first, seed=args.seed,
                          allow_model_mismatch=args.allow_model_mismatch,
                          overwrite=args.overwrite, connect=args.connect,
                          backend=args.backend, posterior=args.posterior,
-                         samples=args.samples, posterior_method=args.posterior_method)
+                         samples=args.samples, posterior_method=args.posterior_method,
+                         session_swaps=args.session_swaps)
     if len(methods) == 1:
         models = {methods[0]: learn(config)}
         folders = {methods[0]: args.out}
@@ -100,6 +105,10 @@ def run(args) -> int:
         print(f"{method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
               f"steps, {model['n_occluded']} occluded)")
         print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
+        if "session_swaps" in model:
+            print(f"  sessions read with the onion's class backwards (prior "
+                  f"{model['session_swaps']['rate']:.3f}), posterior probability: "
+                  + ", ".join(f"{p:.3f}" for p in model["session_swaps"]["p_swapped"]))
         if "posterior" in model:
             risk = model["posterior"]["risk"]
             print(f"  posterior ({args.posterior_method}, {model['posterior']['n_samples']} "

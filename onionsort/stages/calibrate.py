@@ -181,8 +181,38 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
         "depth": depth,
         "inspection": inspection,
     }
-    return (replace(calibration, models=described, depth=depth, inspection=inspection),
-            metrics)
+    swaps = session_swaps(measured, observed_only=True)
+    metrics["session_swaps"] = swaps
+    return (replace(calibration, models=described, depth=depth, inspection=inspection,
+                    session_swaps={k: swaps[k] for k in ("sessions", "swapped")}), metrics)
+
+
+#: Fewest reads of the onion's class that let a session count as read swapped or not.
+MIN_CLASS_READS = 3
+
+
+def session_swaps(measured: list[dict], observed_only: bool = True) -> dict:
+    """How often perception read the onion's class backwards for a whole session.
+
+    Per session: its reads of a good or blemished onion as good or blemished (on the steps not
+    called occluded), and how many of them were the other class. A session with at least
+    :data:`MIN_CLASS_READS` such reads counts as *swapped* when more than half of them were.
+    Returns ``sessions`` (those counted), ``swapped``, and per session ``reads`` and
+    ``swapped_reads``.
+    """
+    from irl.domains.onion_sorting import SORTING_TASK
+
+    good, bad = (SORTING_TASK.value_index("prediction", v) for v in ("good", "bad"))
+    per_session = []
+    for m in measured:
+        true, pred = np.array(m["true"]["prediction"]), np.array(m["pred"]["prediction"])
+        keep = np.isin(true, (good, bad)) & np.isin(pred, (good, bad))
+        if observed_only:
+            keep &= ~np.array(m["called_occluded"], dtype=bool)
+        per_session.append((int(keep.sum()), int((true[keep] != pred[keep]).sum())))
+    counted = [(n, k) for n, k in per_session if n >= MIN_CLASS_READS]
+    return {"sessions": len(counted), "swapped": sum(2 * k > n for n, k in counted),
+            "reads": [n for n, _ in per_session], "swapped_reads": [k for _, k in per_session]}
 
 
 def _measure_session(models: PerceptionModels, steps, depth: bool, inspection: bool) -> dict:

@@ -54,7 +54,7 @@ from onionsort.stages.base import check_difficulty, check_output_folder, log_con
 from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
-from onionsort.stages.learn import BAYESIAN_METHODS, LearnConfig, learn
+from onionsort.stages.learn import BAYESIAN_METHODS, SWAP_METHOD, LearnConfig, learn
 from onionsort.stages.models import PerceptionModels, sorting_threshold
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
@@ -101,6 +101,8 @@ class DemoConfig(ParallelOptions):
     the posterior (``posterior_method``) and sort the same line-up a second time deferring
     where the robot is less sure than it that its next action is right
     (:class:`EvaluateConfig`'s ``defer_below``); both results are reported.
+    ``session_swaps`` has MMAP-BIRL doubt how each whole session was read
+    (:class:`~onionsort.stages.learn.LearnConfig`'s ``session_swaps``).
     """
 
     out: Path = Path("runs/demo")
@@ -120,6 +122,7 @@ class DemoConfig(ParallelOptions):
     device: str = "auto"
     defer_below: float | None = None
     posterior_method: str = "mcmc"
+    session_swaps: bool = False
 
     def __post_init__(self) -> None:
         from irl.inference import check_backend
@@ -230,6 +233,9 @@ def demo(config: DemoConfig) -> dict:
                               "fusion": json.loads((folders[0] / METHODS[0] / "evaluation.json"
                                                     ).read_text())["fusion"]},
                "seconds": round(time.perf_counter() - start, 1)}
+    if config.session_swaps:
+        results["session_swaps"] = {"rate": calibration.session_swap_rate,
+                                    **calibration.session_swaps}
     if config.defer_below is not None:
         results["defer_below"] = config.defer_below
         results["deferring"] = {m: _pooled([r["deferring"] for r in runs], config.seed)
@@ -247,6 +253,7 @@ def _settings(config: DemoConfig, size: dict) -> dict:
             "difficulty": config.difficulty, "inspection_views": config.inspection_views,
             "miss_cost": config.miss_cost, "waste_cost": config.waste_cost,
             "fusion": config.fusion,
+            **({"session_swaps": True} if config.session_swaps else {}),
             **({} if config.defer_below is None else {
                 "defer_below": config.defer_below, "posterior_method": config.posterior_method})}
 
@@ -387,7 +394,8 @@ def _learn_and_sort(progress: _Progress, k: int, method: str, sessions, calibrat
         learn(LearnConfig(sessions=tuple(sessions), calibration=calibration, out=run_dir,
                           method=method, seed=seed, overwrite=config.resume,
                           connect=config.connect, backend=config.backend, posterior=deferring,
-                          posterior_method=config.posterior_method))
+                          posterior_method=config.posterior_method,
+                          session_swaps=config.session_swaps and method == SWAP_METHOD))
         return {"learn_seconds": round(time.perf_counter() - t0, 3)}
 
     def evaluate_stage(defer_below: float | None = None) -> dict:

@@ -51,6 +51,8 @@ CONFIDENCE_FILE = "policy_confidence.json"
 CONFIDENCE_FORMAT = "onionsort.policy-confidence/1"
 #: The learners with an exact posterior to sample.
 BAYESIAN_METHODS = ("mmap-birl", "map-birl")
+#: The learner that can doubt how a whole session was read (``session_swaps``).
+SWAP_METHOD = "mmap-birl"
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,12 @@ class LearnConfig:
     posterior_method : str
         ``mcmc`` (HMC chains, the default) or ``laplace`` (a Gaussian at the MAP, fast); see
         :mod:`irl.posterior`.
+    session_swaps : bool
+        ``mmap-birl`` only: let each session's reads of the onion's class have been backwards
+        as a whole, at the rate the calibration measured on its held-out sessions
+        (:meth:`state_abstraction.calibration.Calibration.session_swap`; the learner's
+        ``session_swap``). Each session's posterior probability of having been swapped is
+        written to ``model.json``.
     """
 
     sessions: tuple[Path, ...]
@@ -104,6 +112,7 @@ class LearnConfig:
     posterior: bool = False
     samples: int = 1000
     posterior_method: str = "mcmc"
+    session_swaps: bool = False
 
     def __post_init__(self) -> None:
         from irl.experiments import METHODS
@@ -112,6 +121,9 @@ class LearnConfig:
 
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
+        if self.session_swaps and self.method != SWAP_METHOD:
+            raise ValueError(f"session_swaps needs {SWAP_METHOD}, which marginalizes how each "
+                             f"session was read; {self.method} does not")
         if self.posterior and self.method not in BAYESIAN_METHODS:
             raise ValueError(f"a posterior needs a Bayesian method ({', '.join(BAYESIAN_METHODS)}"
                              f"); {self.method} gives a point estimate only")
@@ -199,6 +211,8 @@ def learn(config: LearnConfig) -> dict:
         domain = dataclasses.replace(base, observation_model=calibration.observation_model())
         estimator = make_estimator(config.method, domain, seed=config.seed,
                                    backend=config.backend)
+        if config.session_swaps:
+            estimator.session_swap = calibration.session_swap()
         estimator.fit(demos)
         theta = np.asarray(estimator.theta_, float)
         policy = np.asarray(estimator.policy_, int)
@@ -216,6 +230,11 @@ def learn(config: LearnConfig) -> dict:
             "n_iter": int(getattr(estimator, "n_iter_", 0)),
             "model_mismatch_allowed": mismatch,
         }
+        if config.session_swaps:
+            model["session_swaps"] = {
+                "rate": estimator.session_swap.rate,
+                "p_swapped": [round(float(p), 4) for p in
+                              estimator.swap_probabilities(estimator.theta_, demos)]}
         confidence = None
         if config.posterior:
             confidence = _sample_posterior(config, estimator, demos, domain, out)
@@ -244,7 +263,9 @@ def learn_methods(config: LearnConfig, methods: Sequence[str],
     methods = list(dict.fromkeys(methods))
     if not methods:
         raise ValueError("methods must name at least one learner; got none")
-    configs = [dataclasses.replace(config, method=m, out=Path(config.out) / m) for m in methods]
+    configs = [dataclasses.replace(config, method=m, out=Path(config.out) / m,
+                                   session_swaps=config.session_swaps and m == SWAP_METHOD)
+               for m in methods]
     for c in configs:  # refused before any piece starts
         refuse_existing(c.out / MODEL_FILE, c.overwrite)
     models: dict[str, dict] = {}
@@ -281,6 +302,9 @@ def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) 
             for s, (row, credible) in enumerate(zip(conf, post.credible_actions(0.9),
                                                     strict=True))],
     }
+    if post.components:  # the readings of the sessions (which were read swapped) weighed
+        doc["readings"] = [{"swapped": list(c.swapped), "weight": round(c.weight, 6),
+                            "n_samples": c.n_samples} for c in post.components]
     write_json(out / CONFIDENCE_FILE, doc)
     confidence_figure(conf, post.map_policy, domain.state_names, actions,
                       out / "policy_confidence.png")
