@@ -34,10 +34,13 @@ __all__ = [
     "ConfusionMatrix",
     "calibrate",
     "calibration_factors",
+    "confusion_counts",
     "load_calibration",
 ]
 
 FORMAT = "onionsort.calibration/1"
+_NO_SWAPS = ("this calibration does not say how often a whole session's reads of the onion's "
+             "class were backwards (it predates the measure); calibrate again")
 
 
 def calibration_factors(task: TaskDescription) -> dict[str, list[str]]:
@@ -101,7 +104,7 @@ class ConfusionMatrix:
         return float(np.trace(self.counts) / total) if total else float("nan")
 
 
-def _counts(true: np.ndarray, pred: np.ndarray, n: int, name: str) -> np.ndarray:
+def confusion_counts(true: np.ndarray, pred: np.ndarray, n: int, name: str) -> np.ndarray:
     true, pred = np.asarray(true, dtype=np.int64), np.asarray(pred, dtype=np.int64)
     if true.shape != pred.shape or true.ndim != 1:
         raise ValueError(
@@ -144,9 +147,11 @@ class Calibration:
         The task measured: its factors, in the order of the state encoding, and its sizes
         (the onion-sorting task by default).
     session_swaps : dict or None
-        ``{"sessions": n, "swapped": k}``: of the held-out sessions with enough reads of the
-        onion's class, how many were read backwards in most of them
-        (:func:`onionsort.stages.calibrate.session_swaps`); None in files that predate it.
+        ``{"sessions": n, "swapped": k, "prediction_counts": counts}``: of the held-out
+        sessions with enough reads of the onion's class, how many were read backwards in most
+        of them, and the prediction factor's counts with those sessions' class reads swapped
+        back (:func:`onionsort.stages.calibrate.session_swaps`); None in files that predate
+        it.
     """
 
     factors: dict[str, ConfusionMatrix]
@@ -161,10 +166,15 @@ class Calibration:
 
     def __post_init__(self) -> None:
         if self.session_swaps is not None:
-            n, k = self.session_swaps.get("sessions"), self.session_swaps.get("swapped")
+            swaps = self.session_swaps
+            n, k = swaps.get("sessions"), swaps.get("swapped")
             if not (isinstance(n, int) and isinstance(k, int) and 0 <= k <= n):
                 raise ValueError(f"session_swaps must hold integers 0 <= swapped <= sessions; "
-                                 f"got {self.session_swaps}")
+                                 f"got sessions {n!r}, swapped {k!r}")
+            labels = list(self.task.factors["prediction"])
+            within = ConfusionMatrix(np.array(swaps.get("prediction_counts", [])), labels)
+            object.__setattr__(self, "session_swaps", {**swaps, "prediction_counts":
+                                                       within.counts.tolist()})
         expected = calibration_factors(self.task)
         if set(self.factors) != set(expected):
             raise ValueError(f"factors must be {list(expected)} (task {self.task.name!r}); "
@@ -197,12 +207,22 @@ class Calibration:
             raise ValueError(f"smoothing must be >= 0; got {smoothing}")
         return replace(self, smoothing=float(smoothing))
 
-    def observation_model(self, smoothing: float | None = None) -> ObservationModel:
+    def observation_model(self, smoothing: float | None = None, *,
+                          within_sessions: bool = False) -> ObservationModel:
         """The learners' ``O[s, a, o]`` (S states x A actions, pair observations
-        ``o = task.pair(s', a')``)."""
+        ``o = task.pair(s', a')``). ``within_sessions``: the prediction factor's confusion
+        within a session given how it was read, the swapped sessions' reads swapped back
+        (for a learner given :meth:`session_swap`, which models those sessions itself)."""
         smoothing = self.smoothing if smoothing is None else smoothing
-        mats = [self.factors[name].probabilities(smoothing) for name in self.task.factor_names]
-        return factored_observation_model(mats, self.factors["action"].probabilities(smoothing))
+        factors = dict(self.factors)
+        if within_sessions:
+            if self.session_swaps is None:
+                raise ValueError(_NO_SWAPS)
+            factors["prediction"] = ConfusionMatrix(
+                np.array(self.session_swaps["prediction_counts"]),
+                self.factors["prediction"].labels)
+        mats = [factors[name].probabilities(smoothing) for name in self.task.factor_names]
+        return factored_observation_model(mats, factors["action"].probabilities(smoothing))
 
     @property
     def session_swap_rate(self) -> float | None:
@@ -220,8 +240,7 @@ class Calibration:
         from irl.observation.swap import value_swap
 
         if self.session_swaps is None:
-            raise ValueError("this calibration did not measure how often a whole session's "
-                             "class reads are swapped; calibrate again with this version")
+            raise ValueError(_NO_SWAPS)
         return value_swap(self.task, "prediction", ("good", "bad"), self.session_swap_rate)
 
     @property
@@ -310,13 +329,13 @@ def calibrate(true: dict[str, Sequence[int]], predicted: dict[str, Sequence[int]
     if missing:
         raise ValueError(f"true and predicted must both give the factors {list(expected)}; "
                          f"missing {missing}")
-    factors = {k: ConfusionMatrix(_counts(true[k], predicted[k], len(labels), k), labels)
+    factors = {k: ConfusionMatrix(confusion_counts(true[k], predicted[k], len(labels), k), labels)
                for k, labels in expected.items()}
     state_true = task.encode_array(
         np.stack([np.asarray(true[k], dtype=np.int64) for k in task.factor_names], axis=-1))
     state_pred = task.encode_array(
         np.stack([np.asarray(predicted[k], dtype=np.int64) for k in task.factor_names], axis=-1))
-    joint = ConfusionMatrix(_counts(state_true, state_pred, task.n_states, "state"),
+    joint = ConfusionMatrix(confusion_counts(state_true, state_pred, task.n_states, "state"),
                             [str(s) for s in range(task.n_states)])
     pair_correct = int(np.sum((state_true == state_pred)
                               & (np.asarray(true["action"]) == np.asarray(predicted["action"]))))
@@ -360,8 +379,12 @@ def load_calibration(path: Path | str, *, task: TaskDescription = SORTING_TASK) 
     swaps = doc.get("session_swaps")
     if swaps is not None and not isinstance(swaps, dict):
         raise ValueError(f"{path}: session_swaps must be an object; got {swaps!r}")
-    return Calibration(session_swaps=swaps, factors=factors, joint_state=joint,
-                       pair_correct=int(doc.get("pair_correct", 0)),
-                       smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
-                       depth=None if depth is None else bool(depth),
-                       inspection=None if inspection is None else bool(inspection), task=task)
+    try:
+        return Calibration(session_swaps=swaps, factors=factors, joint_state=joint,
+                           pair_correct=int(doc.get("pair_correct", 0)),
+                           smoothing=float(doc.get("smoothing", 1.0)), models=doc.get("models"),
+                           depth=None if depth is None else bool(depth),
+                           inspection=None if inspection is None else bool(inspection),
+                           task=task)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -181,38 +181,53 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
         "depth": depth,
         "inspection": inspection,
     }
-    swaps = session_swaps(measured, observed_only=True)
-    metrics["session_swaps"] = swaps
+    swaps = session_swaps(measured)
+    metrics["session_swaps"] = {k: swaps[k] for k in ("sessions", "swapped", "reads",
+                                                      "swapped_reads")}
     return (replace(calibration, models=described, depth=depth, inspection=inspection,
-                    session_swaps={k: swaps[k] for k in ("sessions", "swapped")}), metrics)
+                    session_swaps={k: swaps[k] for k in ("sessions", "swapped",
+                                                         "prediction_counts")}), metrics)
 
 
 #: Fewest reads of the onion's class that let a session count as read swapped or not.
 MIN_CLASS_READS = 3
 
 
-def session_swaps(measured: list[dict], observed_only: bool = True) -> dict:
+def session_swaps(measured: list[dict]) -> dict:
     """How often perception read the onion's class backwards for a whole session.
 
-    Per session: its reads of a good or blemished onion as good or blemished (on the steps not
-    called occluded), and how many of them were the other class. A session with at least
-    :data:`MIN_CLASS_READS` such reads counts as *swapped* when more than half of them were.
-    Returns ``sessions`` (those counted), ``swapped``, and per session ``reads`` and
-    ``swapped_reads``.
+    Per session (each of ``measured`` as :func:`_measure_session` gives it): its reads of a
+    good or blemished onion as good or blemished, on the steps not called occluded, and how
+    many of them were the other class. A session with at least :data:`MIN_CLASS_READS` such
+    reads counts as *swapped* when more than half of them were. Returns ``sessions`` (those
+    counted), ``swapped``, per session ``reads`` and ``swapped_reads``, and
+    ``prediction_counts``: the prediction factor's confusion on the steps not called occluded
+    with the swapped sessions' class reads swapped back, i.e. the confusion within a session
+    given how it was read (what a learner that models the swaps needs).
     """
     from irl.domains.onion_sorting import SORTING_TASK
+    from state_abstraction.calibration import confusion_counts
 
     good, bad = (SORTING_TASK.value_index("prediction", v) for v in ("good", "bad"))
-    per_session = []
+    back = np.arange(len(SORTING_TASK.factors["prediction"]))
+    back[[good, bad]] = [bad, good]
+    reads, wrong, true_all, pred_all = [], [], [], []
     for m in measured:
-        true, pred = np.array(m["true"]["prediction"]), np.array(m["pred"]["prediction"])
+        seen = ~np.array(m["called_occluded"], dtype=bool)
+        true = np.array(m["true"]["prediction"], dtype=np.int64)[seen]
+        pred = np.array(m["pred"]["prediction"], dtype=np.int64)[seen]
         keep = np.isin(true, (good, bad)) & np.isin(pred, (good, bad))
-        if observed_only:
-            keep &= ~np.array(m["called_occluded"], dtype=bool)
-        per_session.append((int(keep.sum()), int((true[keep] != pred[keep]).sum())))
-    counted = [(n, k) for n, k in per_session if n >= MIN_CLASS_READS]
+        reads.append(int(keep.sum()))
+        wrong.append(int((true[keep] != pred[keep]).sum()))
+        swapped = reads[-1] >= MIN_CLASS_READS and 2 * wrong[-1] > reads[-1]
+        true_all.append(true)
+        pred_all.append(back[pred] if swapped else pred)
+    counted = [(n, k) for n, k in zip(reads, wrong, strict=True) if n >= MIN_CLASS_READS]
+    counts = confusion_counts(np.concatenate(true_all) if true_all else np.zeros(0, int),
+                              np.concatenate(pred_all) if pred_all else np.zeros(0, int),
+                              back.size, "prediction")
     return {"sessions": len(counted), "swapped": sum(2 * k > n for n, k in counted),
-            "reads": [n for n, _ in per_session], "swapped_reads": [k for _, k in per_session]}
+            "reads": reads, "swapped_reads": wrong, "prediction_counts": counts.tolist()}
 
 
 def _measure_session(models: PerceptionModels, steps, depth: bool, inspection: bool) -> dict:

@@ -208,7 +208,9 @@ def learn(config: LearnConfig) -> dict:
                 mismatch.append(str(exc))
                 logger.warning("allowed by --allow-model-mismatch: %s", exc)
         demos = [s.perceived_demonstration() for s in sessions]
-        domain = dataclasses.replace(base, observation_model=calibration.observation_model())
+        # with the swaps modelled, the confusion within a session given how it was read
+        domain = dataclasses.replace(base, observation_model=calibration.observation_model(
+            within_sessions=config.session_swaps))
         estimator = make_estimator(config.method, domain, seed=config.seed,
                                    backend=config.backend)
         if config.session_swaps:
