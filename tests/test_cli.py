@@ -206,6 +206,37 @@ def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perc
     assert "where another demonstration would help most" in capsys.readouterr().out
 
 
+def test_learn_with_session_swaps_weighs_how_each_session_was_read(tmp_path, perceived_sessions,
+                                                                   capsys):
+    import dataclasses
+
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+    from state_abstraction.calibration import load_calibration
+
+    shipped = load_calibration(DEFAULT_MODELS / CALIBRATION_FILE)
+    calibration = dataclasses.replace(shipped, session_swaps={
+        "sessions": 20, "swapped": 2, "prediction_counts": [[60, 5, 3], [6, 55, 3],
+                                                            [0, 1, 90]]}).save(
+        tmp_path / "calibration.json", extra={"models": shipped.models})
+    out = tmp_path / "run"
+    assert main(["learn", *map(str, perceived_sessions), "--method", "mmap-birl,map-birl",
+                 "--session-swaps", "--posterior", "--posterior-method", "laplace",
+                 "--samples", "100", "--observation-model", str(calibration),
+                 "--allow-model-mismatch", "--out", str(out)]) == 0
+    assert "posterior probability" in capsys.readouterr().out
+    mmap = json.loads((out / "mmap-birl" / "model.json").read_text())
+    assert mmap["session_swaps"]["rate"] == pytest.approx(3 / 22)
+    p = mmap["session_swaps"]["p_swapped"]
+    assert len(p) == len(perceived_sessions) and all(0.0 <= v <= 1.0 for v in p)
+    readings = json.loads((out / "mmap-birl" / "policy_confidence.json").read_text())["readings"]
+    assert sum(r["weight"] for r in readings) == pytest.approx(1.0, abs=1e-5)
+    assert sum(r["n_samples"] for r in readings) == 100
+    # MAP-BIRL reads observations at face value: no swaps for it
+    face = out / "map-birl"
+    assert "session_swaps" not in json.loads((face / "model.json").read_text())
+    assert "readings" not in json.loads((face / "policy_confidence.json").read_text())
+
+
 def test_the_parsers_repeated_choices_are_the_libraries():
     from irl.experiments import METHODS
     from irl.inference import BACKENDS

@@ -192,6 +192,10 @@ def learn(config: LearnConfig) -> dict:
     with output_folder(config.out) as out:  # checked before anything is read or fitted
         base = onion_sorting()
         calibration = load_calibration(config.calibration, task=base.task)
+        if config.session_swaps and calibration.session_swaps is None:
+            raise ValueError(f"{config.calibration} does not say how often a whole session's "
+                             "reads of the onion's class were backwards, which "
+                             "--session-swaps needs; calibrate again with this version")
         sessions = [open_session(p) for p in config.sessions]
         for session in sessions:
             if session.task != base.task:

@@ -1,3 +1,4 @@
+import dataclasses
 import json
 
 import numpy as np
@@ -216,3 +217,62 @@ def test_the_independence_check_tells_errors_that_come_together_from_independent
     cal = calibrate(*toy_data(3, 20000), task=TOY)  # independent errors: the two agree
     assert cal.independent_state_error_rate == pytest.approx(cal.state_error_rate, abs=0.01)
     assert cal.independent_pair_error_rate == pytest.approx(cal.pair_error_rate, abs=0.01)
+
+
+def measured_session(true_class, read_class, occluded=None):
+    """One session as ``onionsort.stages.calibrate._measure_session`` reports it, its
+    prediction factor only (class names; the other factors unread)."""
+    idx = {v: i for i, v in enumerate(FACTORS["prediction"])}
+    n = len(true_class)
+    return {"true": {"prediction": [idx[v] for v in true_class]},
+            "pred": {"prediction": [idx[v] for v in read_class]},
+            "called_occluded": occluded or [False] * n}
+
+
+def test_a_session_whose_class_reads_are_mostly_backwards_counts_as_swapped():
+    from onionsort.stages.calibrate import session_swaps
+
+    sessions = [
+        measured_session(["good", "bad", "bad", "good"], ["bad", "good", "good", "good"]),
+        measured_session(["good", "bad", "bad", "good"], ["good", "good", "bad", "good"]),
+        # two of four reads backwards is not more than half; the occluded read not counted
+        measured_session(["good", "bad", "bad", "good"], ["bad", "bad", "good", "good"]),
+        measured_session(["good", "bad", "unknown"], ["bad", "good", "unknown"],
+                         occluded=[False, True, False]),  # one read: too few to tell
+    ]
+    swaps = session_swaps(sessions)
+    assert (swaps["sessions"], swaps["swapped"]) == (3, 1)
+    assert swaps["reads"] == [4, 4, 4, 1] and swaps["swapped_reads"] == [3, 1, 2, 1]
+    good, bad, unknown = range(3)
+    counts = np.array(swaps["prediction_counts"])
+    # the swapped session's reads swapped back: its one wrong read stays wrong
+    assert counts[good, good] == 1 + 2 + 1 + 0 and counts[good, bad] == 1 + 0 + 1 + 1
+    assert counts[bad, bad] == 2 + 1 + 1 and counts[bad, good] == 0 + 1 + 1
+    assert counts[unknown, unknown] == 1 and counts.sum() == 4 + 4 + 4 + 2
+
+
+def test_the_session_swaps_save_load_and_give_the_learners_their_model(tmp_path, known):
+    rng = np.random.default_rng(3)
+    cal = calibrate(*synthetic(rng, 3000, known))
+    with pytest.raises(ValueError, match="calibrate again"):
+        cal.session_swap()
+    assert cal.session_swap_rate is None
+    within = [[30, 2, 1], [3, 28, 2], [0, 0, 40]]
+    cal = dataclasses.replace(cal, session_swaps={"sessions": 25, "swapped": 2,
+                                                  "prediction_counts": within})
+    assert cal.session_swap_rate == pytest.approx(3 / 27)
+    back = load_calibration(cal.save(tmp_path / "calibration.json"))
+    assert back.session_swaps == cal.session_swaps
+    swap = back.session_swap()
+    assert swap.rate == pytest.approx(3 / 27) and swap.n_observations == 240
+    plain, inside = back.observation_model(), back.observation_model(within_sessions=True)
+    assert not np.allclose(plain.probs, inside.probs)  # the prediction factor alone differs
+    other = dataclasses.replace(back, factors={**back.factors, "prediction": type(
+        back.factors["prediction"])(np.array(within), back.factors["prediction"].labels)})
+    np.testing.assert_allclose(inside.probs, other.observation_model().probs)
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    doc["session_swaps"]["swapped"] = 30
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="bad.json: session_swaps must hold") as info:
+        load_calibration(tmp_path / "bad.json")
+    assert "\n" not in str(info.value)

@@ -1,0 +1,138 @@
+"""A whole demonstration read through a swap: the mixture likelihood against each reading's,
+its gradient against differences, and the posterior over readings against quadrature."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import irl
+from irl.observation.swap import SessionSwap, value_swap
+from irl.posterior import load_posterior, sample_posterior, swap_readings
+from tests.irl.test_posterior import noisy_two_state_problem, quadrature
+
+#: the two-state problem's observations (s * 2 + a): action 0 and 1 read backwards
+ACTIONS_BACKWARDS = np.array([1, 0, 3, 2])
+
+
+def sorting_problem(seed: int, rate: float, n: int = 3, length: int = 20):
+    dom = irl.domains.onion_sorting(noise=0.3)
+    demos, _ = dom.sample(n=n, length=length, occlusion=0.2, seed=seed)
+    swap = value_swap(dom.task, "prediction", ("good", "bad"), rate)
+    est = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior,
+                       session_swap=swap)
+    return dom, est, swap, demos
+
+
+@pytest.mark.parametrize(("permutation", "rate", "message"), [
+    ([0, 0, 2, 3], 0.1, "every observation index exactly once"),
+    ([1, 2, 0, 3], 0.1, "its own inverse"),
+    ([[0, 1]], 0.1, "1-D array"),
+    ([1, 0, 3, 2], 0.0, "rate must be"),
+    ([1, 0, 3, 2], 1.0, "rate must be"),
+])
+def test_a_bad_swap_gets_one_line_that_names_it(permutation, rate, message):
+    with pytest.raises(ValueError) as info:
+        SessionSwap(np.array(permutation), rate)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_class_swap_exchanges_good_and_bad_and_nothing_else():
+    task = irl.domains.onion_sorting().task
+    swap = value_swap(task, "prediction", ("good", "bad"), 0.1)
+    changed = 0
+    for o in range(task.n_pairs):
+        s, a = task.unpair(o)
+        s2, a2 = task.unpair(int(swap.permutation[o]))
+        before, after = task.decode(s), task.decode(s2)
+        assert a2 == a and {k: v for k, v in before.items() if k != "prediction"} == \
+            {k: v for k, v in after.items() if k != "prediction"}
+        names = {task.value_name("prediction", before["prediction"]),
+                 task.value_name("prediction", after["prediction"])}
+        assert names in ({"good", "bad"}, {"unknown"})
+        changed += s2 != s
+    assert changed == 2 * task.n_pairs // 3  # every pair whose onion is good or bad
+    demo = irl.Demonstration([3, None, 100])
+    assert swap.apply(swap.apply(demo)) == demo and swap.apply(demo).observations[1] is None
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_likelihood_weighs_each_demonstrations_two_readings(backend):
+    if backend == "numba":
+        pytest.importorskip("numba")
+    dom, est, swap, demos = sorting_problem(seed=1, rate=0.15, length=12)
+    est.backend = backend
+    plain = irl.MMAPBIRL(dom.mdp, dom.observation_model, beta=dom.beta, prior=dom.prior,
+                         backend=backend)
+    theta = np.random.default_rng(0).normal(size=dom.mdp.n_features)
+    each = [(np.log(0.85) + plain.log_likelihood(theta, [d]),
+             np.log(0.15) + plain.log_likelihood(theta, [swap.apply(d)])) for d in demos]
+    np.testing.assert_allclose(est.log_likelihood(theta, demos),
+                               sum(np.logaddexp(a, b) for a, b in each), rtol=1e-12)
+    np.testing.assert_allclose(est.swap_probabilities(theta, demos),
+                               [np.exp(b - np.logaddexp(a, b)) for a, b in each], rtol=1e-9)
+    grad = est.log_likelihood_gradient(theta, demos)
+    h = 1e-6
+    diff = [(est.log_likelihood(theta + e, demos) - est.log_likelihood(theta - e, demos)) / (2 * h)
+            for e in np.eye(theta.size) * h]
+    np.testing.assert_allclose(grad, diff, rtol=1e-5, atol=1e-6)
+
+
+def test_a_swap_that_fits_no_observation_model_is_refused():
+    dom, est, _, demos = sorting_problem(seed=1, rate=0.1, length=5)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.1)
+    with pytest.raises(ValueError, match="session_swap permutes 4 observations"):
+        est.fit(demos)
+    est.session_swap = "swap"
+    with pytest.raises(TypeError, match="session_swap must be"):
+        est.fit(demos)
+
+
+def test_the_readings_weighed_are_the_maps_its_complement_and_their_neighbours():
+    readings = swap_readings(np.array([0.9, 0.1, 0.2]))
+    assert readings[0] == (0,) and len(readings) == 8  # three sessions: every reading
+    many = swap_readings(np.r_[0.9, np.zeros(11)])
+    assert len(many) == len(set(many)) == 2 + 2 * 12
+    assert {(0,), tuple(range(1, 12)), (), tuple(range(12))} <= set(many)
+
+
+@pytest.mark.parametrize("seed", [0, pytest.param(3, marks=pytest.mark.slow)])
+def test_the_posterior_over_readings_matches_quadrature(seed):
+    """One weight, two demonstrations, the first read backwards: the exact mixture posterior
+    is on a grid; the draws (HMC within each reading, the readings weighed by their Laplace
+    evidence) follow it."""
+    _mdp, est, demos = noisy_two_state_problem(seed=seed, occluded=0.2)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
+    demos = [est.session_swap.apply(demos[0]), demos[1]]
+    grid, dens = quadrature(est, demos)
+    post = sample_posterior(est, demos, n_samples=1200, seed=0, method="mcmc", n_draws=300,
+                            max_draws=300)
+    cdf = np.cumsum(dens) * (grid[1] - grid[0])
+    drawn = np.searchsorted(np.sort(post.theta[:, 0]), grid) / post.n_samples
+    assert np.abs(cdf - drawn).max() < 0.08
+    assert len(post.components) == 4
+    assert abs(sum(c.weight for c in post.components) - 1.0) < 1e-12
+    assert sum(c.n_samples for c in post.components) == post.n_samples
+    assert sum(c.weight > 0.05 for c in post.components) >= 2  # truly in doubt
+
+
+def test_the_posterior_finds_the_sessions_read_backwards():
+    """Two of three sorting sessions read with the onion's class backwards: a model of
+    independent errors is unsure of the reward, the swap model finds the two sessions."""
+    dom, est, swap, demos = sorting_problem(seed=2, rate=0.1)
+    read = [swap.apply(demos[0]), swap.apply(demos[1]), demos[2]]
+    est.fit(read)
+    np.testing.assert_array_less([0.5, 0.5], est.swap_probabilities(est.theta_, read)[:2])
+    post = sample_posterior(est, read, n_samples=300, seed=0, method="laplace")
+    best = max(post.components, key=lambda c: c.weight)
+    assert best.swapped == (0, 1) and best.weight > 0.9
+
+
+def test_a_posterior_file_keeps_its_readings(tmp_path):
+    _mdp, est, demos = noisy_two_state_problem(seed=1)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.3)
+    post = sample_posterior(est, demos, n_samples=100, seed=0, method="laplace")
+    back = load_posterior(post.save(tmp_path / "posterior.npz"))
+    assert back.components == post.components and len(back.components) == 4
+    a = sample_posterior(est, demos, n_samples=100, seed=0, method="laplace")
+    np.testing.assert_array_equal(a.theta, post.theta)  # a seed reproduces them
