@@ -159,7 +159,8 @@ class Posterior:
         The MAP the samples were drawn around (the estimator's ``theta_``).
     map_policy : ndarray of shape (S,)
     covariance : ndarray of shape (K, K)
-        The Laplace covariance at the MAP (the proposal's shape for ``"mcmc"``).
+        The Laplace covariance at the MAP (the proposal's shape for ``"mcmc"``; with a
+        ``session_swap``, of the mixture posterior, while each reading is drawn with its own).
     n_actions : int
     method : str
     diagnostics : Diagnostics
@@ -438,8 +439,9 @@ def sample_posterior(
                                             **draw)
             components: tuple[SwapComponent, ...] = ()
         else:
-            theta, diagnostics, cov, components = _draw_swap_readings(
+            theta, diagnostics, components = _draw_swap_readings(
                 estimator, demonstrations, map_theta, 1.0 / std**2, n_samples, draw)
+            cov = _laplace_covariance(value_and_grad, map_theta, 1.0 / std**2, step)[0]
     if np.isfinite(diagnostics.max_r_hat()) and diagnostics.max_r_hat() > 1.01:
         logger.warning("the chains still disagree after %d draws each (max R-hat %.3f > "
                        "1.01): raise max_draws or n_warmup", diagnostics.n_draws,
@@ -516,20 +518,19 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
     counts = _apportion(weights, n_samples)
-    thetas, diags, components, cov_map = [], [], [], None
+    thetas, diags, components = [], [], []
     for (z, theta_z, value_and_grad, log_weight), w, n in zip(fitted, weights, counts,
                                                              strict=True):
         components.append(SwapComponent(swapped=z, weight=float(w), log_weight=log_weight,
                                         n_samples=int(n)))
         if n:
-            theta, diag, cov = _draw(value_and_grad, theta_z, prior_precision, int(n), **draw)
+            theta, diag, _ = _draw(value_and_grad, theta_z, prior_precision, int(n), **draw)
             thetas.append(theta)
             diags.append(diag)
-            cov_map = cov if cov_map is None else cov_map
     logger.info("posterior over %d readings of %d demonstrations: %s", len(readings), N,
                 ", ".join(f"swapped {list(c.swapped)} {c.weight:.3f}"
                           for c in sorted(components, key=lambda c: -c.weight)[:4]))
-    return np.vstack(thetas), _combined(diags), cov_map, tuple(components)
+    return np.vstack(thetas), _combined(diags), tuple(components)
 
 
 def _apportion(weights: np.ndarray, n: int) -> np.ndarray:
