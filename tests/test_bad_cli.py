@@ -63,6 +63,9 @@ def fx(tmp_path_factory) -> Path:
     (d / "run_done" / "model.json").write_text("{}")
     (d / "cal_done").mkdir()
     (d / "cal_done" / CALIBRATION_FILE).write_text("{}")
+    old = json.loads(SHIPPED_CALIBRATION.read_text())  # written before session swaps were
+    del old["session_swaps"]                           # measured
+    (d / "cal_old.json").write_text(json.dumps(old))
     (d / "data_none").mkdir()
     (d / "models_bad_detector").mkdir()
     for name in ("state_classifier.pt", "inspection_classifier.pt"):
@@ -232,9 +235,9 @@ CASES = [
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--connect",
       "rerun+http://host/proxy", "--out", "{d}/x"], ["connect must be", "no port",
                                                      "'rerun+http://host/proxy'"]),
-    (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--session-swaps",
-      "--out", "{d}/x"], ["calibration.json does not say how often a whole session",
-                          "calibrate again"]),
+    (["learn", "{d}/unperceived.mcap", "--observation-model", "{d}/cal_old.json",
+      "--session-swaps", "--out", "{d}/x"],
+     ["cal_old.json does not say how often a whole session", "calibrate again"]),
     (["learn", "{d}/unperceived.mcap", "--observation-model", CAL, "--session-swaps",
       "--method", "map-birl", "--out", "{d}/x"], ["session_swaps needs mmap-birl", "map-birl"]),
     (["demo", "--quick", "--out", "{d}/x", "--defer-below", "2"],
