@@ -79,7 +79,7 @@ def test_the_likelihood_weighs_each_demonstrations_two_readings(backend):
 
 
 def test_a_swap_that_fits_no_observation_model_is_refused():
-    dom, est, _, demos = sorting_problem(seed=1, rate=0.1, length=5)
+    _dom, est, _, demos = sorting_problem(seed=1, rate=0.1, length=5)
     est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.1)
     with pytest.raises(ValueError, match="session_swap permutes 4 observations"):
         est.fit(demos)
@@ -117,9 +117,9 @@ def test_the_posterior_over_readings_matches_quadrature(seed):
 
 
 def test_the_posterior_finds_the_sessions_read_backwards():
-    """Two of three sorting sessions read with the onion's class backwards: a model of
-    independent errors is unsure of the reward, the swap model finds the two sessions."""
-    dom, est, swap, demos = sorting_problem(seed=2, rate=0.1)
+    """Two of three sorting sessions read with the onion's class backwards: the swap model
+    finds the two sessions."""
+    _dom, est, swap, demos = sorting_problem(seed=2, rate=0.1)
     read = [swap.apply(demos[0]), swap.apply(demos[1]), demos[2]]
     est.fit(read)
     np.testing.assert_array_less([0.5, 0.5], est.swap_probabilities(est.theta_, read)[:2])

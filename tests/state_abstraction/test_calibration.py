@@ -273,6 +273,6 @@ def test_the_session_swaps_save_load_and_give_the_learners_their_model(tmp_path,
     doc = json.loads((tmp_path / "calibration.json").read_text())
     doc["session_swaps"]["swapped"] = 30
     (tmp_path / "bad.json").write_text(json.dumps(doc))
-    with pytest.raises(ValueError, match="bad.json: session_swaps must hold") as info:
+    with pytest.raises(ValueError, match=r"bad\.json: session_swaps must hold") as info:
         load_calibration(tmp_path / "bad.json")
     assert "\n" not in str(info.value)
