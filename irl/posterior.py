@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -377,13 +377,16 @@ def sample_posterior(
     Parameters
     ----------
     estimator : MMAPBIRL or MAPBIRL
-        Its model (MDP, observation model of any kind, beta, prior, backend) defines the
-        posterior. If it is fitted (on these demonstrations), its ``theta_`` is the MAP the
-        samples are drawn around and its greedy policy the one the confidence is about;
-        otherwise a copy is fitted. It is not changed.
+        Its model (MDP, observation model of any kind, beta, prior, backend, session swap)
+        defines the posterior. If it is fitted (on these demonstrations), its ``theta_`` is
+        the MAP the samples are drawn around (with a session swap, the MAP whose policy the
+        confidence is about, each reading being drawn round its own mode) and its greedy
+        policy the one the confidence is about; otherwise a copy is fitted. It is not
+        changed.
     demonstrations : sequence of Demonstration
     n_samples : int, default 1000
-        Samples returned (the main draws of all chains, thinned evenly to this many).
+        Samples returned (the main draws of all chains, thinned evenly to this many; with a
+        session swap, each reading's share of them, thinned from its own chains).
     seed : int, Generator or None, default 0
         The same seed gives the same samples.
     method : {"mcmc", "laplace"}
@@ -453,10 +456,13 @@ def sample_posterior(
 
 
 def _draw(value_and_grad, map_theta, prior_precision, n_samples, *, method, rng, n_chains,
-          n_warmup, n_draws, max_draws, step) -> tuple[np.ndarray, Diagnostics, np.ndarray]:
+          n_warmup, n_draws, max_draws, step, laplace=None
+          ) -> tuple[np.ndarray, Diagnostics, np.ndarray]:
     """``n_samples`` draws round the mode ``map_theta`` of ``value_and_grad``: ``(theta,
-    diagnostics, Laplace covariance)``."""
-    cov, clipped, n_grad = _laplace_covariance(value_and_grad, map_theta, prior_precision, step)
+    diagnostics, Laplace covariance)``. ``laplace``: the mode's
+    :func:`_laplace_covariance`, when already computed."""
+    cov, clipped, n_grad = laplace or _laplace_covariance(value_and_grad, map_theta,
+                                                          prior_precision, step)
     chol = np.linalg.cholesky(cov)
     if method == "laplace":
         theta = map_theta + rng.standard_normal((n_samples, map_theta.size)) @ chol.T
@@ -509,24 +515,25 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         est = type(plain)(**plain.get_params()).fit(read)
         value_and_grad = est.log_posterior_function(read)
         theta_z = np.asarray(est.theta_, float)
-        cov, _, _ = _laplace_covariance(value_and_grad, theta_z, prior_precision, draw["step"])
+        laplace = _laplace_covariance(value_and_grad, theta_z, prior_precision, draw["step"])
         log_weight = (len(z) * np.log(swap.rate) + (N - len(z)) * np.log1p(-swap.rate)
                       + value_and_grad(theta_z)[0] + 0.5 * K * np.log(2 * np.pi)
-                      + 0.5 * np.linalg.slogdet(cov)[1])
-        fitted.append((z, theta_z, value_and_grad, float(log_weight)))
-    logs = np.array([f[3] for f in fitted])
+                      + 0.5 * np.linalg.slogdet(laplace[0])[1])
+        fitted.append((z, theta_z, value_and_grad, laplace, float(log_weight)))
+    logs = np.array([f[-1] for f in fitted])
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
     counts = _apportion(weights, n_samples)
     thetas, diags, components = [], [], []
-    for (z, theta_z, value_and_grad, log_weight), w, n in zip(fitted, weights, counts,
-                                                             strict=True):
+    for (z, theta_z, value_and_grad, laplace, log_weight), w, n in zip(fitted, weights, counts,
+                                                                      strict=True):
         components.append(SwapComponent(swapped=z, weight=float(w), log_weight=log_weight,
                                         n_samples=int(n)))
         if n:
-            theta, diag, _ = _draw(value_and_grad, theta_z, prior_precision, int(n), **draw)
+            theta, diag, _ = _draw(value_and_grad, theta_z, prior_precision, int(n),
+                                   laplace=laplace, **draw)
             thetas.append(theta)
-            diags.append(diag)
+            diags.append(replace(diag, ess=np.minimum(diag.ess, n)))  # what it gave, at most
     logger.info("posterior over %d readings of %d demonstrations: %s", len(readings), N,
                 ", ".join(f"swapped {list(c.swapped)} {c.weight:.3f}"
                           for c in sorted(components, key=lambda c: -c.weight)[:4]))
@@ -544,7 +551,8 @@ def _apportion(weights: np.ndarray, n: int) -> np.ndarray:
 
 def _combined(diags: list[Diagnostics]) -> Diagnostics:
     """The diagnostics of several components' draws: the worst R-hat of each weight, summed
-    sizes and costs, the mean acceptance."""
+    sizes (each component's ESS at most the samples it gave) and costs (the chains' and the
+    Hessians' gradients; not the fits of the readings), the mean acceptance."""
     return Diagnostics(
         r_hat=np.max([d.r_hat for d in diags], axis=0), ess=np.sum([d.ess for d in diags], axis=0),
         acceptance=float(np.mean([d.acceptance for d in diags])), n_chains=diags[0].n_chains,

@@ -168,13 +168,19 @@ class Calibration:
         if self.session_swaps is not None:
             swaps = self.session_swaps
             n, k = swaps.get("sessions"), swaps.get("swapped")
-            if not (isinstance(n, int) and isinstance(k, int) and 0 <= k <= n):
+            if not all(isinstance(v, int) and not isinstance(v, bool) for v in (n, k)) \
+                    or not 0 <= k <= n:
                 raise ValueError(f"session_swaps must hold integers 0 <= swapped <= sessions; "
                                  f"got sessions {n!r}, swapped {k!r}")
-            labels = list(self.task.factors["prediction"])
-            within = ConfusionMatrix(np.array(swaps.get("prediction_counts", [])), labels)
-            object.__setattr__(self, "session_swaps", {**swaps, "prediction_counts":
-                                                       within.counts.tolist()})
+            size = len(self.task.factors["prediction"])
+            counts = np.asarray(swaps.get("prediction_counts"), dtype=object)
+            if counts.shape != (size, size) or not all(
+                    isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 0
+                    for v in counts.ravel()):
+                raise ValueError(f"session_swaps.prediction_counts must be a {size} x {size} "
+                                 f"table of counts; got {swaps.get('prediction_counts')!r}")
+            object.__setattr__(self, "session_swaps", {
+                **swaps, "prediction_counts": counts.astype(np.int64).tolist()})
         expected = calibration_factors(self.task)
         if set(self.factors) != set(expected):
             raise ValueError(f"factors must be {list(expected)} (task {self.task.name!r}); "
@@ -226,9 +232,10 @@ class Calibration:
 
     @property
     def session_swap_rate(self) -> float | None:
-        """The probability that a session's class reads are all backwards: Laplace's rule of
-        succession on the held-out sessions, ``(swapped + 1) / (sessions + 2)`` (never 0, so
-        a learner given it can always doubt a session). None when not measured."""
+        """The probability that a session's class reads are backwards (more than half of
+        them, as calibrate counts a swapped session): Laplace's rule of succession on the
+        held-out sessions, ``(swapped + 1) / (sessions + 2)`` (never 0, so a learner given it
+        can always doubt a session). None when not measured."""
         if self.session_swaps is None:
             return None
         return (self.session_swaps["swapped"] + 1) / (self.session_swaps["sessions"] + 2)

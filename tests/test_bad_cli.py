@@ -75,6 +75,11 @@ def fx(tmp_path_factory) -> Path:
     (d / "data_bad" / "dataset.json").write_text("{bad")
     (d / "half").mkdir()
     (d / "half" / "sessions").mkdir()
+    from onionsort.stages.demo import SIZES, DemoConfig, _settings
+
+    (d / "swaps" / "progress").mkdir(parents=True)  # a demo started with --session-swaps
+    (d / "swaps" / "progress" / "config.json").write_text(json.dumps(_settings(
+        DemoConfig(out=d / "swaps", quick=True, session_swaps=True), dict(SIZES[True]))))
     (d / "rec").mkdir()
     (d / "rec" / "session_000.mcap").write_bytes(b"an earlier session")
     _sensor_session(d / "two_frames.mcap", frames_per_step=2)
@@ -285,6 +290,8 @@ CASES = [
     (["demo", "--quick", "--repeats", "0", "--out", "{d}/x"], ["repeats must be >= 1", "got 0"]),
     (["demo", "--quick", "--resume", "--out", "{d}/half"],
      ["cannot resume", "half holds no demo progress", "new --out"]),
+    (["demo", "--quick", "--resume", "--out", "{d}/swaps"],
+     ["cannot resume", "session_swaps True there, None now"]),
     (["demo", "--quick", "--connect", "rerun+http://h:1/viewer", "--out", "{d}/x"],
      ["connect must be", "the path must be /proxy", "'rerun+http://h:1/viewer'"]),
     (["demo", "--quick", "--backend", "cuda", "--out", "{d}/x"],

@@ -10,10 +10,13 @@ a model of independent errors, overwhelming evidence for the reward that sorts b
 :class:`SessionSwap` says instead that with probability ``rate`` a whole demonstration was read
 through ``permutation``, so a demonstration's likelihood is the mixture
 
-    P(o | theta) = (1 - rate) P(o | theta) + rate P(permutation(o) | theta)
+    P_swap(o | theta) = (1 - rate) P(o | theta) + rate P(permutation(o) | theta)
 
-(:class:`irl.MMAPBIRL`'s ``session_swap``). Since the permutation is an involution here (a swap
-of two values), ``permutation(o)`` is also the observation the observer would have reported.
+(:class:`irl.MMAPBIRL`'s ``session_swap``), each term by forward-backward through the
+observation model. A reading impossible under that model (an observation of probability 0,
+which calibration's smoothing prevents) stops the fit with the usual error. Since the
+permutation is an involution (a swap of two values), ``permutation(o)`` is also the
+observation the observer would have reported.
 """
 
 from __future__ import annotations

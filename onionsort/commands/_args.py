@@ -98,8 +98,9 @@ def add_session_swaps_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--session-swaps", action="store_true",
                         help="mmap-birl: let a whole session's reads of the onion's class have "
                              "been backwards, at the rate the calibration measured on its "
-                             "held-out sessions (a lighting cast can swap good and blemished "
-                             "for a session); its posterior weighs every such reading")
+                             "held-out sessions; its posterior weighs the reading of the "
+                             "sessions the MAP implies, its complement, and every reading one "
+                             "session from either")
 
 
 def add_defer_argument(parser: argparse.ArgumentParser, *, needs: str) -> None:

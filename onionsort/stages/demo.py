@@ -285,8 +285,11 @@ class _Progress:
                              "is missing); choose a new --out") from None
         except json.JSONDecodeError as exc:
             raise ValueError(f"cannot resume: {path} is not JSON ({exc})") from None
-        differ = [f"{k} {started.get(k)!r} there, {v!r} now" for k, v in self.settings.items()
-                  if started.get(k) != v]
+        # both ways: a setting given only when asked for (--defer-below, --session-swaps) is
+        # missing on one side when a run started with it is resumed without it
+        differ = [f"{k} {started.get(k)!r} there, {self.settings.get(k)!r} now"
+                  for k in dict.fromkeys([*self.settings, *started])
+                  if started.get(k) != self.settings.get(k)]
         if differ:
             raise ValueError(f"cannot resume: --out {self.out} holds a demo started with other "
                              f"settings ({'; '.join(differ)}); resume with the settings it was "
