@@ -65,8 +65,6 @@ def test_a_signal_during_a_write_is_delivered_after_the_frame_is_whole(recorded,
                                                                        monkeypatch):
     """Ctrl-C that lands while a frame's chunk is going to the file waits for the chunk: the
     interrupt is raised once the frame is counted, and the finished file holds it whole."""
-    import os
-
     from mcap.writer import Writer
 
     from recordings import SessionWriter
@@ -76,7 +74,10 @@ def test_a_signal_during_a_write_is_delivered_after_the_frame_is_whole(recorded,
     flushed = []
 
     def interrupted_flush(self):
-        os.kill(os.getpid(), signal.SIGINT)  # arrives while the chunk is being written
+        # arrives while the chunk is being written; raise_signal runs Python's handler at
+        # once, in this thread, where a signal sent with os.kill may wait for the eval loop
+        # to notice it, which other threads (a Ray driver's, left by earlier tests) can delay
+        signal.raise_signal(signal.SIGINT)
         real_flush(self)
         flushed.append(True)
 
