@@ -74,22 +74,25 @@ def test_a_signal_during_a_write_is_delivered_after_the_frame_is_whole(recorded,
     flushed = []
 
     def interrupted_flush(self):
-        # arrives while the chunk is being written; raise_signal runs Python's handler at
-        # once, in this thread, where a signal sent with os.kill may wait for the eval loop
-        # to notice it, which other threads (a Ray driver's, left by earlier tests) can delay
-        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGINT)  # arrives while the chunk is being written
         real_flush(self)
         flushed.append(True)
 
     config = recorded.config
     path = tmp_path / "s.mcap"
-    with pytest.raises(KeyboardInterrupt), SessionWriter(
-            path, {"seed": 4, "config": config.to_dict()}, intrinsics(config.camera),
-            intrinsics(config.inspection), frames_per_step=config.frames_per_step) as writer:
-        writer.write_frame(recorded.frames[0])
-        monkeypatch.setattr(Writer, "flush", interrupted_flush)
-        writer.write_frame(recorded.frames[1])
-    monkeypatch.undo()
+    # Python's own Ctrl-C handler, whatever this process started with: a shell's background
+    # job starts with SIGINT ignored, and a signal ignored stays ignored, held or not
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt), SessionWriter(
+                path, {"seed": 4, "config": config.to_dict()}, intrinsics(config.camera),
+                intrinsics(config.inspection), frames_per_step=config.frames_per_step) as writer:
+            writer.write_frame(recorded.frames[0])
+            monkeypatch.setattr(Writer, "flush", interrupted_flush)
+            writer.write_frame(recorded.frames[1])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        monkeypatch.undo()
     assert flushed == [True] and writer.n_frames == 2  # the interrupt waited for the write
     session = open_session(path)  # finished and valid: no recovery needed
     assert session.status == "interrupted"
