@@ -506,18 +506,18 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     demonstrations (:func:`swap_readings`), each reading's reward posterior drawn as without a
     swap and weighted by its prior probability times its Laplace evidence."""
     swap = estimator.session_swap
-    plain = type(estimator)(**{**estimator.get_params(), "session_swap": None})
+    plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
     K, N = map_theta.size, len(demos)
     fitted = []
     for z in readings:
         read = [swap.apply(d) if i in z else d for i, d in enumerate(demos)]
-        est = type(plain)(**plain.get_params()).fit(read)
+        est = type(estimator)(**plain).fit(read)
         value_and_grad = est.log_posterior_function(read)
         theta_z = np.asarray(est.theta_, float)
         laplace = _laplace_covariance(value_and_grad, theta_z, prior_precision, draw["step"])
         log_weight = (len(z) * np.log(swap.rate) + (N - len(z)) * np.log1p(-swap.rate)
-                      + value_and_grad(theta_z)[0] + 0.5 * K * np.log(2 * np.pi)
+                      + est.log_posterior_ + 0.5 * K * np.log(2 * np.pi)
                       + 0.5 * np.linalg.slogdet(laplace[0])[1])
         fitted.append((z, theta_z, value_and_grad, laplace, float(log_weight)))
     logs = np.array([f[-1] for f in fitted])

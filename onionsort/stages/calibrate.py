@@ -211,7 +211,7 @@ def session_swaps(measured: list[dict]) -> dict:
     good, bad = (SORTING_TASK.value_index("prediction", v) for v in ("good", "bad"))
     back = np.arange(len(SORTING_TASK.factors["prediction"]))
     back[[good, bad]] = [bad, good]
-    reads, wrong, true_all, pred_all = [], [], [], []
+    reads, wrong, swapped, true_all, pred_all = [], [], [], [], []
     for m in measured:
         seen = ~np.array(m["called_occluded"], dtype=bool)
         true = np.array(m["true"]["prediction"], dtype=np.int64)[seen]
@@ -219,14 +219,13 @@ def session_swaps(measured: list[dict]) -> dict:
         keep = np.isin(true, (good, bad)) & np.isin(pred, (good, bad))
         reads.append(int(keep.sum()))
         wrong.append(int((true[keep] != pred[keep]).sum()))
-        swapped = reads[-1] >= MIN_CLASS_READS and 2 * wrong[-1] > reads[-1]
+        swapped.append(reads[-1] >= MIN_CLASS_READS and 2 * wrong[-1] > reads[-1])
         true_all.append(true)
-        pred_all.append(back[pred] if swapped else pred)
-    counted = [(n, k) for n, k in zip(reads, wrong, strict=True) if n >= MIN_CLASS_READS]
+        pred_all.append(back[pred] if swapped[-1] else pred)
     counts = confusion_counts(np.concatenate(true_all) if true_all else np.zeros(0, int),
                               np.concatenate(pred_all) if pred_all else np.zeros(0, int),
                               back.size, "prediction")
-    return {"sessions": len(counted), "swapped": sum(2 * k > n for n, k in counted),
+    return {"sessions": sum(n >= MIN_CLASS_READS for n in reads), "swapped": sum(swapped),
             "reads": reads, "swapped_reads": wrong, "prediction_counts": counts.tolist()}
 
 
