@@ -72,8 +72,8 @@ def rerun_cli() -> str:
 @contextlib.contextmanager
 def served(rrd: Path, timeout: float = 60.0) -> Iterator[str]:
     """Serve ``rrd`` with ``rerun --serve-web`` while the block runs; yields the web viewer's
-    URL with the recording's gRPC address in it. The server is stopped after, its whole
-    process group."""
+    URL with the recording's gRPC address in it (the viewer follows the recording to its
+    end). The server is stopped after, its whole process group."""
     web, grpc = free_port(), free_port()
     with tempfile.TemporaryFile() as log:
         proc = subprocess.Popen(

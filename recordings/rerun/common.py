@@ -21,9 +21,9 @@ A camera is a static pinhole at ``<root>/camera`` with its images under it::
                            what lies farther than :data:`WORK_CELL_DEPTH_M` along the optical
                            axis: the floor and the far plane beyond the work cell
 
-A blueprint shows a view only where the recording holds its data: a logger states what it
-logged (its *features*) and :class:`Layout` sends the blueprint built from them, again only when
-they changed (a live viewer takes the last one sent).
+A blueprint shows a view only where the recording holds its data: a logger that cannot know
+that when it opens notes what it logged and sends the blueprint built from it once, when it
+closes (:func:`send_layout`); a live viewer shows Rerun's own layout until then.
 
 Scalar series are sent whole with :func:`send_series` (one ``rr.send_columns`` call per
 series), their names logged static once with :func:`log_series_names`.
@@ -34,7 +34,7 @@ from __future__ import annotations
 import logging
 import socket
 import urllib.parse
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from enum import IntEnum
 from pathlib import Path
 
@@ -48,7 +48,6 @@ from recordings.schema import CLASS_COLORS, CLASS_NAMES
 __all__ = [
     "GRPC_SCHEMES",
     "WORK_CELL_DEPTH_M",
-    "Layout",
     "check_viewer_url",
     "class_annotations",
     "close_recording",
@@ -61,6 +60,7 @@ __all__ = [
     "open_recording",
     "reach_viewer",
     "rerun_targets",
+    "send_layout",
     "send_series",
     "value_labels",
 ]
@@ -240,26 +240,14 @@ def close_recording(rec: rr.RecordingStream) -> None:
         partial.replace(path)
 
 
-class Layout:
-    """The blueprint of a recording, built from what it holds and sent when that changes.
+def send_layout(rec: rr.RecordingStream, blueprint: rrb.Blueprint) -> None:
+    """Send ``blueprint`` as the recording's one layout (active and default).
 
-    Parameters
-    ----------
-    rec : rerun.RecordingStream
-    build : callable
-        ``build(**features) -> rrb.Blueprint``; each feature a flag or count of what the
-        recording holds (depth, an inspection view, ground truth ...).
+    A logger whose views depend on what it logged sends it once, when it closes: a recording
+    holding two blueprints opens on either (Rerun's web viewer takes the first it reads), so a
+    layout sent early and corrected later may still show empty views.
     """
-
-    def __init__(self, rec: rr.RecordingStream, build: Callable[..., rrb.Blueprint]) -> None:
-        self.rec, self.build = rec, build
-        self.sent: dict | None = None
-
-    def update(self, **features) -> None:
-        """Send the blueprint of ``features`` (active and default) unless it was sent last."""
-        if features != self.sent:
-            self.rec.send_blueprint(self.build(**features), make_active=True, make_default=True)
-            self.sent = dict(features)
+    rec.send_blueprint(blueprint, make_active=True, make_default=True)
 
 
 def class_annotations() -> rr.AnnotationContext:

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -50,13 +49,13 @@ from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.rerun.common import (
     WORK_CELL_DEPTH_M,
-    Layout,
     close_recording,
     log_camera_images,
     log_class_annotations,
     log_pinhole,
     log_series_names,
     open_recording,
+    send_layout,
     send_series,
     value_labels,
 )
@@ -219,9 +218,9 @@ class EvaluationLogger:
         beyond the work cell; :data:`~recordings.rerun.common.WORK_CELL_DEPTH_M`); None keeps
         every pixel.
 
-    The blueprint (:func:`evaluation_blueprint`) is sent when the logger opens, with a view for
-    everything the run should log, and again at :meth:`close` if it logged less (inspection
-    views never used, no images): no view is left without data.
+    The blueprint (:func:`evaluation_blueprint`) is sent at :meth:`close`, with a view for what
+    the run logged (no slot for an inspection view never used, no image view without images);
+    a live viewer shows Rerun's own layout until then.
 
     Examples
     --------
@@ -273,17 +272,11 @@ class EvaluationLogger:
         self._rows: dict[str, list] = {}
         self._steps: list[int] = []
         self._closed = False
-        # what the recording holds, for its blueprint: first what the run should log (a live
-        # viewer shows the layout from the start), at close what it did (views never used or
-        # images never rendered get no panel)
-        self._layout = Layout(self.rec, partial(evaluation_blueprint, prefix))
+        # what the recording holds, for its blueprint, sent at close: views never used and
+        # images never rendered get no panel
         self._held = {"views": 0, "color": False, "depth": False, "p_blemished": False,
                       "camera_pinhole": False, "inspection_pinhole": False,
                       "world": self._robot_tree is not None}
-        self._layout.update(views=self.views, color=True, depth=True, p_blemished=True,
-                            camera_pinhole=self.camera_K is not None,
-                            inspection_pinhole=self.inspection_K is not None,
-                            world=self._robot_tree is not None)
 
     def __enter__(self) -> EvaluationLogger:
         return self
@@ -378,7 +371,8 @@ class EvaluationLogger:
         self._steps.append(int(event.step))
 
     def close(self) -> None:
-        """Send the buffered series and flush everything to the file or viewer; idempotent."""
+        """Send the buffered series and the blueprint of what was logged, and flush everything
+        to the file or viewer; idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -391,7 +385,7 @@ class EvaluationLogger:
                     self._world.send_joints(self._robot_tree, self._joint_names,
                                             np.asarray(self._rows[f"{self.prefix}/arm/joints"]),
                                             index)
-                self._layout.update(**self._held)
+                send_layout(self.rec, evaluation_blueprint(self.prefix, **self._held))
         finally:
             close_recording(self.rec)
 

@@ -45,7 +45,6 @@ from irl.domains.task import TaskDescription
 from recordings.reader import FrameRecord, Session
 from recordings.rerun.common import (
     WORK_CELL_DEPTH_M,
-    Layout,
     close_recording,
     factor_values,
     log_camera_images,
@@ -53,6 +52,7 @@ from recordings.rerun.common import (
     log_pinhole,
     log_series_names,
     open_recording,
+    send_layout,
     send_series,
     value_labels,
 )
@@ -136,8 +136,8 @@ class SessionLogger:
         beyond the work cell; :data:`~recordings.rerun.common.WORK_CELL_DEPTH_M`); None keeps
         every pixel.
 
-    The blueprint (:func:`session_blueprint`) is sent once the first session is logged, with
-    a view for each thing the sessions hold, and again if a later session adds one.
+    The blueprint (:func:`session_blueprint`) is sent when the logger closes, with a view for
+    each thing the sessions hold.
 
     Examples
     --------
@@ -149,9 +149,8 @@ class SessionLogger:
     def __init__(self, target: str | Path, application_id: str = "onionsort", *,
                  perception: bool = True, task: TaskDescription = SORTING_TASK,
                  max_depth: float | None = WORK_CELL_DEPTH_M) -> None:
-        # the blueprint follows what the sessions hold, sent once the first one is logged
+        # the blueprint follows what the sessions hold: sent once, at close
         self.rec = open_recording(application_id, target)
-        self._layout = Layout(self.rec, session_blueprint)
         self._features = dict.fromkeys((
             "camera_pinhole", "depth", "inspection", "inspection_pinhole", "true_state",
             "truth_series", "perception", "perceived_inspection", "world"), False)
@@ -166,6 +165,7 @@ class SessionLogger:
             f"{_TRUTH}/occlusion/fraction": "fraction of the view covered",
             f"{_TRUTH}/occlusion/occluded": "occluded step (0/1)"})
         self._perception: PerceptionLogger | None = None
+        self._logged = False
         self._frame = 0
         self._step = 0
         self._closed = False
@@ -222,7 +222,7 @@ class SessionLogger:
         held["inspection"] |= any(f.inspection_png is not None for f in frames)
         held["true_state"] |= any(f.state is not None for f in frames)
         held["world"] |= tree is not None or any(f.scene for f in frames)
-        self._layout.update(**held)
+        self._logged = True
         self._frame = frame0 + max(f.index for f in frames) + 1
         self._step = step0 + max(max(f.step for f in frames) + 1, len(session.steps))
 
@@ -341,10 +341,15 @@ class SessionLogger:
         return True
 
     def close(self) -> None:
-        """Flush everything to the file or viewer; idempotent."""
+        """Send the blueprint of what was logged and flush everything to the file or viewer;
+        idempotent."""
         if not self._closed:
-            close_recording(self.rec)
             self._closed = True
+            try:
+                if self._logged:
+                    send_layout(self.rec, session_blueprint(**self._features))
+            finally:
+                close_recording(self.rec)
 
 
 def _session_text(session: Session, index: int) -> str:

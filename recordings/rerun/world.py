@@ -52,7 +52,7 @@ _PLURAL = {"box": "boxes", "sphere": "spheres", "cylinder": "cylinders", "capsul
 #: Where a 3D view of the work cell looks from and at (world metres, z up), for a cell laid
 #: out as ``robot.scene`` lays it (the belt along x through the origin, 0.8 m up, the Sawyer
 #: and the person behind it at y > 0): from the front right, above the camera, at the belt.
-WORK_CELL_EYE = ((1.6, -2.0, 2.1), (0.05, 0.25, 0.95))
+WORK_CELL_EYE = ((2.0, -3.2, 2.6), (0.0, 0.1, 1.0))
 
 
 def world_view(root: str, name: str = "work cell (3D)", *,

@@ -1,9 +1,10 @@
 """What a person sees when Rerun opens an ``.rrd``: its blueprint's views, read back from the
 file, checked against the entities the recording holds.
 
-:func:`layout_problems` lists, for the blueprint that is active when the file is opened (the
-last one sent):
+:func:`layout_problems` lists, for the file's blueprint:
 
+- a second blueprint (the web viewer opens on the first it reads, which need not be the last
+  one sent);
 - every entity a ``Spatial3DView``'s contents match that is neither 3D nor under a pinhole (the
   viewer reports "2D visualizers require a pinhole ancestor to be shown in a 3D view", or has
   nothing to draw for it);
@@ -65,8 +66,8 @@ def entities(path: str | Path) -> dict[str, set[str]]:
 
 
 def blueprint_views(path: str | Path) -> list[View]:
-    """The views of the blueprint that is active when ``path`` is opened: of several, the one
-    sent last (each is a store of its own in the file)."""
+    """The views of the blueprint of ``path``; of several (each a store of its own in the
+    file), the one sent last."""
     reader = rr_chunk.RrdReader(path)
     latest, chosen = None, None
     for store in reader.blueprints():
@@ -125,12 +126,15 @@ def under_pinhole(entity: str, held: dict[str, set[str]]) -> bool:
 
 def layout_problems(path: str | Path) -> list[str]:
     """What a person would see wrong in ``path``'s blueprint (empty if nothing): a 3D view
-    that holds an entity it cannot place, a view without data, or no blueprint at all."""
+    that holds an entity it cannot place, a view without data, several blueprints or none."""
     held = entities(path)
     views = blueprint_views(path)
     if not views:
         return [f"{Path(path).name}: no blueprint"]
     problems = []
+    n = len(rr_chunk.RrdReader(path).blueprints())
+    if n > 1:
+        problems.append(f"{Path(path).name}: {n} blueprints; the viewer may open on any")
     for view in views:
         shown = {e: a for e, a in held.items() if matches(e, view.origin, view.contents)}
         if view.kind == "3D":
