@@ -7,7 +7,8 @@ it. A perceived session's perception topics are logged too, under ``perceive/``
 
     record/camera                    Pinhole (static): the main camera's intrinsics
     record/camera/color              EncodedImage (JPEG), every frame
-    record/camera/depth              DepthImage (uint16 millimetres, meter=1000), with depth
+    record/camera/depth              DepthImage (uint16 millimetres, meter=1000), with depth;
+                                     0 (no point) beyond the work cell (``max_depth``)
     record/camera/color/truth_boxes  Boxes2D (XYXY, class_ids), with ground truth
     record/inspection                EncodedImage (PNG), on a step's first frame
     record/session                   TextDocument: which session is playing
@@ -22,7 +23,10 @@ them: ``record`` is the world (z up); ``record/camera`` and ``record/inspection`
 ``/tf`` (the inspection view is a pinhole too, so both images show in their frustums);
 ``record/scene/*`` holds the bodies of ``/scene`` (belt, bin, gate, sorter, passer-by, onions in
 the colours of their true classes); a session with a robot shows it from its URDF under
-``record/robot``, its joints animated at every frame from ``/joint_states``.
+``record/robot``, its joints animated at every frame from ``/joint_states``. The blueprint
+(:func:`session_blueprint`, sent when the logger closes) has a view only for what the sessions
+hold; its 3D view holds the bodies, the robot and the pinhole cameras, the depth cloud hidden at
+first where there are bodies or a robot.
 
 Timelines: ``frame`` and ``step`` (both counted across every session logged to the stream) and
 ``time`` (the recording time of a frame, a duration). Series are sent whole, one
@@ -112,7 +116,10 @@ def session_blueprint(*, camera_pinhole: bool = True, depth: bool = True,
     if perception:
         columns.append(rrb.Tabs(*perception_views(inspection=perceived_inspection),
                                 name="perception"))
+    # the time cursor on ``frame``, which counts on across sessions (``time`` starts again at 0
+    # in each one, so that on it every session's series lie on top of each other)
     return rrb.Blueprint(rrb.Horizontal(*columns, column_shares=[3, 2, 2][:len(columns)]),
+                         rrb.TimePanel(timeline="frame", state="collapsed"),
                          collapse_panels=True)
 
 
