@@ -169,7 +169,7 @@ def ensure_demo(run: Path, *, allow_run: bool = True) -> Path:
     if (run / "results.json").exists() and rrd.exists():
         return rrd
     command = ["onionsort", *DEMO_COMMAND, "--out", str(run)]
-    if any(run.iterdir()) if run.is_dir() else False:
+    if run.is_dir() and any(run.iterdir()):  # an interrupted demo: finish it
         command.append("--resume")
     if not allow_run:
         raise FigureError(f"no demo in {run}; make it with `{' '.join(command)}`")
