@@ -493,6 +493,12 @@ def workcell_image(size: tuple[int, int] = (480, 360), *, quick: bool = False):
 
 # -- the record ------------------------------------------------------------------------------
 
+#: What FIGURES.md says of the viewer's picture, which a script of its own makes.
+VIEWER_NOTE = (
+    "The demo's evaluation recording (`runs/demo/mmap-birl/evaluation.rrd`) as Rerun's web "
+    "viewer shows it, made by `python docs/make_viewer_figure.py` (headless Chromium and the "
+    "`playwright` package; it runs `onionsort demo --out runs/demo` when the run is missing).")
+
 def write_record(out: Path, entries: list[dict], invocation: str, table: list[str]) -> Path:
     """Write ``FIGURES.md``: each figure, what it shows, the commands its data came from, its
     seeds and size; and the efficiency figure's means."""
@@ -510,6 +516,8 @@ def write_record(out: Path, entries: list[dict], invocation: str, table: list[st
             lines += ["Seeds and settings: " + ", ".join(f"{k} {v}" for k, v in
                                                         e["seeds"].items()) + ".", ""]
         lines += [f"Size: {e['size_kb']:.0f} KB, {e['pixels'][0]} x {e['pixels'][1]} px.", ""]
+    if (Path(out) / "viewer.png").exists():
+        lines += ["## viewer.png", "", VIEWER_NOTE, ""]
     if table:
         lines += ["## The efficiency figure's numbers", "",
                   "Mean normalized ILE (%) · exact-policy rate, per method:", "", *table, ""]

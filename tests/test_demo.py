@@ -127,6 +127,13 @@ def test_quick_demo_runs_end_to_end(quick_demo, capsys):
     rrds = sorted(out.rglob("*.rrd"))
     assert {p.name for p in rrds} >= {"sessions.rrd", "learn.rrd", "evaluation.rrd"}
     assert not list(out.rglob("*.partial"))
+    # each opens on views that all have data, and 3D views that hold only what they can place;
+    # the sessions' recording shows what perception made of them
+    from tests.recordings.rrd_layout import blueprint_views, layout_problems
+
+    for path in rrds:
+        assert layout_problems(path) == [], path
+    assert "observations" in {v.name for v in blueprint_views(out / "sessions.rrd")}
     cli = _rerun_cli()
     if cli is None:
         pytest.skip("the rerun CLI is not installed")

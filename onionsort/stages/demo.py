@@ -1,8 +1,9 @@
 """Stage ``demo``: the whole job on built-in defaults, into one run folder.
 
 1. record 12 sessions of a person sorting onions (20 steps each; the passer-by occludes about 4
-   of them) to MCAP, with a Rerun recording;
-2. perceive them with the shipped detector and state classifier;
+   of them) to MCAP;
+2. perceive them with the shipped detector and state classifier, and log the sessions with
+   what perception made of them to one Rerun recording (``sessions.rrd``);
 3. calibrate the observation model on freshly rendered held-out frames;
 4. learn the sorter's reward with MMAP-BIRL, with MAP-BIRL (the same model reading the
    observations at face value: the ablation that shows what modelling observer noise is worth)
@@ -327,27 +328,33 @@ def _sessions_piece(piece: tuple) -> list[Path]:
     recorded = progress.run(f"record-{k}", lambda: _record(folder, seed, size, config,
                                                            options))
     paths = [folder / "sessions" / name for name in recorded["sessions"]]
-    progress.run(f"perceive-{k}", lambda: _perceive(paths, config, options))
+    progress.run(f"perceive-{k}", lambda: _perceive(paths, config, options,
+                                                     folder / "sessions.rrd"))
     return paths
 
 
 def _record(folder: Path, seed: int, size: dict, config: DemoConfig,
             options: ParallelOptions) -> dict:
-    """Record a repeat's sessions into ``folder/sessions`` (with ``sessions.rrd``); with
-    ``config.resume``, keep the complete ones an interrupted demo recorded."""
+    """Record a repeat's sessions into ``folder/sessions`` (their Rerun recording is written
+    once they are perceived: :func:`_perceive`); with ``config.resume``, keep the complete
+    ones an interrupted demo recorded."""
     paths = record(RecordConfig(out=folder / "sessions", sessions=size["sessions"],
                                 steps_per_session=size["steps"], occlusion=0.2, seed=seed,
-                                rerun=folder / "sessions.rrd", difficulty=config.difficulty,
-                                connect=config.connect, resume=config.resume,
+                                difficulty=config.difficulty, resume=config.resume,
                                 executor=options.executor, workers=options.workers,
                                 ray_address=options.ray_address))
     return {"sessions": [p.name for p in paths]}
 
 
-def _perceive(paths: list[Path], config: DemoConfig, options: ParallelOptions) -> dict:
+def _perceive(paths: list[Path], config: DemoConfig, options: ParallelOptions,
+              rrd: Path) -> dict:
     """Perceive the sessions of ``paths`` that hold no perception topics yet (all of them,
-    unless an interrupted demo perceived some)."""
+    unless an interrupted demo perceived some), then log them all to the Rerun recording
+    ``rrd`` (and the viewer at ``config.connect``): what was recorded and what perception made
+    of it, side by side."""
     from recordings import open_session
+    from recordings.rerun import SessionLogger
+    from recordings.rerun.common import rerun_targets
 
     todo = tuple(p for p in paths if open_session(p).perception_models is None)
     if todo:
@@ -357,6 +364,9 @@ def _perceive(paths: list[Path], config: DemoConfig, options: ParallelOptions) -
                                 ray_address=options.ray_address),
                  None if parallel else PerceptionModels.load_cached(config.models,
                                                                     config.device))
+    with SessionLogger(rerun_targets(rrd, config.connect)) as log:
+        for i, path in enumerate(paths):
+            log.log_session(open_session(path), i)
     return {"perceived": [p.name for p in todo]}
 
 

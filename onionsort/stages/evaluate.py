@@ -297,7 +297,9 @@ def evaluate(config: EvaluateConfig, models=None):
                                   config.connect), detector=detect,
                     camera_K=intrinsics(CameraSpec()), robot=station_robot(),
                     camera_pose=camera_pose(CameraSpec()),
-                    views=config.inspection_views)).on_step)
+                    views=config.inspection_views,
+                    inspection_K=intrinsics(ROBOT_INSPECTION_CAMERA),
+                    inspection_pose=camera_pose(ROBOT_INSPECTION_CAMERA))).on_step)
             if config.mcap:
                 from recordings import SessionWriter
 

@@ -13,9 +13,12 @@ Shared pieces (:mod:`recordings.rerun.common`): :func:`open_recording` opens a s
 ``.rrd`` file, a spawned viewer or a gRPC URL with one blueprint; the onion classes' annotation
 context comes from :mod:`recordings.schema`; a camera is a static pinhole ``<root>/camera`` with
 ``color`` and ``depth`` under it. The work cell in 3D (:mod:`recordings.rerun.world`): each
-blueprint has one ``Spatial3DView`` at its root, showing the cameras' frustums, the bodies of the
-work cell and the Sawyer from its URDF, animated from its joint angles. Importing this package
-loads the Rerun SDK.
+blueprint has one ``Spatial3DView`` at its root, showing the pinhole cameras' frustums with their
+images, the bodies of the work cell and the Sawyer from its URDF, animated from its joint
+angles, and nothing else (no 2D entity outside a pinhole, no series, no text). Each blueprint
+has a view only for what its recording holds (the loggers that learn it as they log send it
+when they close: :func:`~recordings.rerun.common.send_layout`). Importing this package loads
+the Rerun SDK.
 """
 
 from __future__ import annotations

@@ -17,7 +17,13 @@ A camera is a static pinhole at ``<root>/camera`` with its images under it::
 
     <root>/camera          Pinhole (static): intrinsics and resolution
     <root>/camera/color    the colour image (JPEG or raw RGB)
-    <root>/camera/depth    DepthImage (``meter`` units per metre)
+    <root>/camera/depth    DepthImage (``meter`` units per metre); the loggers leave out (depth 0)
+                           what lies farther than :data:`WORK_CELL_DEPTH_M` along the optical
+                           axis: the floor and the far plane beyond the work cell
+
+A blueprint shows a view only where the recording holds its data: a logger that cannot know
+that when it opens notes what it logged and sends the blueprint built from it once, when it
+closes (:func:`send_layout`); a live viewer shows Rerun's own layout until then.
 
 Scalar series are sent whole with :func:`send_series` (one ``rr.send_columns`` call per
 series), their names logged static once with :func:`log_series_names`.
@@ -41,6 +47,7 @@ from recordings.schema import CLASS_COLORS, CLASS_NAMES
 
 __all__ = [
     "GRPC_SCHEMES",
+    "WORK_CELL_DEPTH_M",
     "check_viewer_url",
     "class_annotations",
     "close_recording",
@@ -53,6 +60,7 @@ __all__ = [
     "open_recording",
     "reach_viewer",
     "rerun_targets",
+    "send_layout",
     "send_series",
     "value_labels",
 ]
@@ -64,6 +72,12 @@ logger = logging.getLogger(__name__)
 _PENDING: dict[str, tuple[list[tuple[Path, Path]], list[str]]] = {}
 #: URL schemes of a viewer or server reached over gRPC (``rr.RecordingStream.connect_grpc``).
 GRPC_SCHEMES = ("rerun+http://", "rerun+https://", "rerun://")
+
+#: Depth (m, along a camera's optical axis) beyond which a depth image shows no work cell: the
+#: main camera stands 1.5 m in front of the belt and sees the belt's ends, the bin, the sorter
+#: and the Sawyer within 2.5 m; farther lie the floor and the far plane (5 m), which would hide
+#: the work cell in 3D behind a wall of points.
+WORK_CELL_DEPTH_M = 3.0
 
 #: One target of a stream: an ``.rrd`` path, ``"spawn"`` or a gRPC URL.
 Target = str | Path
@@ -226,6 +240,16 @@ def close_recording(rec: rr.RecordingStream) -> None:
         partial.replace(path)
 
 
+def send_layout(rec: rr.RecordingStream, blueprint: rrb.Blueprint) -> None:
+    """Send ``blueprint`` as the recording's one layout (active and default).
+
+    A logger whose views depend on what it logged sends it once, when it closes: a recording
+    holding two blueprints opens on either (Rerun's web viewer takes the first it reads), so a
+    layout sent early and corrected later may still show empty views.
+    """
+    rec.send_blueprint(blueprint, make_active=True, make_default=True)
+
+
 def class_annotations() -> rr.AnnotationContext:
     """The onion classes (id, name, colour) of :mod:`recordings.schema` as an annotation
     context."""
@@ -259,7 +283,8 @@ def log_pinhole(rec: rr.RecordingStream, root: str, K: Sequence[Sequence[float]]
 
 def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray | None = None,
                       color_jpeg: bytes | None = None, depth: np.ndarray | None = None,
-                      depth_meter: float = 1.0, jpeg_quality: int | None = None) -> None:
+                      depth_meter: float = 1.0, jpeg_quality: int | None = None,
+                      max_depth: float | None = None) -> None:
     """Log a camera's images at the current time: ``<root>/camera/color`` and
     ``<root>/camera/depth``.
 
@@ -276,6 +301,9 @@ def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray |
         Depth, ``depth_meter`` units per metre (1.0 for float metres, 1000 for uint16 mm).
     depth_meter : float
     jpeg_quality : int or None
+    max_depth : float or None
+        Depth in metres beyond which a pixel is logged as 0 (no measurement: Rerun draws no
+        point for it), and non-finite depths too; None keeps every pixel.
 
     Raises
     ------
@@ -292,7 +320,12 @@ def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray |
         rec.log(f"{root}/camera/color",
                 image if jpeg_quality is None else image.compress(jpeg_quality=jpeg_quality))
     if depth is not None:
-        rec.log(f"{root}/camera/depth", rr.DepthImage(np.asarray(depth), meter=depth_meter))
+        depth = np.asarray(depth)
+        if max_depth is not None:
+            far = ~np.isfinite(depth) | (depth > max_depth * depth_meter)
+            if far.any():
+                depth = np.where(far, 0, depth).astype(depth.dtype)
+        rec.log(f"{root}/camera/depth", rr.DepthImage(depth, meter=depth_meter))
 
 
 def enum_labels(enum: type[IntEnum]) -> str:

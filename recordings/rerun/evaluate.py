@@ -10,7 +10,9 @@ prefix per evaluated policy lets two share a recording)::
 
     <root>/camera                      Pinhole (static), when the camera's K is given
     <root>/camera/color                Image (JPEG) of the main camera, when rendering
-    <root>/camera/depth                DepthImage (metres), when rendering
+    <root>/camera/depth                DepthImage (metres), when rendering; nothing farther than
+                                       the work cell (``max_depth``)
+    <root>/inspection                  Pinhole (static), when the inspection camera's K is given
     <root>/inspection/view_K           Image of the robot's K-th view of the onion it inspects
     <root>/inspection/view_K/detections  Boxes2D of the detector, when a detector is given,
                                        labelled with the view's probability of a blemish
@@ -23,7 +25,9 @@ prefix per evaluated policy lets two share a recording)::
 
 In 3D (:mod:`recordings.rerun.world`; one 3D view at ``<root>``): given the ``robot`` (its URDF
 and base), the Sawyer's meshes under ``<root>/robot`` with its joints animated at every step
-from the events' ``q``; given ``camera_pose``, the camera's frustum with its image; an event
+from the events' ``q``; given ``camera_pose``, the camera's frustum with its image (the depth
+cloud in it hidden at first); given ``inspection_K`` and ``inspection_pose``, the inspection
+camera's frustum at its station, with the first view of the onion the Sawyer holds up; an event
 that also carries a ``world`` snapshot (:class:`recordings.world.World`) adds the work cell's
 bodies (``<root>/scene/*``: belt, bin, gate, onions in their true classes' colours).
 
@@ -44,12 +48,14 @@ import rerun.blueprint as rrb
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.rerun.common import (
+    WORK_CELL_DEPTH_M,
     close_recording,
     log_camera_images,
     log_class_annotations,
     log_pinhole,
     log_series_names,
     open_recording,
+    send_layout,
     send_series,
     value_labels,
 )
@@ -120,38 +126,53 @@ class Detection(Protocol):
 Detect = Callable[[list[np.ndarray]], Sequence[Detection]]
 
 
-def evaluation_blueprint(prefix: str = EVALUATE_ROOT, views: int = 1) -> rrb.Blueprint:
-    """The layout: the station's camera and the ``views`` inspection views, the decisions, the
-    metrics, the counts and the arm's joints."""
-    inspection = [rrb.Spatial2DView(origin=f"{prefix}/inspection/view_{k}", name=f"view {k}")
-                  for k in range(max(1, views))]
+def evaluation_blueprint(prefix: str = EVALUATE_ROOT, views: int = 1, *, color: bool = True,
+                         depth: bool = True, p_blemished: bool = True,
+                         camera_pinhole: bool = True, inspection_pinhole: bool = True,
+                         world: bool = True) -> rrb.Blueprint:
+    """The layout, with a view only for what the recording holds: the station's camera
+    (``color``, ``depth``), the work cell in 3D, the first ``views`` inspection views, the
+    decisions, the metrics, ``p_blemished`` per inspection, the counts and the arm's joints.
+
+    ``camera_pinhole``, ``inspection_pinhole``: the camera or the inspection camera has its
+    intrinsics, so that its images show in 3D (an image without them stays out of the 3D
+    view); ``world``: the robot or the work cell's bodies are logged, so that the depth cloud
+    starts hidden in 3D and the 3D view is there even without a camera in it.
+    """
+    cameras = [name for name, shown in (("camera", camera_pinhole and (color or depth)),
+                                        ("inspection/view_0", inspection_pinhole and views > 0))
+               if shown]
+    top = []
+    if color:
+        top.append(rrb.Spatial2DView(origin=f"{prefix}/camera",
+                                     contents=["$origin/**", "- $origin/depth"],
+                                     name="Sawyer station"))
+    if cameras or world:
+        top.append(world_view(prefix, name="Sawyer station (3D)", cameras=cameras,
+                              world=world))
+    below = []
+    if views > 0:
+        below.append(rrb.Grid(*(rrb.Spatial2DView(origin=f"{prefix}/inspection/view_{k}",
+                                                  name=f"view {k}") for k in range(views)),
+                              name="inspection"))
+    if depth:
+        below.append(rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
+                                       name="depth"))
+    left = [rrb.Horizontal(*rows) for rows in (top, below) if rows]
+    series = [rrb.TimeSeriesView(origin=f"{prefix}/metrics", name="precision / recall")]
+    if p_blemished:
+        series.append(rrb.TimeSeriesView(origin=f"{prefix}/inspection/p_blemished",
+                                          name="P(blemished) at inspection"))
+    series += [rrb.TimeSeriesView(origin=f"{prefix}/counts", name="TP / FP / TN / FN"),
+               rrb.TimeSeriesView(origin=f"{prefix}/mdp", name="state / action"),
+               rrb.TimeSeriesView(origin=f"{prefix}/arm", name="Sawyer joints (rad)")]
+    right = rrb.Vertical(rrb.TextLogView(origin=f"{prefix}/decisions", name="decisions"),
+                         *series)
+    if not left:
+        return rrb.Blueprint(right, collapse_panels=True)
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Horizontal(
-                    rrb.Spatial2DView(origin=f"{prefix}/camera",
-                                      contents=["$origin/**", "- $origin/depth"],
-                                      name="Sawyer station"),
-                    world_view(prefix, name="Sawyer station (3D)"),
-                ),
-                rrb.Horizontal(
-                    rrb.Grid(*inspection, name="inspection"),
-                    rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
-                                      name="depth"),
-                ),
-                row_shares=[2, 1],
-            ),
-            rrb.Vertical(
-                rrb.TextLogView(origin=f"{prefix}/decisions", name="decisions"),
-                rrb.TimeSeriesView(origin=f"{prefix}/metrics", name="precision / recall"),
-                rrb.TimeSeriesView(origin=f"{prefix}/inspection/p_blemished",
-                                   name="P(blemished) at inspection"),
-                rrb.TimeSeriesView(origin=f"{prefix}/counts", name="TP / FP / TN / FN"),
-                rrb.TimeSeriesView(origin=f"{prefix}/mdp", name="state / action"),
-                rrb.TimeSeriesView(origin=f"{prefix}/arm", name="Sawyer joints (rad)"),
-            ),
-            column_shares=[3, 2],
-        ),
+        rrb.Horizontal(rrb.Vertical(*left, row_shares=[2, 1][:len(left)]), right,
+                       column_shares=[3, 2]),
         collapse_panels=True,
     )
 
@@ -184,6 +205,22 @@ class EvaluationLogger:
         frustum and image in 3D.
     views : int
         Inspection views per onion (the layout's grid of them).
+    inspection_K : array-like of shape (3, 3) or None
+        The inspection camera's intrinsics: ``<root>/inspection`` becomes a pinhole, so that
+        the views show in 3D in its frustum (the first view only, the others drawn there
+        too would cover it).
+    inspection_pose : Pose or None
+        The inspection camera's optical frame in the world (the Sawyer's inspection station,
+        ``robot.world.camera_pose(ROBOT_INSPECTION_CAMERA)``); an event's ``world`` snapshot
+        places it otherwise.
+    max_depth : float or None
+        Depth (m) beyond which the depth image shows nothing (the floor and the far plane
+        beyond the work cell; :data:`~recordings.rerun.common.WORK_CELL_DEPTH_M`); None keeps
+        every pixel.
+
+    The blueprint (:func:`evaluation_blueprint`) is sent at :meth:`close`, with a view for what
+    the run logged (no slot for an inspection view never used, no image view without images);
+    a live viewer shows Rerun's own layout until then.
 
     Examples
     --------
@@ -195,7 +232,9 @@ class EvaluationLogger:
                  detector: Detect | Any | None = None, *, camera_K: Any = None,
                  application_id: str = "onionsort_evaluate",
                  task: TaskDescription = SORTING_TASK, robot: Robot | None = None,
-                 camera_pose: Pose | None = None, views: int = 1) -> None:
+                 camera_pose: Pose | None = None, views: int = 1, inspection_K: Any = None,
+                 inspection_pose: Pose | None = None,
+                 max_depth: float | None = WORK_CELL_DEPTH_M) -> None:
         prefix = str(prefix).strip("/")
         if not prefix:
             raise ValueError(f"prefix must name an entity path; got {prefix!r}")
@@ -213,14 +252,18 @@ class EvaluationLogger:
         self.views = max(1, int(views))
         self.detect: Detect | None = detector
         self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
-        self.rec = open_recording(application_id, target, evaluation_blueprint(prefix, views))
+        self.inspection_K = None if inspection_K is None else np.asarray(inspection_K, float)
+        self.max_depth = max_depth
+        self.rec = open_recording(application_id, target)
         log_class_annotations(self.rec)
         self._log_series_names()
         self._world = WorldLogger(self.rec, prefix)
-        self._camera_fixed = camera_pose is not None
-        if camera_pose is not None:
-            self._world.log_pose(f"{prefix}/camera", camera_pose.position,
-                                 camera_pose.orientation, static=True)
+        self._fixed = {name: pose is not None for name, pose in (("camera", camera_pose),
+                                                                ("inspection", inspection_pose))}
+        for name, pose in (("camera", camera_pose), ("inspection", inspection_pose)):
+            if pose is not None:
+                self._world.log_pose(f"{prefix}/{name}", pose.position, pose.orientation,
+                                     static=True)
         self._robot_tree = None if robot is None else self._world.robot_model(robot.urdf)
         self._joint_names = () if robot is None else tuple(robot.joint_names)
         if self._robot_tree is not None:
@@ -228,8 +271,12 @@ class EvaluationLogger:
                                        robot.base.orientation, static=True)
         self._rows: dict[str, list] = {}
         self._steps: list[int] = []
-        self._pinhole = False
         self._closed = False
+        # what the recording holds, for its blueprint, sent at close: views never used and
+        # images never rendered get no panel
+        self._held = {"views": 0, "color": False, "depth": False, "p_blemished": False,
+                      "camera_pinhole": False, "inspection_pinhole": False,
+                      "world": self._robot_tree is not None}
 
     def __enter__(self) -> EvaluationLogger:
         return self
@@ -255,15 +302,19 @@ class EvaluationLogger:
             raise ValueError("on_step called on a closed EvaluationLogger")
         p, rec = self.prefix, self.rec
         rec.set_time(_TIMELINE, sequence=int(event.step))
+        held = self._held
+        for image in (event.color, event.depth):
+            if image is not None and self.camera_K is not None and not held["camera_pinhole"]:
+                image = np.asarray(image)
+                log_pinhole(rec, p, self.camera_K, image.shape[1], image.shape[0])
+                held["camera_pinhole"] = True
         if event.color is not None:
-            color = np.asarray(event.color)
-            if self.camera_K is not None and not self._pinhole:
-                log_pinhole(rec, p, self.camera_K, color.shape[1], color.shape[0])
-                self._pinhole = True
-            log_camera_images(rec, p, color=color, jpeg_quality=90)
+            log_camera_images(rec, p, color=np.asarray(event.color), jpeg_quality=90)
+            held["color"] = True
         if event.depth is not None:
             log_camera_images(rec, p, depth=np.asarray(event.depth, np.float32),
-                              depth_meter=1.0)
+                              depth_meter=1.0, max_depth=self.max_depth)
+            held["depth"] = True
         views = tuple(getattr(event, "views", ()) or ())
         if not views and event.inspection is not None:
             views = (event.inspection,)
@@ -274,15 +325,24 @@ class EvaluationLogger:
         world = getattr(event, "world", None)
         if world is not None:
             self._world.log_scene(scene_items(world.shapes))
-            camera = world.cameras.get("camera")
-            if camera is not None and not self._camera_fixed:  # else logged static already
-                self._world.log_pose(f"{p}/camera", camera.position, camera.orientation)
+            held["world"] |= bool(world.shapes)
+            for name, fixed in self._fixed.items():
+                camera = world.cameras.get(name)
+                if camera is not None and not fixed:  # else logged static already
+                    self._world.log_pose(f"{p}/{name}", camera.position, camera.orientation)
         self._buffer(event)
 
     def _log_views(self, event: EvaluationEvent, views: list[np.ndarray]) -> None:
         p, rec = self.prefix, self.rec
         found = self.detect(views) if self.detect is not None else [None] * len(views)
         per_view = tuple(getattr(event, "view_p_blemished", ()) or ())
+        held = self._held
+        if self.inspection_K is not None and not held["inspection_pinhole"]:
+            h, w = views[0].shape[:2]
+            rec.log(f"{p}/inspection", rr.Pinhole(image_from_camera=self.inspection_K,
+                                                  resolution=[w, h]), static=True)
+            held["inspection_pinhole"] = True
+        held["views"] = max(held["views"], min(len(views), self.views))
         for k, (view, det) in enumerate(zip(views, found, strict=True)):
             rec.log(f"{p}/inspection/view_{k}", rr.Image(view))
             if det is not None:
@@ -293,6 +353,7 @@ class EvaluationLogger:
         p_bad = getattr(event, "p_blemished", None)
         if p_bad is not None:
             rec.log(f"{p}/inspection/p_blemished", rr.Scalars(float(p_bad)))
+            held["p_blemished"] = True
 
     def _buffer(self, event: EvaluationEvent) -> None:
         p = self.prefix
@@ -310,7 +371,8 @@ class EvaluationLogger:
         self._steps.append(int(event.step))
 
     def close(self) -> None:
-        """Send the buffered series and flush everything to the file or viewer; idempotent."""
+        """Send the buffered series and the blueprint of what was logged, and flush everything
+        to the file or viewer; idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -323,6 +385,7 @@ class EvaluationLogger:
                     self._world.send_joints(self._robot_tree, self._joint_names,
                                             np.asarray(self._rows[f"{self.prefix}/arm/joints"]),
                                             index)
+                send_layout(self.rec, evaluation_blueprint(self.prefix, **self._held))
         finally:
             close_recording(self.rec)
 

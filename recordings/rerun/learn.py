@@ -39,19 +39,22 @@ LEARN_ROOT = "learn"
 #: Keys of a history entry holding the objective, in order of preference.
 
 
-def learn_blueprint() -> rrb.Blueprint:
-    """The layout: the objective curve beside the learned reward and policy."""
+def learn_blueprint(*, objective: bool = True, confidence: bool = True) -> rrb.Blueprint:
+    """The layout: the ``objective`` curve (where the history records one) beside the learned
+    reward and policy, and the ``confidence`` in the policy (where a posterior gave one)."""
+    model = [rrb.TextDocumentView(origin=f"{LEARN_ROOT}/theta", name="reward weights"),
+             rrb.TextDocumentView(origin=f"{LEARN_ROOT}/policy", name="policy")]
+    if confidence:
+        model += [rrb.BarChartView(origin=f"{LEARN_ROOT}/confidence",
+                                   name="confidence per state"),
+                  rrb.TextDocumentView(origin=f"{LEARN_ROOT}/least_sure",
+                                       name="least sure states")]
+    if not objective:
+        return rrb.Blueprint(rrb.Vertical(*model), collapse_panels=True)
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.TimeSeriesView(origin=f"{LEARN_ROOT}/objective", name="objective"),
-            rrb.Vertical(
-                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/theta", name="reward weights"),
-                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/policy", name="policy"),
-                rrb.BarChartView(origin=f"{LEARN_ROOT}/confidence",
-                                 name="confidence per state"),
-                rrb.TextDocumentView(origin=f"{LEARN_ROOT}/least_sure",
-                                     name="least sure states"),
-            ),
+            rrb.Vertical(*model),
             column_shares=[3, 2],
         ),
         collapse_panels=True,
@@ -87,9 +90,10 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
     if missing:
         raise ValueError(f"model must have 'theta' and 'policy'; missing {missing} in keys "
                          f"{sorted(model)}")
-    rec = open_recording(application_id, target, learn_blueprint())
+    key, values = objective_curve(history)
+    rec = open_recording(application_id, target, learn_blueprint(
+        objective=key is not None and len(values) > 0, confidence=confidence is not None))
     try:
-        key, values = objective_curve(history)
         if key is None:
             logger.warning("the learning history records no objective (%s); logging the "
                            "model alone", " or ".join(OBJECTIVE_KEYS))

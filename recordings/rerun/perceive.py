@@ -54,14 +54,17 @@ PERCEIVE_ROOT = "perceive"
 Detections = dict[int, list[tuple[float, float, float, float, int, float]]]
 
 
-def perception_views() -> list[rrb.View]:
-    """The views of ``perceive/``, for a blueprint: images with the detector's boxes, the
-    observations, the perceived factors and the occlusion calls."""
+def perception_views(inspection: bool = True) -> list[rrb.View]:
+    """The views of ``perceive/``, for a blueprint: images with the detector's boxes (the
+    inspection view's if ``inspection``: the sessions have one), the observations, the
+    perceived factors and the occlusion calls."""
+    images = [rrb.Spatial2DView(origin=f"{PERCEIVE_ROOT}/camera", name="perceived step")]
+    if inspection:
+        images.append(rrb.Spatial2DView(origin=f"{PERCEIVE_ROOT}/inspection",
+                                        name="inspection detections"))
     return [
         rrb.Vertical(
-            rrb.Spatial2DView(origin=f"{PERCEIVE_ROOT}/camera", name="perceived step"),
-            rrb.Spatial2DView(origin=f"{PERCEIVE_ROOT}/inspection",
-                              name="inspection detections"),
+            *images,
             rrb.TextLogView(origin=f"{PERCEIVE_ROOT}/observation", name="observations"),
             name="perceived images",
         ),
@@ -118,6 +121,8 @@ class PerceptionLogger:
                  task: TaskDescription = SORTING_TASK) -> None:
         self.rec = rec
         self.images = images
+        #: Whether an inspection view was logged (``perceive/inspection``).
+        self.logged_inspection = False
         self._named: set[TaskDescription] = set()
         self._name_series(task)
         names = {f"{PERCEIVE_ROOT}/occlusion/p_occluded": "P(occluded)",
@@ -205,6 +210,7 @@ class PerceptionLogger:
                          _boxes(camera.get(frame.index, [])))
             view = views.get(int(msg["step"]))
             if view is not None:
+                self.logged_inspection = True
                 self.rec.log(f"{PERCEIVE_ROOT}/inspection", rr.EncodedImage(
                     contents=view.inspection_png, media_type="image/png"))
                 self.rec.log(f"{PERCEIVE_ROOT}/inspection/detections",

@@ -7,7 +7,8 @@ it. A perceived session's perception topics are logged too, under ``perceive/``
 
     record/camera                    Pinhole (static): the main camera's intrinsics
     record/camera/color              EncodedImage (JPEG), every frame
-    record/camera/depth              DepthImage (uint16 millimetres, meter=1000), with depth
+    record/camera/depth              DepthImage (uint16 millimetres, meter=1000), with depth;
+                                     0 (no point) beyond the work cell (``max_depth``)
     record/camera/color/truth_boxes  Boxes2D (XYXY, class_ids), with ground truth
     record/inspection                EncodedImage (PNG), on a step's first frame
     record/session                   TextDocument: which session is playing
@@ -22,7 +23,10 @@ them: ``record`` is the world (z up); ``record/camera`` and ``record/inspection`
 ``/tf`` (the inspection view is a pinhole too, so both images show in their frustums);
 ``record/scene/*`` holds the bodies of ``/scene`` (belt, bin, gate, sorter, passer-by, onions in
 the colours of their true classes); a session with a robot shows it from its URDF under
-``record/robot``, its joints animated at every frame from ``/joint_states``.
+``record/robot``, its joints animated at every frame from ``/joint_states``. The blueprint
+(:func:`session_blueprint`, sent when the logger closes) has a view only for what the sessions
+hold; its 3D view holds the bodies, the robot and the pinhole cameras, the depth cloud hidden at
+first where there are bodies or a robot.
 
 Timelines: ``frame`` and ``step`` (both counted across every session logged to the stream) and
 ``time`` (the recording time of a frame, a duration). Series are sent whole, one
@@ -44,6 +48,7 @@ from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.reader import FrameRecord, Session
 from recordings.rerun.common import (
+    WORK_CELL_DEPTH_M,
     close_recording,
     factor_values,
     log_camera_images,
@@ -51,6 +56,7 @@ from recordings.rerun.common import (
     log_pinhole,
     log_series_names,
     open_recording,
+    send_layout,
     send_series,
     value_labels,
 )
@@ -68,36 +74,53 @@ _TRUTH = f"{RECORD_ROOT}/truth"
 _CAMERA_ENTITIES = {"camera": f"{RECORD_ROOT}/camera", "inspection": f"{RECORD_ROOT}/inspection"}
 
 
-def session_blueprint() -> rrb.Blueprint:
-    """The layout of logged sessions: camera with ground-truth boxes, the work cell in 3D,
-    depth, inspection view, the true state as text and series, and what perception saw."""
+def session_blueprint(*, camera_pinhole: bool = True, depth: bool = True,
+                      inspection: bool = True, inspection_pinhole: bool = True,
+                      true_state: bool = True, truth_series: bool = True,
+                      perception: bool = True, perceived_inspection: bool = True,
+                      world: bool = True) -> rrb.Blueprint:
+    """The layout of logged sessions, with a view only for what they hold: the camera (with the
+    ground-truth boxes), the work cell in 3D, the ``depth``, the ``inspection`` view, the
+    session, the ``true_state`` as text, the ``truth_series`` (factors, occlusion), and what
+    ``perception`` saw (its inspection view if ``perceived_inspection``).
+
+    ``camera_pinhole``, ``inspection_pinhole``: the camera has its intrinsics, so that it shows
+    in 3D (an image without them stays out of the 3D view); ``world``: the bodies of the work
+    cell or a robot are logged, so that the depth cloud starts hidden in 3D and the 3D view is
+    there even without a camera in it.
+    """
     camera = f"{RECORD_ROOT}/camera"
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Horizontal(
-                    rrb.Spatial2DView(origin=camera, contents=["$origin/**", "- $origin/depth"],
-                                      name="camera + ground-truth boxes"),
-                    world_view(RECORD_ROOT),
-                ),
-                rrb.Horizontal(
-                    rrb.Spatial2DView(origin=camera, contents=["$origin/depth"], name="depth"),
-                    rrb.Spatial2DView(origin=f"{RECORD_ROOT}/inspection", name="inspection"),
-                ),
-                row_shares=[2, 1],
-            ),
-            rrb.Vertical(
-                rrb.TextDocumentView(origin=f"{RECORD_ROOT}/session", name="session"),
-                rrb.TextDocumentView(origin=f"{_TRUTH}/state", name="true state"),
-                rrb.TimeSeriesView(origin=f"{_TRUTH}/factors", name="true state factors"),
-                rrb.TimeSeriesView(origin=f"{_TRUTH}/occlusion", name="occlusion"),
-                row_shares=[1, 2, 3, 2],
-            ),
-            rrb.Tabs(*perception_views(), name="perception"),
-            column_shares=[3, 2, 2],
-        ),
-        collapse_panels=True,
-    )
+    cameras = [name for name, shown in (("camera", camera_pinhole),
+                                        ("inspection", inspection and inspection_pinhole))
+               if shown]
+    top = [rrb.Spatial2DView(origin=camera, contents=["$origin/**", "- $origin/depth"],
+                             name="camera + ground-truth boxes" if true_state else "camera")]
+    if cameras or world:
+        top.append(world_view(RECORD_ROOT, cameras=cameras, world=world))
+    below = [rrb.Spatial2DView(origin=camera, contents=["$origin/depth"], name="depth")] \
+        if depth else []
+    if inspection:
+        below.append(rrb.Spatial2DView(origin=f"{RECORD_ROOT}/inspection", name="inspection"))
+    left = [rrb.Horizontal(*top)] + ([rrb.Horizontal(*below)] if below else [])
+    right = [rrb.TextDocumentView(origin=f"{RECORD_ROOT}/session", name="session")]
+    shares = [1]
+    if true_state:
+        right.append(rrb.TextDocumentView(origin=f"{_TRUTH}/state", name="true state"))
+        shares.append(2)
+    if truth_series:
+        right += [rrb.TimeSeriesView(origin=f"{_TRUTH}/factors", name="true state factors"),
+                  rrb.TimeSeriesView(origin=f"{_TRUTH}/occlusion", name="occlusion")]
+        shares += [3, 2]
+    columns = [rrb.Vertical(*left, row_shares=[2, 1][:len(left)]),
+               rrb.Vertical(*right, row_shares=shares)]
+    if perception:
+        columns.append(rrb.Tabs(*perception_views(inspection=perceived_inspection),
+                                name="perception"))
+    # the time cursor on ``frame``, which counts on across sessions (``time`` starts again at 0
+    # in each one, so that on it every session's series lie on top of each other)
+    return rrb.Blueprint(rrb.Horizontal(*columns, column_shares=[3, 2, 2][:len(columns)]),
+                         rrb.TimePanel(timeline="frame", state="collapsed"),
+                         collapse_panels=True)
 
 
 class SessionLogger:
@@ -115,6 +138,13 @@ class SessionLogger:
         The task whose factor series are named when the stream opens (the onion-sorting task by
         default); each session is logged with its own task (``Session.task``), and a session of
         another task gets its series named when it is logged.
+    max_depth : float or None
+        Depth (m) beyond which the depth image shows nothing (the floor and the far plane
+        beyond the work cell; :data:`~recordings.rerun.common.WORK_CELL_DEPTH_M`); None keeps
+        every pixel.
+
+    The blueprint (:func:`session_blueprint`) is sent when the logger closes, with a view for
+    each thing the sessions hold.
 
     Examples
     --------
@@ -124,10 +154,16 @@ class SessionLogger:
     """
 
     def __init__(self, target: str | Path, application_id: str = "onionsort", *,
-                 perception: bool = True, task: TaskDescription = SORTING_TASK) -> None:
-        self.rec = open_recording(application_id, target, session_blueprint())
+                 perception: bool = True, task: TaskDescription = SORTING_TASK,
+                 max_depth: float | None = WORK_CELL_DEPTH_M) -> None:
+        # the blueprint follows what the sessions hold: sent once, at close
+        self.rec = open_recording(application_id, target)
+        self._features = dict.fromkeys((
+            "camera_pinhole", "depth", "inspection", "inspection_pinhole", "true_state",
+            "truth_series", "perception", "perceived_inspection", "world"), False)
         self.log_perception = perception
         self.task = task
+        self.max_depth = max_depth
         log_class_annotations(self.rec)
         self._world = WorldLogger(self.rec, RECORD_ROOT)
         self._named: set[TaskDescription] = set()
@@ -136,6 +172,7 @@ class SessionLogger:
             f"{_TRUTH}/occlusion/fraction": "fraction of the view covered",
             f"{_TRUTH}/occlusion/occluded": "occluded step (0/1)"})
         self._perception: PerceptionLogger | None = None
+        self._logged = False
         self._frame = 0
         self._step = 0
         self._closed = False
@@ -165,8 +202,9 @@ class SessionLogger:
             logger.warning("%s: no complete frame to log", session.path)
             return
         frame0, step0 = self._frame, self._step
-        self._log_camera(session, frames[0])
-        self._log_inspection_camera(session, frames)
+        held = self._features
+        held["camera_pinhole"] |= self._log_camera(session, frames[0])
+        held["inspection_pinhole"] |= self._log_inspection_camera(session, frames)
         tree = None
         if session.robot is not None and any(f.joints for f in frames):
             tree = self._world.robot_model(session.robot["urdf"])
@@ -180,33 +218,44 @@ class SessionLogger:
         if tree is not None:
             self._log_joints(session, frames, tree, frame0, step0)
         if session.has_ground_truth:
-            self._log_truth_series(session, frames, frame0, step0)
+            held["truth_series"] |= self._log_truth_series(session, frames, frame0, step0)
         if self.log_perception and session.perception:
             if self._perception is None:
                 self._perception = PerceptionLogger(self.rec, task=self.task)
-            self._perception.log_session(session, frame_offset=frame0, step_offset=step0)
+            held["perception"] |= self._perception.log_session(
+                session, frame_offset=frame0, step_offset=step0) > 0
+            held["perceived_inspection"] |= self._perception.logged_inspection
+        held["depth"] |= any(f.depth_raw is not None for f in frames)
+        held["inspection"] |= any(f.inspection_png is not None for f in frames)
+        held["true_state"] |= any(f.state is not None for f in frames)
+        held["world"] |= tree is not None or any(f.scene for f in frames)
+        self._logged = True
         self._frame = frame0 + max(f.index for f in frames) + 1
         self._step = step0 + max(max(f.step for f in frames) + 1, len(session.steps))
 
-    def _log_camera(self, session: Session, first: FrameRecord) -> None:
+    def _log_camera(self, session: Session, first: FrameRecord) -> bool:
+        """The main camera's pinhole; whether the session had its intrinsics."""
         K = session.metadata.get("camera_K")
         if K is None:
             logger.warning("%s: no camera_K in the session record; the camera is logged "
-                           "without intrinsics", session.path)
-            return
+                           "without intrinsics (and left out of the 3D view)", session.path)
+            return False
         h, w = first.color.shape[:2]
         log_pinhole(self.rec, RECORD_ROOT, K, w, h)
+        return True
 
-    def _log_inspection_camera(self, session: Session, frames: list[FrameRecord]) -> None:
-        """The inspection view as a pinhole too, so that it shows in 3D where ``/tf`` puts it."""
+    def _log_inspection_camera(self, session: Session, frames: list[FrameRecord]) -> bool:
+        """The inspection view as a pinhole too, so that it shows in 3D where ``/tf`` puts it;
+        whether it was logged."""
         K = session.metadata.get("inspection_K")
         first = next((f for f in frames if f.inspection_png is not None), None)
         if K is None or first is None:
-            return
+            return False
         h, w = first.inspection.shape[:2]
         self.rec.log(f"{RECORD_ROOT}/inspection",
                      rr.Pinhole(image_from_camera=np.asarray(K, float), resolution=[w, h]),
                      static=True)
+        return True
 
     def _log_world(self, frame: FrameRecord, tree: rru.UrdfTree | None) -> None:
         """The frame's 3D side: camera poses and the robot's base (``/tf``), bodies
@@ -248,7 +297,7 @@ class SessionLogger:
         if frame.depth_raw is not None:
             depth = np.frombuffer(frame.depth_raw, dtype="<u2").reshape(frame.depth_shape)
         log_camera_images(rec, RECORD_ROOT, color_jpeg=frame.color_jpeg, depth=depth,
-                          depth_meter=1000.0)
+                          depth_meter=1000.0, max_depth=self.max_depth)
         if frame.inspection_png is not None:
             rec.log(f"{RECORD_ROOT}/inspection",
                     rr.EncodedImage(contents=frame.inspection_png, media_type="image/png"))
@@ -266,7 +315,8 @@ class SessionLogger:
                                                        media_type="text/markdown"))
 
     def _log_truth_series(self, session: Session, frames: list[FrameRecord], frame0: int,
-                          step0: int) -> None:
+                          step0: int) -> bool:
+        """The true state's factors and the occlusion as series; whether there were any."""
         first: dict[int, FrameRecord] = {}
         covered: dict[int, float] = {}
         for f in frames:
@@ -276,7 +326,7 @@ class SessionLogger:
                                       float(f.state.get("occluded_fraction", 0.0)))
         steps = [s for s in session.steps if s.step in first]
         if not steps:
-            return
+            return False
         indexes = [
             rr.TimeColumn("step", sequence=[step0 + s.step for s in steps]),
             rr.TimeColumn("frame", sequence=[frame0 + first[s.step].index for s in steps]),
@@ -295,12 +345,18 @@ class SessionLogger:
                     [covered.get(s.step, 0.0) for s in steps])
         send_series(self.rec, f"{_TRUTH}/occlusion/occluded", indexes,
                     [float(s.occluded) for s in steps])
+        return True
 
     def close(self) -> None:
-        """Flush everything to the file or viewer; idempotent."""
+        """Send the blueprint of what was logged and flush everything to the file or viewer;
+        idempotent."""
         if not self._closed:
-            close_recording(self.rec)
             self._closed = True
+            try:
+                if self._logged:
+                    send_layout(self.rec, session_blueprint(**self._features))
+            finally:
+                close_recording(self.rec)
 
 
 def _session_text(session: Session, index: int) -> str:

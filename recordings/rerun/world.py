@@ -1,7 +1,9 @@
 """The work cell in 3D in Rerun: its bodies, its cameras, and a robot from its URDF.
 
 A logger with an entity root (``record``, ``evaluate``) shows its world in one
-``Spatial3DView`` at that root (:func:`world_view`); :class:`WorldLogger` logs into it::
+``Spatial3DView`` at that root (:func:`world_view`), whose contents are the bodies, the robot and
+the cameras that are pinholes (an image without one cannot be placed in 3D); the depth cloud
+starts hidden there where the bodies or the robot are shown. :class:`WorldLogger` logs into it::
 
     <root>                            ViewCoordinates (static): the world, right-handed, z up
     <root>/camera                     Transform3D: the camera's optical frame in the world; with
@@ -40,16 +42,46 @@ from recordings.schema import CLASS_NAMES
 from recordings.urdf import viewer_urdf
 from recordings.world import SceneItem, Shape
 
-__all__ = ["WorldLogger", "scene_items", "world_view"]
+__all__ = ["WORK_CELL_EYE", "WorldLogger", "scene_items", "world_view"]
 
 logger = logging.getLogger(__name__)
 
 _PLURAL = {"box": "boxes", "sphere": "spheres", "cylinder": "cylinders", "capsule": "capsules"}
 
 
-def world_view(root: str, name: str = "work cell (3D)") -> rrb.Spatial3DView:
-    """The one 3D view of a blueprint: everything under ``root`` in the world frame."""
-    return rrb.Spatial3DView(origin=root, contents=["$origin/**"], name=name)
+#: Where a 3D view of the work cell looks from and at (world metres, z up), for a cell laid
+#: out as ``robot.scene`` lays it (the belt along x through the origin, 0.8 m up, the Sawyer
+#: and the person behind it at y > 0): from the front right, above the camera, at the belt.
+WORK_CELL_EYE = ((2.0, -3.2, 2.6), (0.0, 0.1, 1.0))
+
+
+def world_view(root: str, name: str = "work cell (3D)", *,
+               cameras: Sequence[str] = ("camera",), world: bool = False
+               ) -> rrb.Spatial3DView:
+    """The one 3D view of a blueprint, in the world frame of ``root``: the bodies
+    (``<root>/scene``), the robot (``<root>/robot``) and the cameras ``cameras`` (names under
+    ``root``, each a pinhole, with what is under it; ``"inspection/view_0"`` takes that image
+    and its pinhole parent ``inspection`` only).
+
+    Nothing else under ``root`` is shown: a 2D entity outside a pinhole's subtree has no place
+    in 3D (the viewer reports it as an error), and series and text have none either. With
+    ``world`` (the bodies or the robot are logged) the view looks at the work cell from
+    :data:`WORK_CELL_EYE`, and the depth cloud of ``<root>/camera/depth`` starts hidden (a
+    person turns it on in the view's entity list), so that the bodies and the robot are seen,
+    not the points that cover them.
+    """
+    contents = ["$origin", "$origin/scene/**", "$origin/robot/**"]
+    for camera in cameras:
+        parent = camera.rsplit("/", 1)[0] if "/" in camera else None
+        contents += ([f"$origin/{parent}"] if parent else []) + [f"$origin/{camera}/**"]
+    if not world:
+        return rrb.Spatial3DView(origin=root, contents=contents, name=name)
+    position, target = WORK_CELL_EYE
+    return rrb.Spatial3DView(
+        origin=root, contents=contents, name=name,
+        overrides={f"{root}/camera/depth": rrb.EntityBehavior(visible=False)},
+        eye_controls=rrb.EyeControls3D(position=position, look_target=target,
+                                       eye_up=(0.0, 0.0, 1.0)))
 
 
 def scene_items(shapes: Iterable[Shape]) -> list[SceneItem]:
