@@ -6,9 +6,9 @@ on import, in this order: ``mmap-birl``, ``map-birl``, ``hidden-data-em``, ``max
 behaviour-cloning baselines ``bc`` (face value) and ``bc-em`` (through the observation model),
 which learn a policy and no reward (``theta_`` is None). Others can be added with
 :func:`register_learner`; a name can be registered once. ``make_estimator``'s ``backend`` goes
-to every estimator with a ``backend`` parameter (``get_params``): of these,
-``mmap-birl`` and ``bc-em`` (HiddenDataEM's E-step has a time-indexed policy, which the compiled
-kernel does not take).
+to every estimator with a ``backend`` parameter (``get_params``): ``mmap-birl``, ``bc-em``, and
+``bc``, which runs no forward-backward and does not use it (HiddenDataEM's E-step has a
+time-indexed policy, which the compiled kernel does not take).
 """
 
 from __future__ import annotations

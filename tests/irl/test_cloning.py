@@ -264,3 +264,15 @@ def test_the_registry_builds_both_variants():
     face, em = (irl.make_estimator(m, dom, seed=1, backend="numpy") for m in ("bc", "bc-em"))
     assert (face.variant, em.variant) == ("face-value", "em")
     assert face.observation_model is dom.observation_model and em.seed == 1
+
+
+def test_bc_em_on_the_compiled_kernels_equals_numpy():
+    pytest.importorskip("numba")
+    dom = irl.domains.onion_sorting(noise=0.45)
+    demos = sample_batch(dom, Trial("sorting", "bc-em", 0.2, 0.45, 0, 4, 20, 21))
+    fits = [irl.BehaviorCloning(dom.mdp, dom.observation_model, variant="em", backend=b,
+                                seed=0).fit(demos) for b in ("numpy", "numba")]
+    np.testing.assert_allclose(fits[1].action_probabilities_, fits[0].action_probabilities_,
+                               rtol=0, atol=1e-9)
+    assert fits[1].n_iter_ == fits[0].n_iter_
+    np.testing.assert_array_equal(fits[1].policy_, fits[0].policy_)
