@@ -93,9 +93,10 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
     rec = open_recording(application_id, target, learn_blueprint())
     try:
         key, values = objective_curve(history)
-        if key is None:
-            logger.warning("the learning history records no objective (%s); logging the "
-                           "model alone", " or ".join(OBJECTIVE_KEYS))
+        if key is None:  # none at all (a learner with no iterations, bc): nothing to say
+            (logger.warning if history else logger.info)(
+                "the learning history records no objective (%s); logging the model alone",
+                " or ".join(OBJECTIVE_KEYS))
         else:
             log_series_names(rec, {f"{LEARN_ROOT}/objective": f"objective ({key})"})
             send_series(rec, f"{LEARN_ROOT}/objective",
