@@ -26,27 +26,31 @@ def _check(mdp, true_theta, learned_theta) -> tuple[np.ndarray, np.ndarray]:
                                                                       "learned_theta")
 
 
-def _learned_policy(mdp, true_theta, learned_theta, policy, solver=None):
-    """``(true_theta, pi_L)``: the greedy optimal policy of ``learned_theta``, or ``policy``
-    itself (a learner with no reward, such as behaviour cloning); exactly one is given."""
+def _check_learned(mdp, true_theta, learned_theta, policy):
+    """``(true_theta, learned_theta or None, policy or None)`` checked: exactly one of
+    ``learned_theta`` (a reward, whose greedy policy is scored) and ``policy[s]`` (a learner
+    with no reward, such as behaviour cloning) is given."""
     if (learned_theta is None) == (policy is None):
         raise ValueError("give exactly one of learned_theta and policy; got "
                          + ("neither" if policy is None else "both"))
     if policy is None:
-        true_theta, learned_theta = _check(mdp, true_theta, learned_theta)
-        return true_theta, (solver or OptimalQSolver(mdp)).solve(learned_theta).policy
+        return (*_check(mdp, true_theta, learned_theta), None)
     if not isinstance(mdp, TabularMDP):
         raise TypeError(f"mdp must be an irl.TabularMDP; got {type(mdp).__name__}")
     policy = as_index_array(policy, "policy", size=mdp.n_actions)
     if policy.shape != (mdp.n_states,):
         raise ValueError(f"policy must give one action per state, shape ({mdp.n_states},); "
                          f"got {policy.shape}")
-    return mdp.check_theta(true_theta, "true_theta"), policy
+    return mdp.check_theta(true_theta, "true_theta"), None, policy
 
 
 def _expert_and_learned_values(mdp: TabularMDP, true_theta, learned_theta, policy):
-    true_theta, pi_l = _learned_policy(mdp, true_theta, learned_theta, policy)
-    pi_e = OptimalQSolver(mdp).solve(true_theta).policy
+    true_theta, learned_theta, policy = _check_learned(mdp, true_theta, learned_theta, policy)
+    # one solver, the expert's reward first: where the learned reward ties two actions, the
+    # greedy policy it gives depends on what the solver solved before (and the results do)
+    solver = OptimalQSolver(mdp)
+    pi_e = solver.solve(true_theta).policy
+    pi_l = solver.solve(learned_theta).policy if policy is None else policy
     reward = mdp.reward(true_theta)
     return policy_values(mdp, reward, pi_e), policy_values(mdp, reward, pi_l)
 
@@ -80,11 +84,12 @@ def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta=None, states=None
     the two, as in :func:`inverse_learning_error`). An action counts as optimal if its true
     ``Q*`` is within 1e-9 of the best (ties allowed).
     """
-    solver = OptimalQSolver(mdp) if isinstance(mdp, TabularMDP) else None
-    true_theta, pi_l = _learned_policy(mdp, true_theta, learned_theta, policy, solver)
+    true_theta, learned_theta, policy = _check_learned(mdp, true_theta, learned_theta, policy)
     idx = (np.arange(mdp.n_states) if states is None
            else as_index_array(states, "states", size=mdp.n_states))
-    Q = solver.q_values(true_theta)
+    solver = OptimalQSolver(mdp)
+    Q = solver.q_values(true_theta)  # first, as in _expert_and_learned_values
+    pi_l = solver.solve(learned_theta).policy if policy is None else policy
     tol = 1e-9 * (1.0 + np.abs(Q).max())
     wrong = Q[idx, pi_l[idx]] < Q[idx].max(axis=1) - tol
     return float(wrong.mean())

@@ -247,6 +247,24 @@ def test_the_metrics_score_a_policy_without_a_reward():
         inverse_learning_error(mdp, theta, policy=np.full(mdp.n_states, 7))
 
 
+def test_a_reward_is_scored_as_before_where_it_ties_two_actions():
+    """A learned reward that ties actions gets its greedy policy from a solver that solved the
+    expert's reward first, as the metrics always did (a fresh solver breaks the tie otherwise:
+    this reward's normalized ILE is then 49.9% instead of 0)."""
+    from irl.solvers import policy_values
+
+    dom = irl.domains.onion_sorting(noise=0.3)
+    trial = Trial("sorting", "maxent", 0.2, 0.3, 3, 1, 20, 0)
+    theta = irl.make_estimator("maxent", dom).fit(sample_batch(dom, trial)).theta_
+    solver = irl.solvers.OptimalQSolver(dom.mdp)
+    reward = dom.mdp.reward(dom.true_theta)
+    v_e = policy_values(dom.mdp, reward, solver.solve(dom.true_theta).policy)
+    v_l = policy_values(dom.mdp, reward, solver.solve(theta).policy)
+    assert inverse_learning_error(dom.mdp, dom.true_theta, theta) == np.abs(v_e - v_l).sum()
+    fresh = irl.solvers.OptimalQSolver(dom.mdp).solve(theta).policy
+    assert inverse_learning_error(dom.mdp, dom.true_theta, policy=fresh) > 0  # the tie
+
+
 @pytest.mark.parametrize("method", ["bc", "bc-em"])
 def test_a_trial_scores_cloning_by_its_policy(method):
     trial = Trial("sorting", method, 0.2, 0.3, 0, 2, 20, 11)
