@@ -3,7 +3,8 @@
 - ``pipeline.png``: the pipeline, from the PyBullet world to the Sawyer's precision and recall,
   drawn with matplotlib (no data);
 - ``efficiency.png``: normalized ILE and exact-policy rate against the number of
-  demonstrations, per method, at two noise levels: the data-efficiency sweep of docs/results.md's
+  demonstrations, per method (the four reward learners and behaviour cloning), at two noise
+  levels: the data-efficiency sweep of docs/results.md's
   Results (``onionsort experiment sorting --trajectories 1,2,4,8 ...``, read from its
   ``summary.json``);
 - ``workcell.png``: stills of the work cell rendered by the project's own cameras (TinyRenderer):
@@ -48,6 +49,8 @@ METHOD_LABELS = {
     "map-birl": "MAP-BIRL (observations at face value)",
     "hidden-data-em": "HiddenDataEM",
     "maxent": "MaxEnt IRL",
+    "bc": "behaviour cloning (face value)",
+    "bc-em": "behaviour cloning (EM, through the observation model)",
 }
 
 #: Seeds of the work-cell still: the sorter's session and the Sawyer's line-up.
@@ -92,15 +95,18 @@ _EFFICIENCY_EXPECT = {"domain": "sorting", "seed": 0, "length": [20], "learners"
 EFFICIENCY = RunSpec(
     "efficiency",
     ("experiment", "sorting", "--trajectories", "1,2,4,8", "--noise", "0.3,0.45",
-     "--occlusion", "0.2", "--batches", "20"),
+     "--occlusion", "0.2", "--batches", "20", "--methods", ",".join(METHOD_LABELS)),
     {**_EFFICIENCY_EXPECT, "trajectories": [1, 2, 4, 8], "batches": 20,
      "points": [[0.2, 0.3], [0.2, 0.45]]},
 )
-"""The data-efficiency sweep of docs/results.md (about 3 min on 2 cores)."""
+"""The data-efficiency sweep of docs/results.md (about 3 min on 2 cores; every learner sees the
+same data in every batch, so adding the cloning baselines left the other learners' cells as
+they were)."""
 EFFICIENCY_QUICK = RunSpec(
     "efficiency-quick",
     ("experiment", "sorting", "--trajectories", "1,2", "--noise", "0.3,0.45",
-     "--occlusion", "0.2", "--batches", "2", "--workers", "1"),
+     "--occlusion", "0.2", "--batches", "2", "--workers", "1", "--methods",
+     ",".join(METHOD_LABELS)),
     {**_EFFICIENCY_EXPECT, "trajectories": [1, 2], "batches": 2,
      "points": [[0.2, 0.3], [0.2, 0.45]]},
 )
@@ -344,10 +350,12 @@ def efficiency_figure(points: Sequence[dict]):
              "the same data); bars: 95% percentile-bootstrap intervals over batches",
              ha="center", fontsize=9, color="0.35")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(methods), fontsize=9,
+    ncol = len(methods) if len(methods) <= 4 else 3  # the cloning baselines: two rows
+    rows = -(-len(methods) // ncol)
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=9,
                frameon=False, bbox_to_anchor=(0.5, 0.005))
-    fig.subplots_adjust(left=0.1, right=0.985, top=0.86, bottom=0.165, hspace=0.08,
-                        wspace=0.05)
+    fig.subplots_adjust(left=0.1, right=0.985, top=0.86, bottom=0.125 + 0.04 * rows,
+                        hspace=0.08, wspace=0.05)
     return fig
 
 

@@ -1,7 +1,8 @@
 """irl: inverse reinforcement learning from occluded, noisy demonstrations.
 
 Exact MMAP-BIRL (marginal MAP Bayesian IRL under occlusion with observer noise) and the
-baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, on tabular MDPs with linear rewards.
+baselines MAP-BIRL, HiddenDataEM and MaxEnt IRL, on tabular MDPs with linear rewards, and
+behaviour cloning (``BehaviorCloning``), which copies the actions and learns no reward.
 
 >>> import irl
 >>> dom = irl.domains.forestworld(noise=0.3)
@@ -20,6 +21,7 @@ from irl.learners import (
     LEARNERS,
     MAPBIRL,
     MMAPBIRL,
+    BehaviorCloning,
     HiddenDataEM,
     LearnerSpec,
     MaxEntIRL,
@@ -50,6 +52,7 @@ __all__ = [
     "LEARNERS",
     "MAPBIRL",
     "MMAPBIRL",
+    "BehaviorCloning",
     "ConvergenceWarning",
     "Demonstration",
     "DenseObservationModel",

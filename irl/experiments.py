@@ -78,7 +78,8 @@ DOMAINS: dict[str, Callable[..., Domain]] = {
 REACHABLE_STATES: dict[str, Callable[[], Sequence[int]]] = {
     "sorting": sorting_reachable_states,
 }
-#: The paper's learners, in registration order; a sweep may also name any learner registered
+#: The registered learners, in registration order (the paper's four, then behaviour cloning's
+#: ``bc`` and ``bc-em``); a sweep may also name any learner registered
 #: since (:func:`irl.learners.register_learner`; with ``workers > 1`` it must be registered on
 #: import of a module the workers import too).
 METHODS = tuple(LEARNERS)
@@ -273,13 +274,17 @@ def run_trial(trial: Trial) -> TrialResult:
     converged = not any(issubclass(w.category, ConvergenceWarning) for w in caught)
     states = REACHABLE_STATES[trial.domain]() if trial.domain in REACHABLE_STATES else None
     mdp, theta = domain.mdp, domain.true_theta
+    # a learner with a reward is scored by its reward's greedy policy, one without (behaviour
+    # cloning, theta_ None) by its own policy_
+    learned = ({"policy": est.policy_} if getattr(est, "theta_", None) is None
+               else {"learned_theta": est.theta_})
     return TrialResult(
         method=trial.method,
         occlusion=trial.occlusion,
         noise=trial.noise,
         batch=trial.batch,
-        ile=inverse_learning_error(mdp, theta, est.theta_),
-        normalized_ile=normalized_inverse_learning_error(mdp, theta, est.theta_),
+        ile=inverse_learning_error(mdp, theta, **learned),
+        normalized_ile=normalized_inverse_learning_error(mdp, theta, **learned),
         seconds=seconds,
         n_iter=int(est.n_iter_),
         converged=converged,
@@ -287,7 +292,7 @@ def run_trial(trial: Trial) -> TrialResult:
         length=trial.length,
         learner=trial.learner,
         learner_beta=float(told.beta),
-        exact_policy=int(policy_mismatch(mdp, theta, est.theta_, states) == 0),
+        exact_policy=int(policy_mismatch(mdp, theta, states=states, **learned) == 0),
         backend=trial.backend,
     )
 

@@ -26,42 +26,70 @@ def _check(mdp, true_theta, learned_theta) -> tuple[np.ndarray, np.ndarray]:
                                                                       "learned_theta")
 
 
-def _expert_and_learned_values(mdp: TabularMDP, true_theta, learned_theta):
-    true_theta, learned_theta = _check(mdp, true_theta, learned_theta)
+def _check_learned(mdp, true_theta, learned_theta, policy):
+    """``(true_theta, learned_theta or None, policy or None)`` checked: exactly one of
+    ``learned_theta`` (a reward, whose greedy policy is scored) and ``policy[s]`` (a learner
+    with no reward, such as behaviour cloning) is given."""
+    if (learned_theta is None) == (policy is None):
+        raise ValueError("give exactly one of learned_theta and policy; got "
+                         + ("neither" if policy is None else "both"))
+    if policy is None:
+        return (*_check(mdp, true_theta, learned_theta), None)
+    if not isinstance(mdp, TabularMDP):
+        raise TypeError(f"mdp must be an irl.TabularMDP; got {type(mdp).__name__}")
+    policy = as_index_array(policy, "policy", size=mdp.n_actions)
+    if policy.shape != (mdp.n_states,):
+        raise ValueError(f"policy must give one action per state, shape ({mdp.n_states},); "
+                         f"got {policy.shape}")
+    return mdp.check_theta(true_theta, "true_theta"), None, policy
+
+
+def _expert_and_learned_values(mdp: TabularMDP, true_theta, learned_theta, policy):
+    true_theta, learned_theta, policy = _check_learned(mdp, true_theta, learned_theta, policy)
+    # one solver, the expert's reward first: where the learned reward ties two actions, the
+    # greedy policy it gives depends on what the solver solved before (and the results do)
     solver = OptimalQSolver(mdp)
     pi_e = solver.solve(true_theta).policy
-    pi_l = solver.solve(learned_theta).policy
+    pi_l = solver.solve(learned_theta).policy if policy is None else policy
     reward = mdp.reward(true_theta)
     return policy_values(mdp, reward, pi_e), policy_values(mdp, reward, pi_l)
 
 
-def inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta) -> float:
+def inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta=None, *,
+                           policy=None) -> float:
     """The paper's ILE: ``sum_s |V^{pi_E}(s) - V^{pi_L}(s)|``.
 
-    ``pi_E`` and ``pi_L`` are greedy optimal for the true and the learned reward; both are
-    evaluated under the true reward. Zero when the learned reward induces an optimal policy.
+    ``pi_E`` is greedy optimal for the true reward; ``pi_L`` greedy optimal for the learned
+    reward ``learned_theta`` or, for a learner without a reward (behaviour cloning), its
+    deterministic ``policy[s]`` (exactly one of the two). Both are evaluated under the true
+    reward. Zero when ``pi_L`` is optimal.
     """
-    v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta)
+    v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta, policy)
     return float(np.abs(v_e - v_l).sum())
 
 
-def normalized_inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta) -> float:
-    """ILE in percent of the expert's value: ``100 ||V_E - V_L||_1 / ||V_E||_1``."""
-    v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta)
+def normalized_inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta=None, *,
+                                      policy=None) -> float:
+    """ILE in percent of the expert's value: ``100 ||V_E - V_L||_1 / ||V_E||_1`` (``pi_L`` as
+    in :func:`inverse_learning_error`)."""
+    v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta, policy)
     return float(100.0 * np.abs(v_e - v_l).sum() / max(np.abs(v_e).sum(), 1e-300))
 
 
-def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta, states=None) -> float:
+def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta=None, states=None, *,
+                    policy=None) -> float:
     """Fraction of states (or of ``states``) where the learned greedy action is not optimal.
 
-    An action counts as optimal if its true ``Q*`` is within 1e-9 of the best (ties allowed).
+    The learned action is the greedy one of ``learned_theta``, or ``policy[s]`` (exactly one of
+    the two, as in :func:`inverse_learning_error`). An action counts as optimal if its true
+    ``Q*`` is within 1e-9 of the best (ties allowed).
     """
-    true_theta, learned_theta = _check(mdp, true_theta, learned_theta)
+    true_theta, learned_theta, policy = _check_learned(mdp, true_theta, learned_theta, policy)
     idx = (np.arange(mdp.n_states) if states is None
            else as_index_array(states, "states", size=mdp.n_states))
     solver = OptimalQSolver(mdp)
-    Q = solver.q_values(true_theta)
-    pi_l = solver.solve(learned_theta).policy
+    Q = solver.q_values(true_theta)  # first, as in _expert_and_learned_values
+    pi_l = solver.solve(learned_theta).policy if policy is None else policy
     tol = 1e-9 * (1.0 + np.abs(Q).max())
     wrong = Q[idx, pi_l[idx]] < Q[idx].max(axis=1) - tol
     return float(wrong.mean())

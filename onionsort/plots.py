@@ -7,8 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-COLORS = {"mmap-birl": "C0", "map-birl": "C1", "hidden-data-em": "C3", "maxent": "C2"}
-MARKERS = {"mmap-birl": "o", "map-birl": "s", "hidden-data-em": "^", "maxent": "D"}
+COLORS = {"mmap-birl": "C0", "map-birl": "C1", "hidden-data-em": "C3", "maxent": "C2",
+          "bc": "C7", "bc-em": "C4"}
+MARKERS = {"mmap-birl": "o", "map-birl": "s", "hidden-data-em": "^", "maxent": "D", "bc": "x",
+           "bc-em": "v"}
 
 #: What a summary row (``irl.experiments.summarize``) holds per plotted quantity: the key of the
 #: mean, the prefix of its bootstrap interval, the axis label and the y scale.

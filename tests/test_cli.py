@@ -237,6 +237,54 @@ def test_learn_with_session_swaps_weighs_how_each_session_was_read(tmp_path, per
     assert "readings" not in json.loads((face / "policy_confidence.json").read_text())
 
 
+def test_learn_method_bc_clones_the_policy_without_a_reward(tmp_path, perceived_sessions,
+                                                            capsys):
+    """``learn --method bc,bc-em``: model.json has no weights but each action's probability;
+    the report and the Rerun recording say so; the policy is what the estimator learned."""
+    from rerun.chunk import RrdReader
+
+    import irl
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+    from recordings import open_session
+    from state_abstraction.calibration import load_calibration
+
+    out = tmp_path / "run"
+    cal = DEFAULT_MODELS / CALIBRATION_FILE
+    assert main(["learn", *map(str, perceived_sessions), "--method", "bc,bc-em",
+                 "--observation-model", str(cal), "--allow-model-mismatch", "--seed", "3",
+                 "--out", str(out)]) == 0
+    assert capsys.readouterr().out.count("no reward (behaviour cloning)") == 2
+    demos = [open_session(p).perceived_demonstration() for p in perceived_sessions]
+    dom = irl.domains.onion_sorting()
+    om = load_calibration(cal, task=dom.task).observation_model()
+    for method, variant in (("bc", "face-value"), ("bc-em", "em")):
+        model = json.loads((out / method / "model.json").read_text())
+        est = irl.BehaviorCloning(dom.mdp, om, variant=variant, seed=3).fit(demos)
+        assert model["theta"] is None and model["method"] == method
+        assert model["policy_indices"] == est.policy_.tolist()
+        assert [r["probability"] for r in model["policy"]] == pytest.approx(
+            est.action_probabilities_[np.arange(48), est.policy_], abs=1e-4)
+        assert len(model["unseen_states"]) == len(est.unseen_states_)
+        assert main(["report", str(out / method)]) == 0
+        report = (out / method / "report.md").read_text()
+        assert "learns no reward" in report and "probability" in report
+        assert (out / method / "learning_curve.png").is_file()
+        paths = {c.entity_path for c in RrdReader(out / method / "learn.rrd").store().stream()}
+        assert {"/learn/theta", "/learn/policy"} <= paths
+    assert len(json.loads((out / "bc-em" / "learning_curve.json").read_text())) >= 2
+
+
+def test_experiment_runs_behaviour_cloning_beside_the_reward_learners(tmp_path):
+    out = tmp_path / "run"
+    assert main(["experiment", "sorting", "--occlusion", "0.2", "--noise", "0.3", "--batches",
+                 "2", "--trajectories", "1,4", "--methods", "mmap-birl,bc,bc-em", "--workers",
+                 "1", "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert {r["method"] for r in rows} == {"mmap-birl", "bc", "bc-em"} and len(rows) == 12
+    assert all(float(r["normalized_ile"]) >= 0 for r in rows)
+    assert "bc-em" in (out / "report.md").read_text()
+
+
 def test_the_parsers_repeated_choices_are_the_libraries():
     from irl.experiments import METHODS
     from irl.inference import BACKENDS

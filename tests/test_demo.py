@@ -207,3 +207,37 @@ def test_quick_demo_deferring_sorts_the_same_line_up_twice_and_reports_both(tmp_
             sum(o["fate"] == "tray" for o in deferring["onions"])
         assert pooled["deferral_rate"] == pooled["deferred"] / len(deferring["onions"])
         assert (run / "policy_confidence.json").is_file()
+
+
+def test_demo_methods_are_checked_and_recorded_only_when_not_the_default(tmp_path):
+    from onionsort.stages.demo import METHODS, SIZES, DemoConfig, _settings
+
+    assert DemoConfig(out=tmp_path / "d").methods == METHODS
+    assert "methods" not in _settings(DemoConfig(out=tmp_path / "d"), SIZES[True])
+    chosen = DemoConfig(out=tmp_path / "d", methods=("mmap-birl", "bc", "bc-em", "bc"))
+    assert chosen.methods == ("mmap-birl", "bc", "bc-em")
+    assert _settings(chosen, SIZES[True])["methods"] == ["mmap-birl", "bc", "bc-em"]
+    for bad, words in ((("bc", "dagger"), "got dagger"), ((), "at least one learner")):
+        with pytest.raises(ValueError, match=words) as info:
+            DemoConfig(out=tmp_path / "d", methods=bad)
+        assert "\n" not in str(info.value)
+
+
+def test_a_cloned_policy_is_scored_and_tabled_without_a_reward():
+    """Behaviour cloning's model.json has no ``theta``: its ILE is its policy's, and Table 1
+    lists whichever methods the demo ran."""
+    from irl.domains.onion_sorting import onion_sorting
+    from irl.solvers import OptimalQSolver
+    from onionsort.stages.demo import _ile, _pooled, table
+
+    dom = onion_sorting()
+    expert = OptimalQSolver(dom.mdp).solve(dom.true_theta).policy
+    assert _ile({"theta": None, "policy_indices": expert.tolist()}) == \
+        {"ile": 0.0, "normalized_ile": 0.0}
+    wrong = expert.copy()
+    wrong[wrong == 4] = 3  # keeps every blemished onion
+    assert _ile({"theta": None, "policy_indices": wrong.tolist()})["ile"] > 0
+    run = {"tp": 3, "fp": 0, "tn": 4, "fn": 3, "ile": 0.0, "normalized_ile": 0.0}
+    results = {"methods": {m: _pooled([run], 0) for m in ("mmap-birl", "bc-em")}}
+    rows = table(results).splitlines()
+    assert [r.split(" | ")[0] for r in rows[2:]] == ["| mmap-birl", "| mmap-birl", "| bc-em"]

@@ -49,6 +49,11 @@ def _points():
             for noise in (0.3, 0.45) for n in (1, 2) for k, m in enumerate(METHODS)]
 
 
+def figures_methods():
+    """The efficiency figure's learners: the four reward learners, then behaviour cloning."""
+    return (*METHODS, "bc", "bc-em")
+
+
 def test_quick_run_makes_every_figure_and_records_its_commands(tmp_path):
     runs, out = tmp_path / "runs", tmp_path / "figures"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
@@ -74,13 +79,15 @@ def test_quick_run_makes_every_figure_and_records_its_commands(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["FIGURES.md", *sorted(expected)]
     record = (out / "FIGURES.md").read_text()
     command = ("onionsort experiment sorting --trajectories 1,2 --noise 0.3,0.45 --occlusion 0.2 "
-               f"--batches 2 --workers 1 --out {runs / 'efficiency-quick'}")
+               "--batches 2 --workers 1 --methods mmap-birl,map-birl,hidden-data-em,maxent,bc,"
+               f"bc-em --out {runs / 'efficiency-quick'}")
     assert command in record
     assert "--quick" in record and "session seed 0" in record and "station seed 5" in record
     for name in expected:
         assert f"## {name}" in record
     summary = json.loads((runs / "efficiency-quick" / "summary.json").read_text())
     assert summary["config"]["trajectories"] == [1, 2]
+    assert summary["config"]["methods"] == list(figures_methods())
     # the record's table holds the run's means
     row = next(p for p in summary["points"] if p["method"] == "mmap-birl"
                and p["noise"] == 0.3 and p["trajectories"] == 2)

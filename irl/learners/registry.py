@@ -2,11 +2,13 @@
 
 Each learner is a :class:`LearnerSpec` whose ``build(domain, *, seed)`` returns an unfitted
 estimator configured with the domain's settings. The four learners of the paper are registered
-on import, in this order: ``mmap-birl``, ``map-birl``, ``hidden-data-em``, ``maxent``. Others can
-be added with :func:`register_learner`; a name can be registered once. ``make_estimator``'s
-``backend`` goes to every estimator with a ``backend`` parameter (``get_params``): of the four,
-``mmap-birl`` (HiddenDataEM's E-step has a time-indexed policy, which the compiled kernel does
-not take).
+on import, in this order: ``mmap-birl``, ``map-birl``, ``hidden-data-em``, ``maxent``, then the
+behaviour-cloning baselines ``bc`` (face value) and ``bc-em`` (through the observation model),
+which learn a policy and no reward (``theta_`` is None). Others can be added with
+:func:`register_learner`; a name can be registered once. ``make_estimator``'s ``backend`` goes
+to every estimator with a ``backend`` parameter (``get_params``): ``mmap-birl``, ``bc-em``, and
+``bc``, which runs no forward-backward and does not use it (HiddenDataEM's E-step has a
+time-indexed policy, which the compiled kernel does not take).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from irl.inference import check_backend
 from irl.learners.birl import MAPBIRL, MMAPBIRL
+from irl.learners.cloning import BehaviorCloning
 from irl.learners.maxent import HiddenDataEM, MaxEntIRL
 
 if TYPE_CHECKING:
@@ -152,6 +155,14 @@ def _maxent(domain: Domain, *, seed=None) -> MaxEntIRL:
     return MaxEntIRL(domain.mdp, domain.observation_model)
 
 
+def _bc(domain: Domain, *, seed=None) -> BehaviorCloning:
+    return BehaviorCloning(domain.mdp, domain.observation_model, seed=seed)
+
+
+def _bc_em(domain: Domain, *, seed=None) -> BehaviorCloning:
+    return BehaviorCloning(domain.mdp, domain.observation_model, variant="em", seed=seed)
+
+
 for _spec in (
     LearnerSpec("mmap-birl", "MMAP-BIRL: Bayesian IRL marginalizing hidden, noisy steps exactly.",
                 _mmap_birl),
@@ -160,6 +171,10 @@ for _spec in (
     LearnerSpec("hidden-data-em", "HiddenDataEM: MaxEnt IRL with EM over the hidden steps.",
                 _hidden_data_em),
     LearnerSpec("maxent", "MaxEnt IRL on the runs of observed steps, at face value.", _maxent),
+    LearnerSpec("bc", "Behaviour cloning: smoothed counts of the perceived pairs, no reward.",
+                _bc),
+    LearnerSpec("bc-em", "Behaviour cloning by EM over the hidden pairs through the observation "
+                "model.", _bc_em),
 ):
     register_learner(_spec)
 del _spec

@@ -46,7 +46,9 @@ INSPECTION_CAMERAS = ("both", "robot")
 #: :data:`onionsort.stages.export.EXPORT_FORMATS` and ``ROS2_STORAGES``
 DEVICES = ("auto", "cpu", "cuda")
 BACKENDS = ("numpy", "numba")
-METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
+METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
+#: The four reward learners of the paper: what ``experiment`` runs by default
+IRL_METHODS = METHODS[:4]
 EXPORT_FORMATS = ("ros2",)
 ROS2_STORAGES = ("mcap", "sqlite3")
 
@@ -83,7 +85,7 @@ def add_backend_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=BACKENDS, default="numpy",
                         help="forward-backward kernels: numpy (default) or numba, compiled "
                              "and equal to rounding (pip install -e \".[fast]\"); used by "
-                             "mmap-birl; the other learners ignore it")
+                             "mmap-birl and bc-em; the other learners ignore it")
 
 
 def add_posterior_method_argument(parser: argparse.ArgumentParser) -> None:
@@ -117,6 +119,19 @@ def subcommand(subparsers, name: str, doc: str, help_: str) -> argparse.Argument
     """A subparser whose description is the command module's docstring."""
     return subparsers.add_parser(name, help=help_, description=doc,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def methods_list(choices):
+    """An option's type: one learner or several, comma-separated, each of ``choices``."""
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(t.strip() for t in text.split(","))
+        for name in names:
+            if name not in choices:
+                raise argparse.ArgumentTypeError(
+                    f"invalid choice: {name!r} (choose from {', '.join(choices)})")
+        return names
+
+    return parse
 
 
 def floats(text: str) -> tuple[float, ...]:

@@ -5,7 +5,8 @@ them with the shipped models, calibrates the observation model on fresh held-out
 the sorter's reward with MMAP-BIRL, MAP-BIRL and HiddenDataEM, lets the Sawyer sort 50 onions
 with each learned policy (its inspection as ``onionsort evaluate``'s: ``--inspection-views``,
 ``--miss-cost``, ``--waste-cost``, ``--fusion``) and prints the paper's Table 1 beside ours.
-``--quick`` runs it small. It ends by writing ``report.md`` in --out (``onionsort report``).
+``--quick`` runs it small. ``--methods`` picks other learners, e.g. behaviour cloning (``bc``,
+``bc-em``) beside MMAP-BIRL. It ends by writing ``report.md`` in --out (``onionsort report``).
 ``--resume`` continues an interrupted demo in its --out from the last finished stage (same
 results as an uninterrupted run); ``--connect URL`` streams the Rerun recordings to a viewer on
 another machine as well.
@@ -16,6 +17,7 @@ Examples
     onionsort demo --quick --out runs/demo-quick
     onionsort demo --quick --out runs/demo-quick --resume
     onionsort demo --connect rerun+http://192.168.1.20:9876/proxy
+    onionsort demo --methods mmap-birl,map-birl,bc,bc-em --out runs/demo-bc   # + cloning
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from onionsort.commands._args import (
+    METHODS,
     add_backend_argument,
     add_connect_argument,
     add_defer_argument,
@@ -32,6 +35,7 @@ from onionsort.commands._args import (
     add_parallel_arguments,
     add_posterior_method_argument,
     add_session_swaps_argument,
+    methods_list,
     parallel_options,
     subcommand,
 )
@@ -49,6 +53,12 @@ def register(subparsers) -> None:
     parser.add_argument("--sessions", type=int, help="sessions recorded per repeat (12; quick 4)")
     parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
                         help="how hard the world makes perception (clean)")
+    parser.add_argument("--methods", type=methods_list(METHODS),
+                        default=("mmap-birl", "map-birl", "hidden-data-em"),
+                        metavar="METHOD[,METHOD...]",
+                        help="the learners whose policies the Sawyer sorts with ("
+                             + ", ".join(METHODS) + "; default mmap-birl,map-birl,"
+                             "hidden-data-em)")
     parser.add_argument("--repeats", type=int, default=1,
                         help="repeat with seeds SEED..SEED+K-1 and report 95%% intervals (1)")
     add_models_argument(parser)
@@ -79,7 +89,7 @@ def run(args) -> int:
                               fusion=args.fusion, device=args.device,
                               defer_below=args.defer_below,
                               posterior_method=args.posterior_method,
-                              session_swaps=args.session_swaps,
+                              session_swaps=args.session_swaps, methods=args.methods,
                               **parallel_options(args)))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")

@@ -7,6 +7,8 @@ Examples
     onionsort experiment sorting --occlusion 0.1,0.2,0.3,0.4 --noise 0.3 --out runs/sorting
     onionsort experiment sorting --trajectories 1,2,4,8 --noise 0.3,0.45 --occlusion 0.2 \\
         --batches 20 --out runs/efficiency                 # 95% bootstrap intervals per point
+    onionsort experiment sorting --trajectories 1,2,4,8 --noise 0.3,0.45 --occlusion 0.2 \\
+        --batches 20 --methods mmap-birl,map-birl,bc,bc-em --out runs/efficiency-bc  # + cloning
     onionsort experiment sorting --trajectories 2,8 --noise 0.3 --occlusion 0.2 \\
         --learner-beta x0.25,x1,x4,paper --batches 20 --out runs/beta   # misspecified beta
     onionsort experiment forestworld --out runs/forestworld --resume   # after an interruption
@@ -20,6 +22,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from onionsort.commands._args import (
+    IRL_METHODS,
+    METHODS,
     add_backend_argument,
     add_parallel_arguments,
     floats,
@@ -39,8 +43,9 @@ def register(subparsers) -> None:
     p.add_argument("--length", help="steps per demonstration, e.g. 10,20 (default 15 / 20)")
     p.add_argument("--learner-beta", help="beta the learners are fitted with: betas, factors of "
                    "the true beta (x0.5,x1,x2) or paper (0.03); default: the true beta")
-    p.add_argument("--methods", default="mmap-birl,map-birl,hidden-data-em,maxent",
-                   help="comma-separated subset of mmap-birl,map-birl,hidden-data-em,maxent")
+    p.add_argument("--methods", default=",".join(IRL_METHODS),
+                   help=f"comma-separated subset of {','.join(METHODS)} (default: the four "
+                        "reward learners; bc and bc-em clone the policy, learning no reward)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="a small sweep that takes seconds")
     add_backend_argument(p)

@@ -1,5 +1,8 @@
 """``onionsort learn``: learn the sorter's reward from perceived sessions (an offline run).
 
+``--method bc`` or ``bc-em`` clones the sorter's policy instead (behaviour cloning, at face
+value or through the observation model): no reward is learned.
+
 The learner sees only the perceived observations (``onionsort perceive``), never ground truth,
 through the observation model of ``onionsort calibrate``. Sessions perceived by other models, or
 in another depth mode, than the calibration measured are refused (``--allow-model-mismatch``).
@@ -19,11 +22,12 @@ Examples
     onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
         --method mmap-birl,map-birl,hidden-data-em --out runs/learn   # runs/learn/<method>,
         # the methods in parallel (--workers, --executor ray)
+    onionsort learn runs/rec/*.mcap --observation-model runs/calibration/calibration.json \\
+        --method bc-em --out runs/learn-bc-em        # behaviour cloning, no reward
 """
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from onionsort.commands._args import (
@@ -33,6 +37,7 @@ from onionsort.commands._args import (
     add_parallel_arguments,
     add_posterior_method_argument,
     add_session_swaps_argument,
+    methods_list,
     parallel_options,
     subcommand,
 )
@@ -42,7 +47,7 @@ def register(subparsers) -> None:
     parser = subcommand(subparsers, "learn", __doc__,
                         "learn the sorter's reward from perceived sessions (offline run)")
     parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
-    parser.add_argument("--method", type=_methods(METHODS), default=("mmap-birl",),
+    parser.add_argument("--method", type=methods_list(METHODS), default=("mmap-birl",),
                         metavar="METHOD[,METHOD...]",
                         help=f"the learner ({', '.join(METHODS)}; default mmap-birl); several, "
                              "comma-separated, learn in parallel, each into OUT/METHOD")
@@ -65,19 +70,6 @@ def register(subparsers) -> None:
     add_connect_argument(parser, what="the learning run (learn.rrd)")
     add_parallel_arguments(parser, pieces="methods")
     parser.set_defaults(func=run)
-
-
-def _methods(choices):
-    """``--method``'s type: one learner or several, comma-separated, each of ``choices``."""
-    def parse(text: str) -> tuple[str, ...]:
-        names = tuple(t.strip() for t in text.split(","))
-        for name in names:
-            if name not in choices:
-                raise argparse.ArgumentTypeError(
-                    f"invalid choice: {name!r} (choose from {', '.join(choices)})")
-        return names
-
-    return parse
 
 
 def run(args) -> int:
@@ -104,7 +96,11 @@ def run(args) -> int:
     for method, model in models.items():
         print(f"{method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "
               f"steps, {model['n_occluded']} occluded)")
-        print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
+        if model["theta"] is None:  # behaviour cloning
+            print(f"  no reward (behaviour cloning): the policy copies the actions; "
+                  f"{len(model['unseen_states'])} state(s) never seen")
+        else:
+            print("  theta: " + ", ".join(f"{k} {v:+.2f}" for k, v in model["theta"].items()))
         if "session_swaps" in model:
             print(f"  sessions read with the onion's class backwards (prior "
                   f"{model['session_swaps']['rate']:.3f}), posterior probability: "

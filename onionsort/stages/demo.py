@@ -7,7 +7,8 @@
 3. calibrate the observation model on freshly rendered held-out frames;
 4. learn the sorter's reward with MMAP-BIRL, with MAP-BIRL (the same model reading the
    observations at face value: the ablation that shows what modelling observer noise is worth)
-   and with HiddenDataEM;
+   and with HiddenDataEM (``methods`` picks others: any registered learner, e.g. behaviour
+   cloning's ``bc`` and ``bc-em``, which copy the sorter's actions and learn no reward);
 5. let the Sawyer sort 50 onions (30 blemished) with each learned policy, inspection by the
    detector;
 6. write ``results.json`` with the paper's Table 1 beside ours (:func:`table`), and
@@ -104,6 +105,8 @@ class DemoConfig(ParallelOptions):
     (:class:`EvaluateConfig`'s ``defer_below``); both results are reported.
     ``session_swaps`` has MMAP-BIRL doubt how each whole session was read
     (:class:`~onionsort.stages.learn.LearnConfig`'s ``session_swaps``).
+    ``methods`` are the learners whose policies the Sawyer sorts with (:data:`METHODS` by
+    default; any of :data:`irl.experiments.METHODS`).
     """
 
     out: Path = Path("runs/demo")
@@ -124,12 +127,21 @@ class DemoConfig(ParallelOptions):
     defer_below: float | None = None
     posterior_method: str = "mcmc"
     session_swaps: bool = False
+    methods: tuple[str, ...] = METHODS
 
     def __post_init__(self) -> None:
+        from irl.experiments import METHODS as LEARNERS
         from irl.inference import check_backend
         from irl.posterior import METHODS as POSTERIOR_METHODS
 
         super().__post_init__()
+        methods = (self.methods,) if isinstance(self.methods, str) else tuple(self.methods)
+        if not methods:
+            raise ValueError("methods must name at least one learner; got none")
+        unknown = [m for m in methods if m not in LEARNERS]
+        if unknown:
+            raise ValueError(f"methods must be among {LEARNERS}; got {', '.join(unknown)}")
+        object.__setattr__(self, "methods", tuple(dict.fromkeys(methods)))
         check_backend(self.backend)
         # the robot's inspection, checked as evaluate checks it (before any work starts)
         checked = EvaluateConfig(policy="expert", out=self.out,
@@ -208,7 +220,7 @@ def demo(config: DemoConfig) -> dict:
             names=[f"the sessions of repeat {k}" for k in range(config.repeats)],
             desc="demo: record and perceive", unit="repeat"):
         sessions[k] = paths
-    jobs = [(k, method) for k in range(config.repeats) for method in METHODS]
+    jobs = [(k, method) for k in range(config.repeats) for method in config.methods]
     scored: dict[tuple[int, str], dict] = {}
     for j, result in run_pieces(
             _method_piece, [(progress, k, method, sessions[k], calibration_path,
@@ -217,7 +229,7 @@ def demo(config: DemoConfig) -> dict:
             names=[f"{method} of repeat {k}" for k, method in jobs],
             desc="demo: learn and sort", unit="method"):
         scored[jobs[j]] = result
-    per_repeat = {m: [scored[(k, m)] for k in range(config.repeats)] for m in METHODS}
+    per_repeat = {m: [scored[(k, m)] for k in range(config.repeats)] for m in config.methods}
     results = {"methods": {m: _pooled(runs, config.seed) for m, runs in per_repeat.items()},
                "paper": PAPER_TABLE_1, "quick": config.quick, "seed": config.seed,
                "difficulty": config.difficulty, "repeats": config.repeats,
@@ -231,7 +243,8 @@ def demo(config: DemoConfig) -> dict:
                               "threshold": sorting_threshold(config.miss_cost,
                                                              config.waste_cost),
                               # the rule the evaluations used, as they recorded it
-                              "fusion": json.loads((folders[0] / METHODS[0] / "evaluation.json"
+                              "fusion": json.loads((folders[0] / config.methods[0]
+                                                    / "evaluation.json"
                                                     ).read_text())["fusion"]},
                "seconds": round(time.perf_counter() - start, 1)}
     if config.session_swaps:
@@ -255,6 +268,8 @@ def _settings(config: DemoConfig, size: dict) -> dict:
             "miss_cost": config.miss_cost, "waste_cost": config.waste_cost,
             "fusion": config.fusion,
             **({"session_swaps": True} if config.session_swaps else {}),
+            # recorded only when not the default, so a default demo's settings are as before
+            **({} if config.methods == METHODS else {"methods": list(config.methods)}),
             **({} if config.defer_below is None else {
                 "defer_below": config.defer_below, "posterior_method": config.posterior_method})}
 
@@ -507,18 +522,23 @@ def precision_recall_intervals(counts, *, seed: int = 0, n_resamples: int = 2000
 
 
 def _ile(model: dict) -> dict[str, float]:
-    """The learned reward's inverse learning error against the sorter's true reward: raw
-    (``ile``) and in percent of the expert's value (``normalized_ile``)."""
+    """The learned reward's (or, for behaviour cloning, the cloned policy's) inverse learning
+    error against the sorter's true reward: raw (``ile``) and in percent of the expert's value
+    (``normalized_ile``)."""
     import numpy as np
 
     from irl.domains.onion_sorting import onion_sorting
     from irl.metrics import inverse_learning_error, normalized_inverse_learning_error
 
     domain = onion_sorting()
-    theta = np.array([model["theta"][name] for name in domain.task.feature_names])
-    return {"ile": float(inverse_learning_error(domain.mdp, domain.true_theta, theta)),
+    if model["theta"] is None:  # behaviour cloning: its own policy, no reward
+        learned = {"policy": np.asarray(model["policy_indices"], dtype=np.int64)}
+    else:
+        learned = {"learned_theta": np.array([model["theta"][name]
+                                              for name in domain.task.feature_names])}
+    return {"ile": float(inverse_learning_error(domain.mdp, domain.true_theta, **learned)),
             "normalized_ile": float(normalized_inverse_learning_error(
-                domain.mdp, domain.true_theta, theta))}
+                domain.mdp, domain.true_theta, **learned))}
 
 
 def table(results: dict) -> str:
@@ -528,7 +548,7 @@ def table(results: dict) -> str:
             "| ILE (% of the expert's value) |",
             "|---|---|---|---|---|---|---|---|---|"]
     ours = f"ours (simulation, {results.get('repeats', 1)} repeat(s))"
-    for method in METHODS:
+    for method in results["methods"]:
         sources = [(ours, results["methods"][method])]
         if method in results.get("deferring", {}):
             deferring = results["deferring"][method]

@@ -12,9 +12,9 @@ of an uninterrupted run, timings aside. Trials run on the stages' executor
 (``executor="local"``; ``"process"``, its former name, is taken too) or Ray tasks
 (``executor="ray"``: the Ray instance this process already joined, else ``ray_address``, else
 ``RAY_ADDRESS``, else a new local instance of ``workers`` CPUs); both give the same rows.
-``backend`` picks the forward-backward kernels of MMAP-BIRL: numpy, or numba, which gives the
-same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed, always
-runs numpy). Each row records the backend of the sweep that ran it (``summary.json`` their
+``backend`` picks the forward-backward kernels of MMAP-BIRL and ``bc-em``: numpy, or numba,
+which gives the same results to rounding (HiddenDataEM's E-step, whose policy is time-indexed,
+always runs numpy). Each row records the backend of the sweep that ran it (``summary.json`` their
 counts), and a sweep may be resumed with the other one: the kept rows keep theirs.
 
 Example::
@@ -109,6 +109,9 @@ class ExperimentConfig(ParallelOptions):
         Learner settings (``irl.experiments.parse_learner_setting``): betas, factors of the
         domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
     methods : tuple of str
+        Learners of :data:`irl.learners.LEARNERS`; by default the four reward learners (the
+        behaviour-cloning baselines ``bc`` and ``bc-em`` are asked for by name; a cloned
+        policy is scored by its own actions).
     seed : int
     quick : bool
         A small sweep that takes seconds.

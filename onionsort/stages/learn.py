@@ -6,7 +6,9 @@ must have been measured with the same perception models (their hashes) and in th
 mode as the sessions were perceived; ``allow_model_mismatch`` overrides the refusal.
 
 Writes into ``out``: ``model.json`` (method, learned reward weights with feature names, the
-greedy policy with state and action names, the inputs, the forward-backward backend),
+greedy policy with state and action names, the inputs, the forward-backward backend; for
+behaviour cloning, ``bc`` and ``bc-em``, no weights (``theta`` null) but each policy action's
+probability and the states never seen),
 ``learning_curve.json`` and ``.png``, and ``learn.rrd`` (Rerun), which ``connect`` also streams
 to a viewer on another machine. With ``posterior``, the Bayesian learners also draw the
 posterior over reward weights (:mod:`irl.posterior`) and write ``posterior.npz``,
@@ -83,7 +85,7 @@ class LearnConfig:
     backend : str
         Forward-backward kernels (``irl.inference.BACKENDS``): ``numpy`` or ``numba`` (the
         ``fast`` extra), equal to rounding; used by the methods that run forward-backward
-        (``mmap-birl``, ``hidden-data-em``), recorded in ``model.json`` for every method.
+        (``mmap-birl``, ``bc-em``), recorded in ``model.json`` for every method.
     posterior : bool
         Also sample the posterior over reward weights (``mmap-birl`` and ``map-birl`` only).
     samples : int
@@ -220,12 +222,17 @@ def learn(config: LearnConfig) -> dict:
         if config.session_swaps:
             estimator.session_swap = calibration.session_swap()
         estimator.fit(demos)
-        theta = np.asarray(estimator.theta_, float)
         policy = np.asarray(estimator.policy_, int)
+        # behaviour cloning learns no reward (theta None) but the probability of each action
+        cloned = getattr(estimator, "action_probabilities_", None)
         model = {
             "format": MODEL_FORMAT, "method": config.method, "backend": config.backend,
-            "theta": dict(zip(domain.feature_names, theta.round(6).tolist(), strict=True)),
-            "policy": [{"state": domain.state_names[s], "action": domain.action_names[a]}
+            "theta": None if estimator.theta_ is None else dict(zip(
+                domain.feature_names, np.asarray(estimator.theta_, float).round(6).tolist(),
+                strict=True)),
+            "policy": [{"state": domain.state_names[s], "action": domain.action_names[a],
+                        **({} if cloned is None else
+                           {"probability": round(float(cloned[s, a]), 4)})}
                        for s, a in enumerate(policy)],
             "policy_indices": policy.tolist(),
             "sessions": [str(p) for p in config.sessions],
@@ -236,6 +243,8 @@ def learn(config: LearnConfig) -> dict:
             "n_iter": int(getattr(estimator, "n_iter_", 0)),
             "model_mismatch_allowed": mismatch,
         }
+        if cloned is not None:
+            model["unseen_states"] = [domain.state_names[s] for s in estimator.unseen_states_]
         if config.session_swaps:
             model["session_swaps"] = {
                 "rate": estimator.session_swap.rate,

@@ -398,7 +398,7 @@ def _demo_learning(folder: Path, results: dict, methods: list[str], repeats: int
     for k in range(repeats):
         for m in methods:
             r = results["methods"][m]["per_repeat"][k]
-            theta = r.get("theta", {})
+            theta = r.get("theta") or {}  # behaviour cloning learns no reward: null
             features = features or list(theta)
             base = "" if repeats == 1 else f"repeat_{k}/"
             model = folder / base / m / MODEL_FILE
@@ -505,8 +505,13 @@ def _learn(folder: Path) -> list[str]:
     ])
     ile = in_demo.get("ile") if in_demo else None
     lines += ["## Learned reward", "",
-              *_table(("feature", "weight"), ((k, _num(v, ".4f"))
-                                              for k, v in model.get("theta", {}).items())), "",
+              *(_table(("feature", "weight"), ((k, _num(v, ".4f"))
+                                               for k, v in model["theta"].items()))
+                if model.get("theta") is not None else
+                [f"None: {model.get('method')} clones the sorter's policy from its actions and "
+                 "learns no reward; the policy below is its most probable action per state "
+                 f"({len(model.get('unseen_states', []))} state(s) never seen, where it acts "
+                 "at random)."]), "",
               (f"Inverse learning error against the sorter's true reward: {ile:.4f} (as "
                "recorded by the demo this run belongs to)." if ile is not None else
                "Inverse learning error: not recorded (a demo records it for the runs it "
@@ -538,15 +543,20 @@ def _learn(folder: Path) -> list[str]:
 def _policy(model: dict, confidence: dict | None) -> list[str]:
     policy = model.get("policy", [])
     conf = {row["state"]: row for row in confidence["states"]} if confidence else {}
-    header = ("state", "action") + (("confidence", "90% credible actions") if conf else ())
+    cloned = model.get("theta", {}) is None  # behaviour cloning: each action's probability
+    header = ("state", "action") + (("confidence", "90% credible actions") if conf else ()) \
+        + (("probability",) if cloned else ())
     rows = []
     for p in policy:
         row = conf.get(p["state"])
         extra = ((_num(row["confidence"].get(p["action"]), ".2f"),
                   ", ".join(row.get("credible_90", []))) if row else ("-", "-")) if conf else ()
-        rows.append((p["state"], p["action"], *extra))
+        rows.append((p["state"], p["action"], *extra,
+                     *((_num(p.get("probability"), ".2f"),) if cloned else ())))
+    what = ("The cloned policy's most probable action" if cloned
+            else "The greedy policy of the learned reward")
     return ["## Learned policy", "",
-            f"The greedy policy of the learned reward, {len(policy)} states.", "",
+            f"{what}, {len(policy)} states.", "",
             "<details><summary>the action in every state</summary>", "",
             *_table(header, rows), "", "</details>", ""]
 

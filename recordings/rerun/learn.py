@@ -4,8 +4,10 @@ Entity paths::
 
     learn/objective     Scalars: the objective per iteration (``value``, the log posterior, or
                         ``log_likelihood``, whichever the history records), one send_columns
-    learn/theta         TextDocument (static): the learned reward weights
-    learn/policy        TextDocument (static): the learned policy, ``state -> action``
+    learn/theta         TextDocument (static): the learned reward weights (for behaviour
+                        cloning, which learns none, a line saying so)
+    learn/policy        TextDocument (static): the learned policy, ``state -> action`` (with
+                        the action's probability where the model gives one: behaviour cloning)
     learn/confidence    BarChart (static), with a posterior: the confidence in the policy's
                         action per state index
     learn/least_sure   TextDocument (static): per state, its action's confidence, the
@@ -72,8 +74,9 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
         An ``.rrd`` file, ``"spawn"`` or a gRPC URL (see
         :func:`recordings.rerun.common.open_recording`).
     model : dict
-        The learned model: ``theta`` (dict of feature name -> weight) and ``policy`` (list of
-        dicts with ``state`` and ``action``).
+        The learned model: ``theta`` (dict of feature name -> weight, or None for a learner
+        without a reward) and ``policy`` (list of dicts with ``state`` and ``action``, and
+        optionally ``probability``).
     history : sequence of dict
         One entry per iteration, with the objective under ``value`` or ``log_likelihood``.
     application_id : str
@@ -94,17 +97,22 @@ def log_learning(target: str | Path, model: dict, history: Sequence[dict], *,
     rec = open_recording(application_id, target, learn_blueprint(
         objective=key is not None and len(values) > 0, confidence=confidence is not None))
     try:
-        if key is None:
-            logger.warning("the learning history records no objective (%s); logging the "
-                           "model alone", " or ".join(OBJECTIVE_KEYS))
+        if key is None:  # none at all (a learner with no iterations, bc): nothing to say
+            (logger.warning if history else logger.info)(
+                "the learning history records no objective (%s); logging the model alone",
+                " or ".join(OBJECTIVE_KEYS))
         else:
             log_series_names(rec, {f"{LEARN_ROOT}/objective": f"objective ({key})"})
             send_series(rec, f"{LEARN_ROOT}/objective",
                         [rr.TimeColumn("iteration", sequence=range(len(values)))], values)
-        rec.log(f"{LEARN_ROOT}/theta", rr.TextDocument("\n".join(
-            f"{name}: {float(w):+.3f}" for name, w in model["theta"].items())), static=True)
+        weights = ("no reward: behaviour cloning copies the actions" if model["theta"] is None
+                   else "\n".join(f"{name}: {float(w):+.3f}"
+                                  for name, w in model["theta"].items()))
+        rec.log(f"{LEARN_ROOT}/theta", rr.TextDocument(weights), static=True)
         rec.log(f"{LEARN_ROOT}/policy", rr.TextDocument("\n".join(
-            f"{row['state']} -> {row['action']}" for row in model["policy"])), static=True)
+            f"{row['state']} -> {row['action']}"
+            + (f" ({row['probability']:.2f})" if "probability" in row else "")
+            for row in model["policy"])), static=True)
         if confidence is not None:
             rows = confidence["states"]
             sure = [row["confidence"][row["map_action"]] for row in rows]

@@ -28,6 +28,7 @@ from irl.learners import (
     LEARNERS,
     MAPBIRL,
     MMAPBIRL,
+    BehaviorCloning,
     HiddenDataEM,
     LearnerSpec,
     MaxEntIRL,
@@ -275,11 +276,11 @@ def test_validation_names_argument_and_value(overrides, error, message):
 
 
 def test_registry_order_and_classes():
-    assert METHODS == ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
-    assert tuple(LEARNERS)[:4] == METHODS
+    assert METHODS == ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
+    assert tuple(LEARNERS)[:6] == METHODS
     dom = irl.domains.forestworld()
     expected = {"mmap-birl": MMAPBIRL, "map-birl": MAPBIRL, "hidden-data-em": HiddenDataEM,
-                "maxent": MaxEntIRL}
+                "maxent": MaxEntIRL, "bc": BehaviorCloning, "bc-em": BehaviorCloning}
     for name, cls in expected.items():
         est = make_estimator(name, dom, seed=3)
         assert type(est) is cls
@@ -356,7 +357,7 @@ def test_custom_learner_can_be_registered_built_and_swept():
     finally:
         assert unregister_learner("constant") is spec
     assert "constant" not in LEARNERS
-    assert METHODS == ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
+    assert METHODS == ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
     with pytest.raises(ValueError, match=r"methods must be among .*; got \['constant'\]"):
         from irl.experiments import SweepConfig
 
