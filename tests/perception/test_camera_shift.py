@@ -99,3 +99,21 @@ def test_bad_settings_and_images_are_refused():
         CameraShift().apply(np.zeros((4, 4), np.uint8))
     with pytest.raises(ValueError, match="dtype float64"):
         CameraShift().apply(np.zeros((4, 4, 3)))
+
+
+def test_a_dataset_gives_each_session_and_line_up_a_camera_of_its_own():
+    from onionsort.stages.calibrate import SessionCameras
+
+    cameras = SessionCameras(5)
+    frame = {"session": 2, "source": "human", "frame": 7}
+    assert cameras.camera(frame) == cameras.camera({"session": 2, "frame": 0})  # its views too
+    assert cameras.camera(frame) == CameraShift.draw((5, 0, 2))
+    assert cameras.camera({"source": "robot", "lineup": 2, "session": 9}) == \
+        CameraShift.draw((5, 1, 2))
+    assert cameras.camera(frame) != cameras.camera({"session": 3})
+    assert cameras.camera(frame) != SessionCameras(6).camera(frame)
+    img = _image()
+    np.testing.assert_array_equal(cameras(img, frame), CameraShift.draw((5, 0, 2)).apply(img))
+    for bad in (-1, True, 1.5, "3"):
+        with pytest.raises(ValueError, match="camera_shift must be a seed, an int >= 0"):
+            SessionCameras(bad)
