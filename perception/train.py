@@ -171,7 +171,9 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     start, history, best = 0, [], -1.0
     if resume:
         ckpt = torch.load(last, map_location=device, weights_only=False)
-        if ckpt["train_config"] != asdict(config) or ckpt["config"] != net_config.to_dict():
+        # a run saved before the field existed trained without photometric augmentation
+        saved = {"photometric": False, **ckpt["train_config"]}
+        if saved != asdict(config) or ckpt["config"] != net_config.to_dict():
             raise ValueError(f"cannot resume from {last}: it was trained with "
                              f"{ckpt['train_config']}, {ckpt['config']}")
         net.load_state_dict(ckpt["model"])

@@ -135,3 +135,21 @@ def test_the_inspection_classifier_augments_its_training_crops_only(spy):
     classifier.probabilities(val_x)
     classifier.rot_probabilities(val_x)
     assert spy == []
+
+
+def test_a_detector_run_saved_before_augmentation_resumes_as_trained_without_it(tmp_path):
+    from perception.train import TrainConfig, train_detector
+
+    rng = np.random.default_rng(1)
+    images = [(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), [[10, 10, 30, 30]], [0])
+              for _ in range(2)]
+    config = TrainConfig(epochs=1, images_per_epoch=2, batch_size=2, photometric=False)
+    train_detector(images, images, [], config, tmp_path, TINY_DETECTOR)
+    last = tmp_path / "detector_last.pt"
+    ckpt = torch.load(last, weights_only=False)
+    del ckpt["train_config"]["photometric"]  # as a run of an earlier version saved it
+    torch.save(ckpt, last)
+    train_detector(images, images, [], config, tmp_path, TINY_DETECTOR, resume=True)
+    with pytest.raises(ValueError, match="cannot resume"):
+        train_detector(images, images, [], replace(config, photometric=True), tmp_path,
+                       TINY_DETECTOR, resume=True)
