@@ -91,7 +91,12 @@ def crop_onion(rgb: np.ndarray, box, size: int = CROP_SIZE, margin: float = CROP
 def to_tensor(crops: Sequence[np.ndarray]) -> torch.Tensor:
     """Crops (S, S, 3) uint8 as a normalized batch ``x[n, 3, S, S]`` float32."""
     x = torch.from_numpy(np.stack([np.asarray(c) for c in crops])).permute(0, 3, 1, 2)
-    return (x.float() / 255.0 - _MEAN) / _STD
+    return normalize(x.float() / 255.0)
+
+
+def normalize(x: torch.Tensor) -> torch.Tensor:
+    """A batch ``x[n, 3, S, S]`` of values in [0, 1] as the network reads it."""
+    return (x - _MEAN) / _STD
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from perception.data import LabelledImage, Sample, augment, to_samples
 from perception.detector import Detector, postprocess, save_weights
 from perception.metrics import mean_average_precision
 from perception.model import DetectorConfig, DetectorNet, grid_points
+from perception.photometric import PhotometricAugment
 
 __all__ = ["TrainConfig", "evaluate_detector", "train_detector"]
 
@@ -41,6 +42,8 @@ class TrainConfig:
 
     An epoch is ``images_per_epoch`` images drawn afresh from the train split (consecutive
     frames of a session are near duplicates, so full passes waste time on a CPU).
+    ``photometric``: each training image is also seen through a camera of its own
+    (:class:`perception.photometric.PhotometricAugment`); never at evaluation.
     """
 
     epochs: int = 24
@@ -51,6 +54,7 @@ class TrainConfig:
     warmup_epochs: float = 1.0
     ema_decay: float = 0.998
     seed: int = 0
+    photometric: bool = True
 
     def __post_init__(self) -> None:
         if self.epochs < 1:
@@ -167,7 +171,9 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     start, history, best = 0, [], -1.0
     if resume:
         ckpt = torch.load(last, map_location=device, weights_only=False)
-        if ckpt["train_config"] != asdict(config) or ckpt["config"] != net_config.to_dict():
+        # a run saved before the field existed trained without photometric augmentation
+        saved = {"photometric": False, **ckpt["train_config"]}
+        if saved != asdict(config) or ckpt["config"] != net_config.to_dict():
             raise ValueError(f"cannot resume from {last}: it was trained with "
                              f"{ckpt['train_config']}, {ckpt['config']}")
         net.load_state_dict(ckpt["model"])
@@ -181,6 +187,7 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     points, strides = grid_points(net_config.height, net_config.width)
     points, strides = points.to(device), strides.to(device)
     step = start * per_epoch
+    photometric = PhotometricAugment() if config.photometric else None
     for epoch in range(start, config.epochs):
         net.train()
         order = rng.permutation(len(train_samples))[:n_epoch]
@@ -188,6 +195,8 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
         for i in range(0, len(order), config.batch_size):
             x, targets = _batch([augment(train_samples[j], rng)
                                  for j in order[i:i + config.batch_size]], device)
+            if photometric is not None:  # a camera of its own for each image
+                x = torch.stack([photometric(image) for image in x])
             with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
                 logits, ltrb = net(x)
             loss, _ = detection_loss(logits.float(), ltrb.float(), points, strides, targets)

@@ -32,8 +32,10 @@ from perception.inspection import (
     crop_onion,
     fit_platt,
     fit_temperature,
+    normalize,
     to_tensor,
 )
+from perception.photometric import PhotometricAugment
 
 __all__ = ["CONTEXT_SCALE", "CropSet", "InspectionTrainConfig", "augment", "context_crop",
            "train_inspection"]
@@ -82,7 +84,10 @@ class InspectionTrainConfig:
     scales within ``scale``; the brightness varies by up to ``brightness``, each channel by up
     to ``color`` more; Gaussian noise of a standard deviation up to ``noise`` grey levels is
     added; and a share ``jpeg`` of the crops is re-encoded as JPEG of quality 30-90. The views
-    of every difficulty level are in the training set; these spread them further.
+    of every difficulty level are in the training set; these spread them further. With
+    ``photometric``, each crop is then seen through a camera of its own as well
+    (:class:`perception.photometric.PhotometricAugment`: white balance, exposure, tone curve,
+    defocus, noise, JPEG); never at validation or inference.
     """
 
     epochs: int = 30
@@ -96,6 +101,7 @@ class InspectionTrainConfig:
     noise: float = 6.0
     jpeg: float = 0.3
     seed: int = 0
+    photometric: bool = True
 
     def __post_init__(self) -> None:
         if self.epochs < 1:
@@ -138,6 +144,17 @@ def augment(context: np.ndarray, rng: np.random.Generator, config: InspectionTra
         if ok:
             crop = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     return np.ascontiguousarray(crop)
+
+
+def _training_batch(crops: list[np.ndarray], photometric: PhotometricAugment | None
+                    ) -> torch.Tensor:
+    """:func:`~perception.inspection.to_tensor` of training crops, each through a camera of
+    its own first (``photometric``; None: as they are)."""
+    if photometric is None:
+        return to_tensor(crops)
+    raw = torch.from_numpy(np.stack(crops)).permute(0, 3, 1, 2).float() / 255.0
+    seen = torch.stack([photometric(crop) for crop in raw])
+    return normalize(seen)
 
 
 def _weighted_loss(logits: torch.Tensor, labels: torch.Tensor, weights: torch.Tensor
@@ -216,6 +233,7 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
     amp = device.type == "cuda"
     scaler = torch.amp.GradScaler("cuda", enabled=amp)
     best, best_loss, best_epoch, history = None, np.inf, 0, []
+    photometric = PhotometricAugment() if config.photometric else None
     for epoch in range(config.epochs):
         net.train()
         order = rng.permutation(len(crops))
@@ -224,7 +242,8 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
             idx = order[i:i + config.batch_size]
             if len(idx) < 2:
                 continue  # batch norm needs two samples
-            x = to_tensor([augment(crops[j], rng, config) for j in idx]).to(device)
+            x = _training_batch([augment(crops[j], rng, config) for j in idx],
+                                photometric).to(device)
             y = torch.from_numpy(labels[idx]).to(device)
             w = torch.from_numpy(weights[idx]).to(device)
             with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):

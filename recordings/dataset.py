@@ -51,7 +51,7 @@ from recordings.schema import check_task, task_of
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
-           "LabelledFrame", "dataset_task", "read_metadata", "read_split", "read_steps",
+           "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_split", "read_steps",
            "split_names", "split_sessions"]
 
 FORMAT = "onionsort.dataset/1"
@@ -302,10 +302,19 @@ def read_metadata(root: Path | str) -> dict:
     return meta
 
 
+ImageMap = Callable[[np.ndarray, dict], np.ndarray]
+"""A change made to each colour image as it is read: ``(rgb (H, W, 3) uint8, its record) ->
+rgb``, e.g. another camera for each session (the record names the session or line-up).
+Depth is never passed through it."""
+
+
 def read_split(root: Path | str, split: str, view: str = "camera", *,
-               where: Callable[[dict], bool] | None = None) -> Iterator[LabelledFrame]:
+               where: Callable[[dict], bool] | None = None,
+               image_map: ImageMap | None = None) -> Iterator[LabelledFrame]:
     """Iterate the frames of one split of a dataset folder, in ``view`` (see :data:`VIEWS`);
-    with ``where``, only the frames whose record it passes (the others are not read)."""
+    with ``where``, only the frames whose record it passes (the others are not read); with
+    ``image_map``, each colour image as it gives it (:data:`ImageMap`; the files are not
+    changed)."""
     root = Path(root)
     meta = read_metadata(root)
     if split not in SPLITS:
@@ -322,8 +331,9 @@ def read_split(root: Path | str, split: str, view: str = "camera", *,
                  if "depth" in rec else None)
         if color is None or ("depth" in rec and depth is None):
             raise ValueError(f"{root / split}: frame {rec['color']} is missing or unreadable")
+        color = cv2.cvtColor(color, cv2.COLOR_BGR2RGB)
         yield LabelledFrame(
-            color=cv2.cvtColor(color, cv2.COLOR_BGR2RGB),
+            color=color if image_map is None else image_map(color, rec),
             depth=None if depth is None else depth.astype(np.float32) / 1000.0, record=rec,
         )
 
@@ -360,10 +370,13 @@ class DatasetStep:
 
 
 def read_steps(root: Path | str, split: str, frames_per_step: int, *,
-               session: int | None = None) -> list[list[DatasetStep]]:
+               session: int | None = None, image_map: ImageMap | None = None
+               ) -> list[list[DatasetStep]]:
     """The complete steps of each session of a split (or ``"all"``), sessions in order; with
     ``session``, of that session of the split alone (a list of one, or none where it has no
-    complete step), its frames alone read (:func:`split_sessions` names them).
+    complete step), its frames alone read (:func:`split_sessions` names them); with
+    ``image_map``, every colour image (frames and inspection views) changed by it as it is
+    read (:func:`read_split`).
 
     Frames are grouped by :func:`recordings.steps.group_steps`; a step cut short at the end of
     the dataset (by its frame count) is left out.
@@ -376,8 +389,8 @@ def read_steps(root: Path | str, split: str, frames_per_step: int, *,
         views = {(f.record["session"], f.record["frame"]): f.color
                  for f in read_split(root, name, view="inspection",
                                      where=lambda r: r.get("source", "human") == "human"
-                                     and wanted(r))}
-        steps = group_steps(read_split(root, name, where=wanted),
+                                     and wanted(r), image_map=image_map)}
+        steps = group_steps(read_split(root, name, where=wanted, image_map=image_map),
                             step=lambda f: (f.record["session"], f.record["step"]),
                             phase=lambda f: f.record["phase"], frames_per_step=frames_per_step,
                             incomplete="drop", source=f"{root}/{name}")

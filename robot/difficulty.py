@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 __all__ = ["DIFFICULTY_LEVELS", "Difficulty", "ImageEffects", "difficulty_rng",
-           "hand_patch", "resolve_difficulty"]
+           "hand_patch", "resolve_difficulty", "tagged_rng"]
 
 #: spawn-key tag of the difficulty's generator (kept apart from the session's own streams)
 _TAG = 0xD1FF
@@ -172,8 +172,16 @@ def difficulty_rng(seed: int | np.random.SeedSequence, stream: int = 0) -> np.ra
     does not advance (or spawn from) the session's seed sequence. ``stream`` > 0 gives further
     independent streams (one per camera, so that whether one camera renders never changes
     another's noise)."""
+    return tagged_rng(seed, _TAG, stream)
+
+
+def tagged_rng(seed: int | np.random.SeedSequence, tag: int, stream: int = 0
+               ) -> np.random.Generator:
+    """A generator of its own for the session seeded with ``seed``, named by ``tag`` (one per
+    kind of draw: the difficulty's, the look's), that does not advance (or spawn from) the
+    session's seed sequence; ``stream`` > 0 gives further independent streams."""
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    key = (*seq.spawn_key, _TAG) + ((stream,) if stream else ())
+    key = (*seq.spawn_key, tag) + ((stream,) if stream else ())
     return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=key))
 
 

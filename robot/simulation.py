@@ -44,6 +44,7 @@ from robot.difficulty import (
     resolve_difficulty,
 )
 from robot.labels import OnionLabel, StepLabel
+from robot.look import Look, draw_look, look_rng
 from robot.occluder import PasserBy, occlusion_schedule
 from robot.scene import Onion, OnionPool, StopGate, build_workcell, connect
 from robot.state_map import HAND_TARGETS, PICK_SPOT, WorldSnapshot, state_of_world
@@ -95,6 +96,10 @@ class SessionConfig:
     label_blemishes : bool
         Measure the rot each onion shows in the inspection view (one more render of it per
         frame; :attr:`robot.labels.OnionLabel.rot_pixels`), for datasets.
+    randomize_look : bool
+        Draw the world's look from the session's seed (:mod:`robot.look`: light, surface
+        colours, the cameras' exposure and white balance), for training data; off, the world
+        renders exactly as without it. Independent of ``difficulty``.
     """
 
     n_steps: int = 20
@@ -109,6 +114,7 @@ class SessionConfig:
     inspection: CameraSpec = INSPECTION_CAMERA
     difficulty: Difficulty = DIFFICULTY_LEVELS["clean"]
     label_blemishes: bool = False
+    randomize_look: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "difficulty", resolve_difficulty(self.difficulty))
@@ -187,6 +193,7 @@ class SortingSession:
         self._walker_rng = np.random.default_rng(walker_seq)
         # the difficulty draws from a stream of its own: the clean world's draws are unchanged
         self._difficulty_rng = difficulty_rng(seq)
+        self._look_rng = look_rng(seq)  # and so does the look
         d = config.difficulty
         self.partial = np.zeros(config.n_steps, bool)
         if d.partial_occlusion:
@@ -201,6 +208,11 @@ class SortingSession:
         rng = self._scene_rng
         self.lighting: Lighting = sample_lighting(rng)
         self.workcell = build_workcell(self.client, rng)
+        self.look: Look | None = None
+        if self.config.randomize_look:
+            self.look = draw_look(self._look_rng)
+            self.lighting = self.look.lighting
+            self.look.paint(self.client, self.workcell)
         d = self.config.difficulty
         self.pool = OnionPool(self.client, self.config.n_onions, self.config.blemish_rate, rng,
                               texture_size=self.config.texture_size,
@@ -308,7 +320,7 @@ class SortingSession:
             focus = [o.box for o in inspection_onions if o.in_focus]
             rgb, covered = self.effects.hand_and_cover(close.rgb, focus[0] if focus else None,
                                                        self.sorter.skin)
-            inspection = self.effects.color(rgb, time_s)
+            inspection = self.effects.color(self._camera(rgb), time_s)
             if self._blemish_probe is not None:
                 bodies = {o.onion_id: self.pool.onions[o.onion_id].body
                           for o in inspection_onions}
@@ -318,12 +330,16 @@ class SortingSession:
                     o.onion_id]]) for o in inspection_onions)
         return WorldFrame(
             index=index, step=label, phase=phase, time_s=time_s,
-            color=self.effects.color(image.rgb, time_s, moving=phase > 0),
+            color=self.effects.color(self._camera(image.rgb), time_s, moving=phase > 0),
             depth=self.effects.depth(image.depth), onions=onions,
             occluded_fraction=occluded_fraction(image.seg, self.walker.body_ids),
             inspection=inspection, inspection_onions=inspection_onions,
             world=self.world_state(),
         )
+
+    def _camera(self, rgb: np.ndarray) -> np.ndarray:
+        """``rgb`` through the look's camera (exposure, white balance); as it is without one."""
+        return rgb if self.look is None else self.look.camera(rgb)
 
     def _onion_labels(self, seg: np.ndarray) -> tuple[OnionLabel, ...]:
         """Every onion of the pool, with its box in the view whose segmentation is ``seg``."""

@@ -44,7 +44,7 @@ from __future__ import annotations
 import logging
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, NamedTuple, Protocol, runtime_checkable
 
@@ -76,6 +76,7 @@ from robot.difficulty import (
 )
 from robot.inspection_poses import INSPECTION_TILT, INSPECTION_VIEWS, inspection_poses
 from robot.labels import OnionLabel
+from robot.look import Look, draw_look, look_rng
 from robot.onions import OnionAppearance, onion_texture, sample_appearance, save_texture
 from robot.scene import GATE_X, StopGate, build_workcell, connect
 from robot.state_map import (
@@ -359,6 +360,10 @@ class SawyerStation:
         Perception difficulty (:mod:`robot.difficulty`), or a level's name: the onions'
         blemishes, and the image effects and the gripper covering part of the onion on the
         inspection view (and the main camera's renders); ``"clean"`` is today's station.
+    randomize_look : bool
+        Draw the station's look from ``seed`` (:mod:`robot.look`: light, surface colours, the
+        cameras' exposure and white balance), for training data; off, it renders exactly as
+        without it.
 
     Attributes
     ----------
@@ -388,6 +393,7 @@ class SawyerStation:
         inspection_views: int = INSPECTION_VIEWS,
         stop_when_settled: bool = True,
         label_blemishes: bool = False,
+        randomize_look: bool = False,
     ) -> None:
         if isinstance(classify, str):
             if classify != GROUND_TRUTH:
@@ -406,6 +412,8 @@ class SawyerStation:
         self.poses = inspection_poses(inspection_views)
         self.stop_when_settled = bool(stop_when_settled)
         self.label_blemishes = bool(label_blemishes)
+        self.randomize_look = bool(randomize_look)
+        self.look: Look | None = None
         self._blemish_probe = None
         seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
         self.difficulty = resolve_difficulty(difficulty)
@@ -440,6 +448,10 @@ class SawyerStation:
             self.workcell = build_workcell(self.client, self._scene_rng)
             self.gate = StopGate(self.client)
             self.workcell["pedestal"] = self._pedestal()
+            if self.randomize_look:  # from a stream of its own: the line-up is unchanged
+                self.look = draw_look(look_rng(self._difficulty_seq))
+                self.lighting = self.look.lighting
+                self.look.paint(self.client, self.workcell)
             self.arm = Sawyer(self.client, base_position=ROBOT_BASE, base_yaw=ROBOT_BASE_YAW)
             self._q_rest = self.arm.inverse_kinematics(ROBOT_TARGETS[Location.CONVEYOR])
             self.arm.reset(self._q_rest)
@@ -628,6 +640,8 @@ class SawyerStation:
         renders after the actions.
         """
         image = render(self._require_client(), self.camera, self.lighting)
+        if self.look is not None:
+            image = replace(image, rgb=self.look.camera(image.rgb))
         if self.difficulty.is_clean:
             return image
         effects = self._initial_effects if initial else self.effects
@@ -639,6 +653,8 @@ class SawyerStation:
         effects and, by chance, the gripper over part of the held onion."""
         image = render(self._require_client(), self.inspection, self.lighting,
                        cull=(self.arm.body,))
+        if self.look is not None:
+            image = replace(image, rgb=self.look.camera(image.rgb))
         if self.difficulty.is_clean:
             return image
         box = None
@@ -920,21 +936,23 @@ def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
                            difficulty: Difficulty | str = DIFFICULTY_LEVELS["clean"],
                            inspection_views: int = INSPECTION_VIEWS,
                            camera: CameraSpec = ROBOT_INSPECTION_CAMERA,
+                           randomize_look: bool = False,
                            ) -> Iterator[tuple[int, int, np.ndarray, list]]:
     """The Sawyer's inspection views of a line-up, with their ground-truth boxes.
 
     The expert's greedy policy runs the line-up, the robot showing each onion from
     ``inspection_views`` sides (:func:`inspection_poses`) to ``camera``, and a classifier that
     knows the truth. Yields ``(onion index, view index, rgb (h, w, 3) uint8, labels)``, the
-    labels :class:`InspectionLabel` with the rot each view shows; ``difficulty`` as for
-    :class:`SawyerStation`.
+    labels :class:`InspectionLabel` with the rot each view shows; ``difficulty`` and
+    ``randomize_look`` as for :class:`SawyerStation`.
     """
     from irl.domains.onion_sorting import encode_state, onion_sorting
 
     actions = onion_sorting().expert_policy().argmax(axis=1)
     with SawyerStation(GROUND_TRUTH, n_onions=n_onions, n_blemished=n_onions // 2, seed=seed,
                        difficulty=difficulty, inspection=camera,
-                       inspection_views=inspection_views, label_blemishes=True) as station:
+                       inspection_views=inspection_views, label_blemishes=True,
+                       randomize_look=randomize_look) as station:
         for _ in range(n_onions * 6):
             if all(station.place_of(i) in ("bin", "belt", "gone") for i in range(n_onions)):
                 break

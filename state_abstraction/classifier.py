@@ -256,6 +256,18 @@ def drop_depth(x: torch.Tensor, p: float, generator: torch.Generator | None = No
     return x, dropped
 
 
+def augment_colours(x: torch.Tensor, photometric: Callable[[torch.Tensor], torch.Tensor]
+                    ) -> torch.Tensor:
+    """The steps of ``x[n, 4 * frames, h, w]`` with each step's colour channels passed through
+    ``photometric`` (one call per step: its frames, ``[frames, 3, h, w]`` in [0, 1], through
+    one camera); depth channels unchanged. ``x`` itself is not changed."""
+    n, c, h, w = x.shape
+    frames = x.reshape(n, c // 4, 4, h, w).clone()
+    for i in range(n):
+        frames[i, :, :3] = photometric(frames[i, :, :3])
+    return frames.reshape(n, c, h, w)
+
+
 def waiting(onion: int, prediction: int) -> int:
     """1 if a claimed onion waits at the gate (on the conveyor, not inspected), else 0."""
     return int(onion == TASK.value_index("onion", "conveyor")
@@ -360,7 +372,8 @@ def _val_score(model: StateClassifier, x: torch.Tensor, y: dict, dropout: float
 def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
                      test: Sequence[LabelledStep], config: ClassifierConfig,
                      out: Path | str, *, on_epoch: Callable[[dict], None] | None = None,
-                     device: str | torch.device = "cpu") -> dict:
+                     device: str | torch.device = "cpu",
+                     photometric: Callable[[torch.Tensor], torch.Tensor] | None = None) -> dict:
     """Train on ``train``, keep the best epoch on ``val``, report metrics on ``test``.
 
     Each training step's depth is zeroed with probability ``config.depth_dropout``. The best
@@ -380,6 +393,10 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     device : str or torch.device
         Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
         the CPU in float32.
+    photometric : callable, optional
+        Photometric augmentation of the training steps alone (:func:`augment_colours`; e.g.
+        ``perception.photometric.PhotometricAugment()``, which the ``train`` stage passes),
+        drawing from torch's generator; never applied to the validation or test steps.
 
     Returns
     -------
@@ -409,6 +426,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
         for i in range(0, len(order), config.batch_size):
             idx = order[i:i + config.batch_size]
             x, _ = drop_depth(x_tr[idx].float(), config.depth_dropout, drop_gen)
+            if photometric is not None:
+                x = augment_colours(x, photometric)
             with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
                 logits = model(x.to(device))
             loss = _loss({k: v.float() for k, v in logits.items()},
@@ -434,6 +453,7 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
         metrics["test"], metrics["test_without_depth"] = (report["with_depth"],
                                                           report["without_depth"])
     metrics.update({"history": history, "config": asdict(config),
+                    "photometric": None if photometric is None else repr(photometric),
                     "n_steps": {"train": len(train), "val": len(val), "test": len(test)}})
     tmp = out / "state_classifier_metrics.json.partial"
     tmp.write_text(json.dumps(metrics, indent=1))

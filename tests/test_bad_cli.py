@@ -287,6 +287,10 @@ CASES = [
     (["perceive", "{d}/unperceived.mcap", "--device", "gpu"],
      ["--device", "invalid choice", "'gpu'"]),
     (["eval-perception", "--data", "{d}/data_bad", "--views", "0"], ["views must be >= 1"]),
+    (["eval-perception", "--data", "{d}/data_bad", "--camera-shift", "-3"],
+     ["camera_shift must be a seed, an int >= 0", "-3"]),
+    (["eval-perception", "--data", "{d}/data_bad", "--camera-shift", "warm"],
+     ["--camera-shift", "invalid int value", "'warm'"]),
     # demo
     (["demo", "--quick", "--out", "{d}/afile/demo"], ["afile/demo", "cannot be created"]),
     (["demo", "--quick", "--out", "{d}/half"],

@@ -91,6 +91,10 @@ def test_quick_demo_report_holds_table_1_calibration_plots_and_recordings(quick_
     calibration = _section(text, "Calibration")
     assert f"| {results['state_error_rate']:.3f} |" in calibration
     assert f"| {results['pair_error_rate']:.3f} |" in calibration
+    backwards = results["sessions_read_backwards"]
+    assert (f"Held-out sessions: {backwards['swapped']} of {backwards['sessions']} sessions "
+            "read backwards") in calibration
+    assert f"held-out sessions: {backwards['swapped']} of" in printed
     settings = _section(text, "Settings")
     assert "| line-up | 10 onions, 6 blemished |" in settings
     assert "| size | quick |" in settings

@@ -49,6 +49,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from onionsort.stages import CalibrateConfig, calibrate
+    from onionsort.stages.calibrate import describe_session_swaps
 
     calibration, metrics = calibrate(CalibrateConfig(
         data=args.data, out=args.out, split=args.split, smoothing=args.smoothing,
@@ -67,5 +68,6 @@ def run(args) -> int:
           f"{calibration.independent_state_error_rate:.3f} from the factors' accuracies, "
           f"(state, action) {calibration.independent_pair_error_rate:.3f} from the state's and "
           "the action's")
+    print(describe_session_swaps(metrics["session_swaps"]))
     print(f"wrote calibration.json, observation_model.npz and confusion.png to {args.out}")
     return 0

@@ -8,6 +8,12 @@ Examples
     onionsort dataset --frames 3000 --seed 0 --out runs/data
     onionsort dataset --frames 300 --occlusion 0.4 --seed 1 --out runs/data-small
     onionsort dataset --frames 8000 --difficulty clean,realistic,paper,hard --out runs/data-mix
+    onionsort dataset --frames 8000 --randomize-look --out runs/data-looks
+
+``--randomize-look`` gives each session and robot line-up a look of its own, drawn from its
+seed (``robot.look``: the light's colour, intensity and direction; the colours of the floor,
+belt, stand and bin; the cameras' exposure and white balance), for models that must survive
+another camera. The difficulty levels are unchanged by it.
 """
 
 from __future__ import annotations
@@ -41,6 +47,10 @@ def register(subparsers) -> None:
                         help="perception difficulty of the world: one of "
                              f"{', '.join(DIFFICULTY_LEVELS)} (clean), or several joined by "
                              "commas for a mix whose sessions take the levels in turn")
+    parser.add_argument("--randomize-look", action="store_true",
+                        help="draw each session's and line-up's light, surface colours and "
+                             "camera exposure and white balance from its seed (training data "
+                             "across cameras; default: today's look)")
     add_parallel_arguments(parser, pieces="sessions and line-ups")
     parser.set_defaults(func=run)
 
@@ -65,7 +75,8 @@ def run(args) -> int:
         out=args.out, frames=args.frames, seed=args.seed, occlusion=args.occlusion,
         steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
         val=args.val, test=args.test, robot_onions=args.robot_onions, difficulty=args.difficulty,
-        robot_views=args.robot_views, **parallel_options(args)))
+        robot_views=args.robot_views, randomize_look=args.randomize_look,
+        **parallel_options(args)))
     sessions = ", ".join(f"{s}: {n} sessions" for s, n in summary.sessions.items())
     print(f"wrote {summary.frames} frames ({sessions}) to {args.out}")
     if summary.robot_views:

@@ -93,6 +93,10 @@ def run(args) -> int:
                               **parallel_options(args)))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
+    if results.get("sessions_read_backwards"):
+        from onionsort.stages.calibrate import describe_session_swaps
+
+        print(f"held-out sessions: {describe_session_swaps(results['sessions_read_backwards'])}")
     print(table(results))
     print(f"wrote {args.out / 'results.json'} ({results['seconds']:.0f} s)")
     print(f"report: {args.out / 'report.md'}")

@@ -7,6 +7,10 @@ Examples
     onionsort train detector --data runs/data --out runs/perception
     onionsort train detector --data runs/data --out runs/perception --resume
     onionsort train inspection --data runs/data --out runs/perception
+    onionsort train state-classifier --data runs/data --out runs/plain --no-augment
+
+Every model is trained with photometric augmentation unless ``--no-augment``: each training
+sample is seen through a camera of its own (``perception.photometric``); evaluation never is.
 """
 
 from __future__ import annotations
@@ -44,6 +48,10 @@ def register(subparsers) -> None:
         p.add_argument("--epochs", type=int, default=epochs)
         p.add_argument("--batch-size", type=int, default=batch_size)
         p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=True,
+                       help="see each training sample through a camera of its own (white "
+                            "balance, exposure, tone curve, defocus, noise, JPEG), never at "
+                            "evaluation (default: on)")
         add_device_argument(p)
     ins.add_argument("--detector", type=Path, default=None,
                      help="folder of the detector.pt that finds the onion in the validation "
@@ -82,7 +90,8 @@ def run_state_classifier(args: argparse.Namespace) -> int:
 
     metrics = train_state_classifier(ClassifierTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, batch_size=args.batch_size,
-        seed=args.seed, depth_dropout=args.depth_dropout, device=args.device))
+        seed=args.seed, depth_dropout=args.depth_dropout, device=args.device,
+        augment=args.augment))
     for key, label in (("test", ""), ("test_without_depth", " without depth")):
         if metrics.get(key):
             print(f"state classifier, test split{label}: "
@@ -97,7 +106,7 @@ def run_detector(args: argparse.Namespace) -> int:
     test = train_detector(DetectorTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, images_per_epoch=args.images_per_epoch,
         batch_size=args.batch_size, seed=args.seed, resume=args.resume,
-        device=args.device, init=args.init, lr=args.lr))["test"]
+        device=args.device, init=args.init, lr=args.lr, augment=args.augment))["test"]
     print(f"detector, test split: mAP@0.5 {test['map50']:.3f}, mAP@0.5:0.95 "
           f"{test['map50_95']:.3f}")
     print(f"wrote {args.out / 'detector.pt'}")
@@ -132,7 +141,7 @@ def run_inspection(args: argparse.Namespace) -> int:
         data=tuple(args.data), out=args.out, epochs=args.epochs, batch_size=args.batch_size,
         seed=args.seed, detector=args.detector, level_weights=args.level_weights,
         device=args.device, fusion=args.fusion,
-        visibility=args.visibility, camera=args.camera))
+        visibility=args.visibility, camera=args.camera, augment=args.augment))
     val = metrics["val"]
     print(f"inspection classifier, val split: rot call accuracy {val['accuracy']:.3f} on "
           f"{val['n']} views, temperature {metrics['temperature']:.3f}")

@@ -19,6 +19,7 @@ Example::
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,8 +39,10 @@ from onionsort.stages.parallel import ParallelOptions, run_pieces
 __all__ = [
     "CalibrateConfig",
     "PerceptionEvalConfig",
+    "SessionCameras",
     "calibrate",
     "dataset_identity",
+    "describe_session_swaps",
     "detector_map",
     "eval_perception",
     "measure_perception",
@@ -99,7 +102,8 @@ class PerceptionEvalConfig:
     """A dataset split to measure the perception models on: the detector, the state
     classifier and the inspection. ``views`` fuses the robot's first ``views`` views of each
     onion (all the dataset holds: None); ``plots`` is a folder for the inspection's
-    precision-recall curves (None: none drawn)."""
+    precision-recall curves (None: none drawn); ``camera_shift`` a seed (an int >= 0) of
+    other cameras to measure through as well (:class:`SessionCameras`; None: none)."""
 
     data: Path
     split: str = "test"
@@ -109,17 +113,24 @@ class PerceptionEvalConfig:
     device: str = "auto"
     views: int | None = None
     plots: Path | None = None
+    camera_shift: int | None = None
 
     def __post_init__(self) -> None:
         check_device(self.device)
+        if self.camera_shift is not None:
+            SessionCameras(self.camera_shift)  # checks the seed
         if self.views is not None and self.views < 1:
             raise ValueError(f"views must be >= 1; got {self.views}")
 
 
 def measure_perception(models: PerceptionModels | tuple, root: Path | str,
                        split: str = "test", *, depth: bool = True, inspection: bool = True,
-                       options: ParallelOptions | None = None):
+                       options: ParallelOptions | None = None, image_map=None):
     """Perceive every step of a dataset split and compare with the truth.
+
+    ``image_map`` changes every colour image as it is read
+    (:data:`recordings.dataset.ImageMap`, e.g. :class:`SessionCameras`; picklable when the
+    sessions are perceived on workers).
 
     ``models`` are the loaded models, which perceive the split's sessions here, one after
     another; or ``(folder, device)``, and the sessions are perceived on ``options``'s workers
@@ -144,8 +155,8 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
         sessions = split_sessions(root, split)
         measured = [None] * len(sessions)
         for i, result in run_pieces(
-                _measure_piece, [(models, root, name, session, frames, depth, inspection)
-                                 for name, session in sessions],
+                _measure_piece, [(models, root, name, session, frames, depth, inspection,
+                                  image_map) for name, session in sessions],
                 options or ParallelOptions(), names=[f"{root} ({name}) session {session}"
                                                      for name, session in sessions],
                 desc="calibrate", unit="session"):
@@ -153,7 +164,8 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
     else:
         described = models.describe()
         measured = [_measure_session(models, steps, depth, inspection)
-                    for steps in read_steps(root, split, models.frames_per_step)]
+                    for steps in read_steps(root, split, models.frames_per_step,
+                                            image_map=image_map)]
     true = {k: [v for m in measured for v in m["true"][k]] for k in FACTORS}
     pred = {k: [v for m in measured for v in m["pred"][k]] for k in FACTORS}
     truly_occluded, called_occluded, inspected_before = (
@@ -229,6 +241,13 @@ def session_swaps(measured: list[dict]) -> dict:
             "reads": reads, "swapped_reads": wrong, "prediction_counts": counts.tolist()}
 
 
+def describe_session_swaps(swaps: dict) -> str:
+    """One line: how many sessions perception read backwards (:func:`session_swaps`)."""
+    return (f"{swaps['swapped']} of {swaps['sessions']} sessions read backwards (of those "
+            f"with at least {MIN_CLASS_READS} reads of the onion's class: more than half of "
+            "them the other class)")
+
+
 def _measure_session(models: PerceptionModels, steps, depth: bool, inspection: bool) -> dict:
     """Perceive one dataset session's steps: per step, each factor's truth (``true``) and
     perceived value (``pred``), whether it was occluded and called so, and whether the
@@ -254,13 +273,15 @@ def _measure_session(models: PerceptionModels, steps, depth: bool, inspection: b
 
 def _measure_piece(piece: tuple) -> dict:
     """:func:`_measure_session` of one session of a dataset split, read alone: ``piece`` is
-    ``((folder, device), root, split name, session, frames per step, depth, inspection)``."""
+    ``((folder, device), root, split name, session, frames per step, depth, inspection,
+    image_map)``."""
     from recordings.dataset import read_steps
 
-    (folder, device), root, name, session, frames, depth, inspection = piece
+    (folder, device), root, name, session, frames, depth, inspection, image_map = piece
     models = PerceptionModels.load_cached(folder, device)
     return _measure_session(models, [step for steps in read_steps(root, name, frames,
-                                                                  session=session)
+                                                                  session=session,
+                                                                  image_map=image_map)
                                      for step in steps], depth, inspection)
 
 
@@ -269,8 +290,9 @@ def _mean_or_none(values: np.ndarray, where: np.ndarray) -> float | None:
 
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
-                 batch_size: int = 32) -> dict[str, dict[str, float]]:
-    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``."""
+                 batch_size: int = 32, *, image_map=None) -> dict[str, dict[str, float]]:
+    """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``
+    (each colour image changed by ``image_map`` first, if given)."""
 
     from perception.metrics import mean_average_precision
     from perception.train import EVAL_SCORE_THRESHOLD
@@ -281,7 +303,8 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     dts: dict[str, list] = {}
     frames: dict[str, list] = {}
     for view in views:
-        frames[view] = [f for name in split_names(split) for f in read_split(root, name, view=view)]
+        frames[view] = [f for name in split_names(split)
+                        for f in read_split(root, name, view=view, image_map=image_map)]
         gts[view] = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
                       np.asarray(f.record["classes"], int)) for f in frames[view]]
         dts[view] = []
@@ -340,30 +363,75 @@ def dataset_identity(root: Path | str) -> dict:
             "frames": meta.get("frames"), "difficulty": levels}
 
 
+@dataclass(frozen=True)
+class SessionCameras:
+    """A dataset seen through other cameras: each session and each robot line-up through a
+    camera of its own, ``CameraShift.draw((seed, kind, index))`` (kind 0 a session, 1 a
+    line-up; :mod:`perception.camera_shift`), on its colour images and inspection views alike.
+    An :data:`recordings.dataset.ImageMap`."""
+
+    seed: int
+
+    def __post_init__(self) -> None:
+        if (not isinstance(self.seed, int | np.integer) or isinstance(self.seed, bool)
+                or self.seed < 0):
+            raise ValueError(f"camera_shift must be a seed, an int >= 0; got {self.seed!r}")
+
+    def camera(self, record: dict):
+        """The camera of the session or line-up ``record`` belongs to."""
+        robot = record.get("source", "human") == "robot"
+        return _camera(int(self.seed), int(robot),
+                       int(record["lineup"] if robot else record["session"]))
+
+    def __call__(self, image: np.ndarray, record: dict) -> np.ndarray:
+        return self.camera(record).apply(image)
+
+
+@functools.lru_cache(maxsize=4096)
+def _camera(seed: int, kind: int, index: int):
+    from perception.camera_shift import CameraShift
+
+    return CameraShift.draw((seed, kind, index))
+
+
 def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None
                     ) -> dict:
-    """mAP of the detector and the state classifier's accuracy on a dataset split."""
-    from onionsort.stages.inspection import measure_inspection
-
+    """mAP of the detector, the state classifier's accuracy and the inspection on a dataset
+    split; with ``config.camera_shift``, the same again through other cameras
+    (:class:`SessionCameras`), under ``"camera_shift"``: ``seed`` and ``shifted`` (the same
+    keys, measured on the changed images)."""
     log_config("eval-perception", config)
     if config.plots is not None:
         check_output_folder(config.plots, "--plots")
     models = PerceptionModels.load(config.models, config.device) if models is None else models
+    out = _eval_figures(models, config, None)
+    if config.inspection and config.plots is not None:
+        from onionsort.plots import precision_recall_figure
+
+        out["plots"] = [str(p) for p in precision_recall_figure(
+            out["inspection_classifier"], config.plots)]
+    if config.camera_shift is not None:
+        out["camera_shift"] = {"seed": config.camera_shift, "shifted": _eval_figures(
+            models, config, SessionCameras(config.camera_shift))}
+    return out
+
+
+def _eval_figures(models: PerceptionModels, config: PerceptionEvalConfig, image_map) -> dict:
+    """:func:`eval_perception`'s figures, each colour image changed by ``image_map``."""
+    from onionsort.stages.inspection import measure_inspection
+
     _, metrics = measure_perception(models, config.data, config.split, depth=config.depth,
-                                    inspection=config.inspection)
-    maps = detector_map(models, config.data, config.split)
+                                    inspection=config.inspection, image_map=image_map)
+    maps = detector_map(models, config.data, config.split, image_map=image_map)
     out = {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
            "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
            "occlusion_precision": metrics["occlusion_precision"],
            "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],
+           "session_swaps": metrics["session_swaps"],
            "map_by_view": maps, "n_steps": metrics["n_steps"], "split": config.split,
            "depth": config.depth, "inspection": config.inspection}
     if config.inspection:
         out["inspection_classifier"] = measure_inspection(models, config.data, config.split,
-                                                          views=config.views)
-        if config.plots is not None:
-            from onionsort.plots import precision_recall_figure
-
-            out["plots"] = [str(p) for p in precision_recall_figure(
-                out["inspection_classifier"], config.plots)]
+                                                          views=config.views,
+                                                          image_map=image_map)
     return out

@@ -55,6 +55,10 @@ class DatasetConfig(ParallelOptions):
         Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
         today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
         whose sessions and robot line-ups take the levels in turn.
+    randomize_look : bool
+        Each session and line-up draws its look from its seed (:mod:`robot.look`: light,
+        surface colours, the cameras' exposure and white balance): training data that spans
+        cameras. The levels stay as they are; the look is a knob beside them.
     executor, workers, ray_address
         Where the sessions and the line-ups are rendered
         (:class:`~onionsort.stages.parallel.ParallelOptions`): each is a piece, rendered from
@@ -73,6 +77,7 @@ class DatasetConfig(ParallelOptions):
     difficulty: str = "clean"
     robot_views: int = 8
     rot_labels: bool = True
+    randomize_look: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -133,7 +138,8 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     session_configs = [SessionConfig(n_steps=config.steps_per_session,
                                      occlusion=config.occlusion,
                                      frames_per_step=config.frames_per_step, difficulty=level,
-                                     label_blemishes=config.rot_labels)
+                                     label_blemishes=config.rot_labels,
+                                     randomize_look=config.randomize_look)
                        for level in levels]
     per_session = config.steps_per_session * config.frames_per_step
     n_sessions = math.ceil(config.frames / per_session)
@@ -199,7 +205,8 @@ def _robot_views(writer, config: DatasetConfig) -> int:
             else ["train"] * len(sizes))
     seeds = np.random.SeedSequence([config.seed, 0x5A3E7]).spawn(len(sizes))
     lineups = [(config.out, plan[k], k, sizes[k], seeds[k],
-                config.levels[k % len(config.levels)], config.robot_views)
+                config.levels[k % len(config.levels)], config.robot_views,
+                config.randomize_look)
                for k in range(len(sizes))]
     parts = dict(run_pieces(_render_lineup, lineups, config,
                             names=[f"line-up {k}" for k in range(len(sizes))],
@@ -213,13 +220,14 @@ def _robot_views(writer, config: DatasetConfig) -> int:
 
 def _render_lineup(piece: tuple):
     """Render one line-up's inspection views: ``piece`` is ``(root, split, index, size, seed,
-    level, views)``; its :class:`recordings.dataset.DatasetPart`."""
+    level, views, randomize_look)``; its :class:`recordings.dataset.DatasetPart`."""
     from recordings.dataset import DatasetPart
     from robot.station import robot_inspection_views
 
-    root, split, k, size, seed, level, views = piece
+    root, split, k, size, seed, level, views, randomize_look = piece
     part = DatasetPart(root, split, f"l{k:04d}")
     for index, view, rgb, labels in robot_inspection_views(size, seed, level,
-                                                           inspection_views=views):
+                                                           inspection_views=views,
+                                                           randomize_look=randomize_look):
         part.add_robot_view(rgb, labels, lineup=k, index=index, view=view, difficulty=level)
     return part

@@ -239,6 +239,9 @@ def demo(config: DemoConfig) -> dict:
                "onions": size["onions"], "blemished": size["blemished"],
                "state_error_rate": calibration.state_error_rate,
                "pair_error_rate": calibration.pair_error_rate,
+               # whole held-out sessions whose good/blemished reads were mostly backwards
+               "sessions_read_backwards": None if calibration.session_swaps is None else {
+                   k: calibration.session_swaps[k] for k in ("sessions", "swapped")},
                "inspection": {"views": config.inspection_views,
                               "threshold": sorting_threshold(config.miss_cost,
                                                              config.waste_cost),

@@ -105,8 +105,8 @@ def _held_onion(record: dict) -> int | None:
 
 
 def inspection_views(root: Path | str, split: str, *, detector=None,
-                     dataset_level: str | None = None, allow_empty: bool = False
-                     ) -> InspectionViews:
+                     dataset_level: str | None = None, allow_empty: bool = False,
+                     image_map=None) -> InspectionViews:
     """The inspection views of ``split`` (or ``"all"``) of dataset ``root`` that show an onion.
 
     Without ``detector``: context crops of the true boxes (for training,
@@ -114,7 +114,8 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     the detector's best box (:meth:`perception.inspection.Inspector.boxes`), ``found`` False
     (and a blank crop) where it finds none. ``dataset_level`` names the level of records that
     do not name theirs (datasets written before the field). A split with no such view is an
-    error, or empty with ``allow_empty``.
+    error, or empty with ``allow_empty``. ``image_map`` changes each view as it is read
+    (:data:`recordings.dataset.ImageMap`).
     """
     from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
@@ -140,7 +141,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
         pending.clear()
 
     for name in split_names(split):
-        for frame in read_split(root, name, view="inspection"):
+        for frame in read_split(root, name, view="inspection", image_map=image_map):
             rec = frame.record
             k = _held_onion(rec)
             if k is None:
@@ -203,7 +204,9 @@ class InspectionTrainStageConfig:
     views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
     robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
     the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
-    Sawyer's inspection then reads instead).
+    Sawyer's inspection then reads instead). ``augment``: each training crop also seen through
+    a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
+    validation.
     """
 
     data: Path | tuple[Path, ...]
@@ -217,6 +220,7 @@ class InspectionTrainStageConfig:
     fusion: str | None = None
     visibility: float | None = None
     camera: str = "both"
+    augment: bool = True
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
@@ -298,7 +302,8 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     classifier, metrics = train_inspection(
         train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
                                                   batch_size=config.batch_size,
-                                                  seed=config.seed),
+                                                  seed=config.seed,
+                                                  photometric=config.augment),
         device=device, on_epoch=on_epoch)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
@@ -343,7 +348,8 @@ def _fused_scores(classifier, views: InspectionViews, rule: str, p: np.ndarray) 
 
 
 def measure_inspection(models, root: Path | str, split: str = "test", *,
-                       threshold: float | None = None, views: int | None = None) -> dict:
+                       threshold: float | None = None, views: int | None = None,
+                       image_map=None) -> dict:
     """The inspection on a dataset split, per difficulty level and source.
 
     For each level: how often the detector finds the onion; the accuracy of each view alone
@@ -351,7 +357,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     and, for each fusion rule, the fused call on each onion (the robot's views of it, the first
     ``views`` of them if given; the sorter's views of it in a session) at ``threshold`` (the
     task's cost threshold by default): accuracy, precision, recall, expected calibration error
-    and the points of the precision-recall curve.
+    and the points of the precision-recall curve. ``image_map`` changes each view as it is
+    read (:func:`inspection_views`).
     """
     from onionsort.stages.models import sorting_threshold
     from perception.fusion import (
@@ -361,7 +368,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     )
 
     threshold = sorting_threshold() if threshold is None else threshold
-    data = inspection_views(root, split, detector=models.detector, allow_empty=True)
+    data = inspection_views(root, split, detector=models.detector, allow_empty=True,
+                            image_map=image_map)
     if views is not None:
         keep = (data.source != "robot") | (data.view < views)
         data = data.subset(keep)

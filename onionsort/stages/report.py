@@ -328,6 +328,11 @@ def _demo_calibration(folder: Path, results: dict) -> list[str]:
                   _num(results.get("state_error_rate"))),
                  ("(state, action): its state or its action misread",
                   _num(results.get("pair_error_rate")))]), ""]
+    backwards = results.get("sessions_read_backwards")
+    if backwards:
+        from onionsort.stages.calibrate import describe_session_swaps
+
+        lines += [f"Held-out sessions: {describe_session_swaps(backwards)}.", ""]
     path = folder / "calibration" / "calibration.json"
     if path.is_file():
         cal = _read(path)

@@ -48,7 +48,9 @@ class ClassifierTrainConfig:
     """``onionsort train state-classifier``: dataset folder, run folder, hyperparameters.
 
     ``depth_dropout``: probability that a training step's depth is zeroed
-    (:class:`state_abstraction.classifier.ClassifierConfig`).
+    (:class:`state_abstraction.classifier.ClassifierConfig`); ``augment``: each training
+    step's frames seen through a camera of their own
+    (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
     """
 
     data: Path
@@ -58,6 +60,7 @@ class ClassifierTrainConfig:
     seed: int = 0
     depth_dropout: float = 0.5
     device: str = "auto"
+    augment: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
@@ -72,7 +75,9 @@ class ClassifierTrainConfig:
 class DetectorTrainConfig:
     """``onionsort train detector``: dataset folder, run folder, hyperparameters, ``resume``
     (continue the run in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to
-    fine-tune instead of training from scratch) and the peak learning rate ``lr``."""
+    fine-tune instead of training from scratch), the peak learning rate ``lr`` and
+    ``augment`` (each training image seen through a camera of its own,
+    :class:`perception.photometric.PhotometricAugment`; never at evaluation)."""
 
     data: Path
     out: Path
@@ -84,6 +89,7 @@ class DetectorTrainConfig:
     device: str = "auto"
     init: Path | None = None
     lr: float = 2e-3
+    augment: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
@@ -130,6 +136,7 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     """
     import torch
 
+    from perception.photometric import PhotometricAugment
     from recordings.dataset import read_steps
     from state_abstraction.classifier import ClassifierConfig, train_classifier
 
@@ -152,7 +159,8 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     with _EpochBar("state classifier", model.epochs) as bar:
         return train_classifier(splits["train"], splits["val"], splits["test"], model,
                                 config.out, on_epoch=bar.update,
-                                device=resolve_device(config.device))
+                                device=resolve_device(config.device),
+                                photometric=PhotometricAugment() if config.augment else None)
 
 
 def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
@@ -210,7 +218,8 @@ def train_detector(config: DetectorTrainConfig) -> dict:
     if config.init is not None and not Path(config.init).is_file():
         raise FileNotFoundError(f"--init {config.init}: no such detector checkpoint")
     model = TrainConfig(epochs=config.epochs, images_per_epoch=config.images_per_epoch,
-                        batch_size=config.batch_size, seed=config.seed, lr=config.lr)
+                        batch_size=config.batch_size, seed=config.seed, lr=config.lr,
+                        photometric=config.augment)
     with _EpochBar("detector", model.epochs) as bar:
         return train(images["train"], images["val"], images["test"], model, config.out,
                      resume=config.resume, on_epoch=bar.update,

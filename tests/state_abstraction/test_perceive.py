@@ -109,11 +109,17 @@ def test_perceived_demonstration_has_none_exactly_where_the_classifier_said_occl
     assert perceive_session(models, path, replace=True).n_steps == len(steps)
 
 
-def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys):
-    data = tmp_path / "data"
+@pytest.fixture(scope="module")
+def small_data(tmp_path_factory):
+    """A dataset of 3 sessions of 12 frames, no robot views."""
+    data = tmp_path_factory.mktemp("small") / "data"
     assert main(["dataset", "--frames", "36", "--robot-onions", "0",
-                 "--steps-per-session", "4", "--seed", "4",
-                 "--out", str(data)]) == 0
+                 "--steps-per-session", "4", "--seed", "4", "--out", str(data)]) == 0
+    return data
+
+
+def test_calibrate_and_eval_perception_commands(random_models, small_data, tmp_path, capsys):
+    data = small_data
     out = tmp_path / "cal"
     assert main(["calibrate", "--data", str(data), "--models", str(random_models),
                  "--out", str(out)]) == 0
@@ -125,13 +131,51 @@ def test_calibrate_and_eval_perception_commands(random_models, tmp_path, capsys)
     assert probs.shape == (48, 5, 240)
     np.testing.assert_allclose(probs.sum(axis=2), 1.0)
     assert (out / "confusion.png").stat().st_size > 0
-    capsys.readouterr()
+    assert "sessions read backwards" in capsys.readouterr().out
     assert main(["eval-perception", "--data", str(data), "--models", str(random_models),
                  "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert {"map50", "map50_95", "accuracy", "occlusion_recall"} <= set(result)
     assert set(result["accuracy"]) == {"onion", "end_effector", "prediction", "action"}
     assert "prediction_after_first_inspection" in result
+    assert {"sessions", "swapped"} <= set(result["session_swaps"])
+    assert "camera_shift" not in result
+
+
+def test_eval_perception_through_other_cameras_only_when_asked(random_models, small_data,
+                                                                capsys, monkeypatch):
+    from perception.camera_shift import CameraShift
+
+    data = small_data
+    shifted = []  # (camera, image shape) of each image a camera changed
+    apply = CameraShift.apply
+
+    def spy(self, image):
+        shifted.append((self, image.shape))
+        return apply(self, image)
+
+    monkeypatch.setattr(CameraShift, "apply", spy)
+    argv = ["eval-perception", "--data", str(data), "--split", "all", "--models",
+            str(random_models)]
+    capsys.readouterr()
+    assert main([*argv, "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert not shifted  # never applied unless asked
+    assert main([*argv, "--json", "--camera-shift", "11"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["camera_shift"]["seed"] == 11
+    # the unchanged figures are those of a run without cameras; the changed ones are measured
+    assert {k: v for k, v in result.items() if k != "camera_shift"} == plain
+    assert result["camera_shift"]["shifted"].keys() == plain.keys()
+    cameras = {camera for camera, _ in shifted}
+    assert len(cameras) == 3  # one per session (3 sessions of 12 frames), main and close views
+    assert {shape for _, shape in shifted} == {(240, 320, 3), (120, 160, 3)}
+    from onionsort.commands.eval_perception import _print_shift
+
+    _print_shift(result, result["camera_shift"]["shifted"], 11)
+    text = capsys.readouterr().out
+    assert "through other cameras (seed 11)" in text and "unchanged  changed" in text
+    assert "sessions read backwards" in text
 
 
 def test_missing_models_name_the_training_command(random_models, tmp_path):
