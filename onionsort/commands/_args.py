@@ -48,6 +48,8 @@ DEVICES = ("auto", "cpu", "cuda")
 BACKENDS = ("numpy", "numba")
 METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
 EXPORT_FORMATS = ("ros2",)
+#: :data:`onionsort.stages.label.LABEL_FORMATS`, repeated for the same reason
+LABEL_FORMATS = ("coco", "yolo")
 ROS2_STORAGES = ("mcap", "sqlite3")
 
 

@@ -147,7 +147,8 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 continue
             source = rec.get("source", "human")
             level = rec.get("difficulty") or (
-                levels[rec["session"]] if levels and source == "human" else default_level)
+                levels[rec["session"]] if levels and source == "human" and "session" in rec
+                else default_level)
             rot = rec.get("rot_pixels")
             visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
             blemished = bool(rec["classes"][k])
@@ -158,9 +159,11 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
             if source == "robot":
                 rows["onion"].append(f"{name}/lineup{rec['lineup']}/{rec['index']}")
                 rows["view"].append(int(rec.get("view", 0)))
-            else:
-                onion_id = (rec.get("onions") or [k])[k]
-                rows["onion"].append(f"{name}/session{rec['session']}/{onion_id}")
+            elif rec.get("onions"):
+                rows["onion"].append(f"{name}/session{rec['session']}/{rec['onions'][k]}")
+                rows["view"].append(-1)
+            else:  # an imported view names no onion: an onion of its own
+                rows["onion"].append(f"{name}/{rec.get('image', rec['color'])}")
                 rows["view"].append(-1)
             if detector is None:
                 rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
