@@ -256,4 +256,114 @@ def test_the_canvas_imports_fit_is_the_detectors():
     from onionsort.stages.label import FIT
     from perception.model import DetectorConfig
 
-    assert FIT == (DetectorConfig().width, DetectorConfig().height)
+    assert (DetectorConfig().width, DetectorConfig().height) == FIT
+
+
+# -- sets the project did not write ----------------------------------------------------------
+
+
+def _their_sets(rendered: Path, out: Path) -> dict[str, Path]:
+    """A COCO and a YOLO set of ``rendered`` as another tool writes them, built here from the
+    records with json and plain text (not with the project's writers): JPEG at quality 95,
+    file names of its own, a states CSV per view, the Sawyer's views box-only."""
+    task_columns = ["onion", "end_effector", "prediction"]
+    from irl.domains.onion_sorting import SORTING_TASK as task
+
+    sets = {"coco": out / "coco", "yolo": out / "yolo"}
+    for view in VIEWS:
+        sub = "" if view == "camera" else "inspection"
+        rows = ["split,image,session,step,frame,occluded," + ",".join(task_columns)
+                + ",action"]
+        yaml_lines = []
+        for split in SPLITS:
+            doc = {"images": [], "annotations": [],
+                   "categories": [{"id": 7, "name": "good"}, {"id": 9, "name": "blemished"}]}
+            for k, rec in enumerate(read_records(rendered, split, view)):
+                name = f"frame-{k:05d}.jpg"
+                bgr = cv2.imread(str(rendered / split / rec["color"]))
+                h, w = bgr.shape[:2]
+                for folder in (sets["coco"] / sub / f"{split}2017",
+                               sets["yolo"] / sub / "images" / split):
+                    folder.mkdir(parents=True, exist_ok=True)
+                    cv2.imwrite(str(folder / name), bgr, [cv2.IMWRITE_JPEG_QUALITY, 95])
+                doc["images"].append({"id": 100 + k, "file_name": name, "width": w,
+                                      "height": h})
+                lines = []
+                for (x0, y0, x1, y1), c in zip(rec["boxes"], rec["classes"], strict=True):
+                    doc["annotations"].append({
+                        "id": len(doc["annotations"]) + 1, "image_id": 100 + k,
+                        "category_id": (7, 9)[c], "bbox": [x0, y0, x1 - x0, y1 - y0],
+                        "area": (x1 - x0) * (y1 - y0), "iscrowd": 0})
+                    lines.append(f"{c} {(x0 + x1) / 2 / w:.6f} {(y0 + y1) / 2 / h:.6f} "
+                                 f"{(x1 - x0) / w:.6f} {(y1 - y0) / h:.6f}")
+                labels = sets["yolo"] / sub / "labels" / split
+                labels.mkdir(parents=True, exist_ok=True)
+                (labels / f"frame-{k:05d}.txt").write_text("\n".join(lines))
+                if "state" in rec:
+                    rows.append(",".join(str(v) for v in (
+                        split, name, rec["session"], rec["step"], rec["frame"],
+                        int(rec["occluded"]),
+                        *(task.factors[f][rec[f]] for f in task_columns),
+                        task.action_names[rec["action"]])))
+            ann = sets["coco"] / sub / "annotations"
+            ann.mkdir(parents=True, exist_ok=True)
+            (ann / f"instances_{split}2017.json").write_text(json.dumps(doc))
+            yaml_lines.append(f"{split}: images/{split}")
+        (sets["yolo"] / sub / "data.yaml").write_text(
+            "\n".join(yaml_lines) + "\nnc: 2\nnames: [good, blemished]\n")
+        for folder in sets.values():
+            (folder / sub / "states.csv").write_text("\n".join(rows) + "\n")
+    return sets
+
+
+def _within_a_hundredth(imported: dict, original: dict) -> None:
+    assert imported["n_steps"] == original["n_steps"] > 0
+    for key in ("map50", "map50_95"):
+        assert abs(imported[key] - original[key]) <= 0.01, (key, imported[key], original[key])
+    for factor, value in original["accuracy"].items():
+        assert abs(imported["accuracy"][factor] - value) <= 0.01, (factor, imported, original)
+
+
+def test_their_sets_in_jpeg_measure_as_the_original(rendered, tmp_path):
+    """Acceptance, fast: eval-perception --no-depth (the stage, the models loaded once) on
+    the small set's test split gives mAP and every factor's accuracy within 0.01 on each
+    imported set and on the dataset it was made from (the slow test below: 600 fresh frames
+    at the command line)."""
+    from onionsort.stages import PerceptionEvalConfig, eval_perception
+    from onionsort.stages.models import PerceptionModels
+
+    models = PerceptionModels.load(None, "cpu")
+
+    def measured(data: Path) -> dict:
+        return eval_perception(PerceptionEvalConfig(data=data, split="test", depth=False),
+                               models=models)
+
+    original = measured(rendered)
+    for fmt, theirs in _their_sets(rendered, tmp_path / "theirs").items():
+        out = tmp_path / f"imported-{fmt}"
+        assert main(["label", "import", str(theirs), "--format", fmt, "--out", str(out)]) == 0
+        _within_a_hundredth(measured(out), original)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fmt", ["coco", "yolo"])
+def test_their_sets_of_a_larger_fresh_dataset_measure_as_the_original(tmp_path, capsys, fmt):
+    """Acceptance at the command line, on 600 fresh frames of every difficulty level."""
+    data = tmp_path / "data"
+    assert main(["dataset", "--frames", "600", "--seed", "37", "--robot-onions", "20",
+                 "--difficulty", "clean,realistic,paper,hard", "--out", str(data)]) == 0
+    theirs = _their_sets(data, tmp_path / "theirs")[fmt]
+    out = tmp_path / "imported"
+    assert main(["label", "import", str(theirs), "--format", fmt, "--out", str(out)]) == 0
+    capsys.readouterr()
+    measured = []
+    for folder in (data, out):
+        assert main(["eval-perception", "--data", str(folder), "--split", "all", "--no-depth",
+                     "--json"]) == 0
+        measured.append(json.loads(capsys.readouterr().out.strip().splitlines()[-1]))
+    with capsys.disabled():
+        for name, m in zip(("original", f"imported {fmt}"), measured, strict=True):
+            print(f"\n{name}: mAP@0.5 {m['map50']:.4f}, mAP@0.5:0.95 {m['map50_95']:.4f}, "
+                  + ", ".join(f"{k} {v:.4f}" for k, v in m["accuracy"].items())
+                  + f" ({m['n_steps']} steps)")
+    _within_a_hundredth(measured[1], measured[0])
