@@ -27,7 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config, write_json
+from onionsort.stages.base import (
+    check_device,
+    check_output_folder,
+    log_config,
+    pool_datasets,
+    write_json,
+)
 
 __all__ = ["INSPECTION_CAMERAS", "MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
            "inspection_views", "measure_inspection", "train_inspection_stage"]
@@ -206,7 +212,9 @@ class InspectionTrainStageConfig:
     views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
     robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
     the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
-    Sawyer's inspection then reads instead).
+    Sawyer's inspection then reads instead). ``data_weights``: how many times each dataset's
+    training views count (positive integers, 1 each by default), times the level weights;
+    ``init``: an inspection classifier to fine-tune instead of training from scratch.
     """
 
     data: Path | tuple[Path, ...]
@@ -220,14 +228,13 @@ class InspectionTrainStageConfig:
     fusion: str | None = None
     visibility: float | None = None
     camera: str = "both"
+    init: Path | None = None
+    data_weights: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
 
-        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
-        if not data:
-            raise ValueError("data must name at least one dataset folder; got none")
-        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        pool_datasets(self)
         object.__setattr__(self, "out", Path(self.out))
         check_device(self.device)
         if self.fusion is not None and self.fusion not in FUSION_RULES:
@@ -283,11 +290,18 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     check_output_folder(config.out)
     torch.set_num_threads(torch_threads())
     detector = _load_detector(config.detector, device)
-    train = InspectionViews.concat([inspection_views(d, "train") for d in config.data])
-    val = InspectionViews.concat([inspection_views(d, "val", detector=detector)
+    if config.init is not None and not Path(config.init).is_file():
+        raise FileNotFoundError(f"{config.init}: no such inspection classifier to start from")
+    parts = [inspection_views(d, "train", allow_empty=len(config.data) > 1)
+             for d in config.data]
+    train = InspectionViews.concat(parts)
+    counts = np.repeat(config.data_weights, [len(p) for p in parts]).astype(float)
+    val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
+                                                   allow_empty=len(config.data) > 1)
                                   for d in config.data])
     val = val.subset(val.found)
     if config.camera == "robot":
+        counts = counts[train.source == "robot"]
         train, val = (views.subset(views.source == "robot") for views in (train, val))
         if not len(train) or not len(val):
             raise ValueError(f"{', '.join(map(str, config.data))} hold no robot views in "
@@ -295,14 +309,19 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
                              "them with `onionsort dataset --robot-onions N`")
     logger.info("inspection views: %d train (%d show rot), %d val", len(train),
                 int((train.labels == 1).sum()), len(val))
-    train_set = CropSet(train.crops, train.labels, train.classes,
-                        train.weights(config.level_weights))
+    if not len(train) or not len(val):
+        raise ValueError(f"{', '.join(map(str, config.data))} hold no inspection view of an "
+                         f"onion in their {'train' if not len(train) else 'val'} splits")
+    weights = train.weights(config.level_weights)
+    if (counts != 1).any():  # each dataset's views counted its weight's times
+        weights = weights * counts * len(weights) / (weights * counts).sum()
+    train_set = CropSet(train.crops, train.labels, train.classes, weights)
     val_set = CropSet(val.crops, val.labels, val.classes, val.weights(config.level_weights))
     classifier, metrics = train_inspection(
         train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
                                                   batch_size=config.batch_size,
                                                   seed=config.seed),
-        device=device, on_epoch=on_epoch)
+        device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
@@ -314,6 +333,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     metrics.update({"rules": rules, "rule": classifier.rule,
                     "level_weights": dict(config.level_weights), "device": str(device),
                     "n_val": len(val), "data": [str(d) for d in config.data],
+                    "data_weights": list(config.data_weights),
                     "camera": config.camera})
     # the robot's classifier and its metrics beside the shared ones: robot_inspection_...
     prefix = "robot_" if config.camera == "robot" else ""
