@@ -165,6 +165,10 @@ CASES = [
     # export
     (["label", "export", "{d}/data_none", "--format", "coco", "--out", "{d}/x"],
      ["data_none is not a dataset folder"]),
+    (["label", "select", "{d}/two_frames.mcap", "--frames", "0", "--out", "{d}/x"],
+     ["frames must be >= 1; got 0"]),
+    (["label", "select", "{d}/garbage.mcap", "--frames", "5", "--out", "{d}/x"],
+     ["garbage.mcap", "not an MCAP file"]),
     (["label", "import", "{d}/afile", "--format", "yolo", "--out", "{d}/x"],
      ["afile: no such folder"]),
     (["label", "import", "{d}/data_none", "--format", "coco", "--out", "{d}/x"],

@@ -8,6 +8,13 @@ factor of the task and action, in the task's words) and depth as 16-bit PNG in m
 ``depth/<split>/``: the main camera's frames at the top, the inspection views in
 ``inspection/`` in the same layout. CVAT, Label Studio, FiftyOne and Ultralytics open it.
 
+``label select`` chooses the frames of recorded sessions where the models are least sure (the
+entropy of perception's estimate of each step: the state classifier's heads and the
+inspection's call), spread over sessions and steps, and writes them as a labelling task
+pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
+(what ``label import`` reads back once corrected), or Label Studio's import format with
+predictions.
+
 ``label import`` reads such a folder, or what CVAT, Label Studio or Roboflow export
 (``<split>/_annotations.coco.json``; one file without splits), into a dataset folder that
 ``train``, ``calibrate`` and ``eval-perception`` read. Frames without a row in the states CSV
@@ -23,6 +30,8 @@ Examples
     onionsort label import cvat-export --format coco --states lab-states.csv \\
         --classes good=sound,blemished=rotten --out runs/lab
     onionsort label import yolo-set --format yolo --depth yolo-set/depth --out runs/lab-yolo
+    onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
+    onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
 """
 
 from __future__ import annotations
@@ -30,7 +39,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from onionsort.commands._args import LABEL_FORMATS, subcommand
+from onionsort.commands._args import (
+    LABEL_FORMATS,
+    SELECT_FORMATS,
+    add_device_argument,
+    add_models_argument,
+    subcommand,
+)
 
 __all__ = ["register"]
 
@@ -66,6 +81,21 @@ def register(subparsers) -> None:
                           "blemished)")
     imp.add_argument("--out", type=Path, required=True, help="a new dataset folder")
     imp.set_defaults(func=run_import)
+    sel = actions.add_parser("select", help="the frames of sessions where the models are least "
+                                            "sure, as a pre-annotated labelling task")
+    sel.add_argument("sessions", type=Path, nargs="+", metavar="SESSION",
+                     help="recorded sessions (.mcap)")
+    sel.add_argument("--frames", type=int, required=True, metavar="N",
+                     help="how many frames to choose (whole steps, spread over sessions and "
+                          "steps)")
+    sel.add_argument("--format", choices=SELECT_FORMATS, default="coco",
+                     help="coco (images, annotations with scores, states.csv; what label "
+                          "import reads back) or labelstudio (tasks.json with predictions and "
+                          "labeling_config.xml)")
+    sel.add_argument("--out", type=Path, required=True, help="a new folder")
+    add_models_argument(sel)
+    add_device_argument(sel)
+    sel.set_defaults(func=run_select)
 
 
 def _classes(text: str) -> dict[str, str]:
@@ -103,4 +133,20 @@ def run_import(args: argparse.Namespace) -> int:
             print(f"{view}: " + ", ".join(f"{s} {n}" for s, n in counts.items())
                   + f" images, {summary['with_states'][view]} with state labels")
     print(f"{summary['depth']} with depth; wrote {args.out}")
+    return 0
+
+
+def run_select(args: argparse.Namespace) -> int:
+    from onionsort.stages.label_select import LabelSelectConfig, select_frames
+
+    result = select_frames(LabelSelectConfig(
+        sessions=tuple(args.sessions), out=args.out, frames=args.frames, format=args.format,
+        models=args.models, device=args.device))
+    chosen = result["frames"]
+    steps = {(f["session"], f["step"]) for f in chosen}
+    sessions = {f["session"] for f in chosen}
+    print(f"chose {len(chosen)} frames ({len(steps)} steps of {len(sessions)} sessions) of "
+          f"{result['steps_seen']} steps, the least sure by the entropy of perception's "
+          "estimate")
+    print(f"wrote {args.out}")
     return 0
