@@ -3,6 +3,7 @@ sessions and steps, as a pre-annotated labelling task that ``label import`` read
 
 import json
 
+import numpy as np
 import pytest
 
 from onionsort.cli import main
@@ -80,3 +81,49 @@ def test_zero_frames_is_one_line(sessions, tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err == ["onionsort label: error: frames must be >= 1; got 0"]
     assert not (tmp_path / "x").exists()
+
+
+def _wrong_steps(paths, models) -> dict:
+    """``(session, step) -> bool``: the step's state guess is wrong (the truth, which the
+    selection never reads, checks it)."""
+    from recordings.reader import open_session
+
+    wrong = {}
+    for k, path in enumerate(paths):
+        session = open_session(path)
+        steps = session.step_frames()
+        seen = models.perceive([([f.color for f in st], [f.depth for f in st],
+                                 [f.inspection if f.inspection_png is not None else None
+                                  for f in st]) for st in steps])
+        for st, guess in zip(steps, seen, strict=True):
+            truth = st[0].state
+            wrong[k, st[0].step] = bool(guess.occluded != truth["occluded"] or (
+                not truth["occluded"] and guess.state != truth["state"]))
+    return wrong
+
+
+@pytest.mark.slow
+def test_the_frames_chosen_are_wrong_three_times_as_often(tmp_path, capsys):
+    """Acceptance on 6 fresh `paper` sessions of 20 steps (seed 901): the 60 frames chosen
+    have a wrong state guess at least 3x as often as the sessions' steps on average, or hold
+    every wrong one where there are fewer than 20."""
+    from onionsort.stages.label_select import LabelSelectConfig, select_frames
+    from onionsort.stages.models import PerceptionModels
+
+    assert main(["record", "--sessions", "6", "--steps-per-session", "20", "--difficulty",
+                 "paper", "--seed", "901", "--out", str(tmp_path / "rec")]) == 0
+    paths = sorted((tmp_path / "rec").glob("*.mcap"))
+    models = PerceptionModels.load(None, "cpu")
+    wrong = _wrong_steps(paths, models)
+    chosen = select_frames(LabelSelectConfig(sessions=tuple(paths), out=tmp_path / "task",
+                                             frames=60, device="cpu"), models=models)
+    picked = {(f["session"], f["step"]) for f in chosen["frames"]}
+    rate, rate_picked = (np.mean(list(wrong.values())),
+                         np.mean([wrong[s] for s in picked]))
+    with capsys.disabled():
+        print(f"\n{sum(wrong.values())} of {len(wrong)} steps wrong ({rate:.3f}); "
+              f"{sum(wrong[s] for s in picked)} of the {len(picked)} chosen ({rate_picked:.3f})")
+    if sum(wrong.values()) < len(picked):
+        assert all(s in picked for s, w in wrong.items() if w)
+    else:
+        assert rate_picked >= 3 * rate

@@ -9,8 +9,8 @@ factor of the task and action, in the task's words) and depth as 16-bit PNG in m
 ``inspection/`` in the same layout. CVAT, Label Studio, FiftyOne and Ultralytics open it.
 
 ``label select`` chooses the frames of recorded sessions where the models are least sure (the
-entropy of perception's estimate of each step: the state classifier's heads and the
-inspection's call), spread over sessions and steps, and writes them as a labelling task
+chance, by their own probabilities, that a step's state guess is wrong), spread over sessions
+and steps, and writes them as a labelling task
 pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
 (what ``label import`` reads back once corrected), or Label Studio's import format with
 predictions.
@@ -146,7 +146,6 @@ def run_select(args: argparse.Namespace) -> int:
     steps = {(f["session"], f["step"]) for f in chosen}
     sessions = {f["session"] for f in chosen}
     print(f"chose {len(chosen)} frames ({len(steps)} steps of {len(sessions)} sessions) of "
-          f"{result['steps_seen']} steps, the least sure by the entropy of perception's "
-          "estimate")
+          f"{result['steps_seen']} steps, those whose state guess is the most likely wrong")
     print(f"wrote {args.out}")
     return 0

@@ -299,7 +299,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
                                                    allow_empty=len(config.data) > 1)
                                   for d in config.data])
-    val = val.subset(val.found)
+    val = val.subset(val.found.astype(bool))  # an empty set's columns are float
     if config.camera == "robot":
         counts = counts[train.source == "robot"]
         train, val = (views.subset(views.source == "robot") for views in (train, val))

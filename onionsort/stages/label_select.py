@@ -1,12 +1,12 @@
 """The ``label select`` stage: the frames of recorded sessions most worth a person's labels.
 
 Perception runs on every complete step of the sessions (their sensor side only; ground truth,
-where a file has it, is never read). A step's *uncertainty* is the entropy, in nats, of what
-perception said about it, summed over the state classifier's heads (each factor, the action,
-whether the step was occluded) plus the binary entropy of the inspection's fused probability
-that the onion in focus is blemished (the prediction factor's source; nothing where no view
-has shown it). The least-sure steps are taken, spread over the sessions (each session in turn,
-its least-sure step left) and over their steps (never a step next to one already taken, while
+where a file has it, is never read). A step's *uncertainty* is the chance, by the models' own
+probabilities, that its state guess is wrong (:func:`step_uncertainties`): the occluded call
+and, on a step not called occluded, each factor's guess (the prediction's from the
+inspection's fused probability, or unknown before the session's first inspection). The
+least-sure steps are taken, spread over the sessions (rounds that take each session's
+least-sure step left) and over their steps (never a step next to one already taken, while
 others remain), until ``frames`` frames; every frame of a taken step is labelled, so the state
 classifier gets whole steps.
 
@@ -34,7 +34,7 @@ import numpy as np
 from onionsort.stages.base import check_device, log_config
 from onionsort.stages.label import STATES_FILE, _staging
 
-__all__ = ["SELECT_FORMATS", "LabelSelectConfig", "select_frames", "step_uncertainty"]
+__all__ = ["SELECT_FORMATS", "LabelSelectConfig", "select_frames", "step_uncertainties"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,18 +69,30 @@ class LabelSelectConfig:
             raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
 
 
-def _entropy(p) -> float:
-    p = np.clip(np.asarray(p, float), 1e-12, 1.0)
-    return float(-(p * np.log(p)).sum())
+def step_uncertainties(seen: list) -> list[float]:
+    """The chance, by the models' own probabilities, that each perceived step of one session
+    (:class:`state_abstraction.perceive.PerceivedStep`, in order) has its state guess wrong:
+    ``1 - p(occluded call) * prod_f p(guess of f)`` over the state's factors. The prediction
+    factor's ``p`` is ``max(p_blemished, 1 - p_blemished)`` where the inspection has seen the
+    onion in focus; 1 where it has not since a new onion was taken up (then ``unknown`` is
+    right); and one over the factor's values before the session's first inspection, when
+    the sorter may hold an onion inspected before the recording began (nothing shows it)."""
+    from irl.domains.onion_sorting import SORTING_TASK
 
-
-def step_uncertainty(seen) -> float:
-    """A perceived step's uncertainty (:class:`state_abstraction.perceive.PerceivedStep`):
-    the entropies of the classifier's heads plus the binary entropy of ``p_blemished``."""
-    total = sum(_entropy(p) for p in seen.probs.values())
-    if seen.p_blemished is not None:
-        total += _entropy([seen.p_blemished, 1.0 - seen.p_blemished])
-    return total
+    values = len(SORTING_TASK.factors["prediction"])
+    out, inspected = [], False
+    for step in seen:
+        inspected |= step.inspected is not None
+        sure = float(step.probs["occluded"][int(step.occluded)])
+        if not step.occluded:
+            for head in ("onion", "end_effector"):
+                sure *= float(np.max(step.probs[head]))
+            if step.p_blemished is not None:
+                sure *= max(step.p_blemished, 1.0 - step.p_blemished)
+            elif not inspected:
+                sure /= values
+        out.append(1.0 - sure)
+    return out
 
 
 def _choose(scores: list[list[float]], frames_per_step: int, budget: int
@@ -138,7 +150,7 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
                                   for f in step]) for step in mine]) if mine else []
         steps.append(mine)
         perceived.append(seen)
-        scores.append([step_uncertainty(s) for s in seen])
+        scores.append(step_uncertainties(seen))
     taken = _choose(scores, fps, config.frames)
     if not taken:
         raise ValueError(f"{', '.join(map(str, config.sessions))} hold no complete step")
@@ -223,6 +235,7 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
         choices = {n: task.factors[n] for n in ("onion", "end_effector", "prediction")}
         choices.update(action=task.action_names, occluded=("no", "yes"))
         (tmp / "labeling_config.xml").write_text(labeling_config(CLASSES, choices))
-    write_json(tmp / "selection.json", {"measure": "entropy of perception's step estimate "
-                                                   "(nats)", "frames": selection})
+    write_json(tmp / "selection.json", {"measure": "the chance that the step's state guess is "
+                                                   "wrong, by the models' probabilities",
+                                        "frames": selection})
     return selection
