@@ -173,6 +173,11 @@ def test_frames_without_states_are_box_only(rendered, exported, tmp_path):
     from onionsort.stages.train import detector_images
 
     assert len(detector_images(out, "val")) >= len(boxed)
+    # calibration measures the steps with states alone; the detector's mAP every frame
+    assert main(["calibrate", "--data", str(out), "--split", "all", "--workers", "1",
+                 "--out", str(tmp_path / "cal")]) == 0
+    saved = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    assert saved["metrics"]["n_steps"] == 4
 
 
 # -- bad input -------------------------------------------------------------------------------
