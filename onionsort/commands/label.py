@@ -9,8 +9,8 @@ factor of the task and action, in the task's words) and depth as 16-bit PNG in m
 ``inspection/`` in the same layout. CVAT, Label Studio, FiftyOne and Ultralytics open it.
 
 ``label select`` chooses the frames of recorded sessions where the models are least sure (the
-chance, by their own probabilities, that a step's state guess is wrong), spread over sessions
-and steps, and writes them as a labelling task
+chance, by their own probabilities, that a step's state guess is wrong), in rounds over the
+sessions, and writes them as a labelling task
 pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
 (what ``label import`` reads back once corrected), or Label Studio's import format with
 predictions.
@@ -86,8 +86,8 @@ def register(subparsers) -> None:
     sel.add_argument("sessions", type=Path, nargs="+", metavar="SESSION",
                      help="recorded sessions (.mcap)")
     sel.add_argument("--frames", type=int, required=True, metavar="N",
-                     help="how many frames to choose (whole steps, spread over sessions and "
-                          "steps)")
+                     help="how many frames to choose (whole steps, in rounds over the "
+                          "sessions)")
     sel.add_argument("--format", choices=SELECT_FORMATS, default="coco",
                      help="coco (images, annotations with scores, states.csv; what label "
                           "import reads back) or labelstudio (tasks.json with predictions and "

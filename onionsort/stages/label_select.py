@@ -5,10 +5,11 @@ where a file has it, is never read). A step's *uncertainty* is the chance, by th
 probabilities, that its state guess is wrong (:func:`step_uncertainties`): the occluded call
 and, on a step not called occluded, each factor's guess (the prediction's from the
 inspection's fused probability, or unknown before the session's first inspection). The
-least-sure steps are taken, spread over the sessions (rounds that take each session's
-least-sure step left) and over their steps (never a step next to one already taken, while
-others remain), until ``frames`` frames; every frame of a taken step is labelled, so the state
-classifier gets whole steps.
+least-sure steps are taken, spread over the sessions by rounds that take each session's
+least-sure step left (the least sure first), until ``frames`` frames; every frame of a taken
+step is labelled, so the state classifier gets whole steps. Steps next to each other are
+taken when they are the least sure: a session's first steps, before perception can know what
+the sorter holds, are often wrong together.
 
 The frames are written as a labelling task pre-annotated with the models' output:
 
@@ -75,21 +76,24 @@ def step_uncertainties(seen: list) -> list[float]:
     ``1 - p(occluded call) * prod_f p(guess of f)`` over the state's factors. The prediction
     factor's ``p`` is ``max(p_blemished, 1 - p_blemished)`` where the inspection has seen the
     onion in focus; 1 where it has not since a new onion was taken up (then ``unknown`` is
-    right); and one over the factor's values before the session's first inspection, when
-    the sorter may hold an onion inspected before the recording began (nothing shows it)."""
-    from irl.domains.onion_sorting import SORTING_TASK
+    right); and one over the factor's values before the session's first inspection or new
+    onion (as :func:`state_abstraction.perceive.track_predictions` starts its memory over:
+    a claimed onion waiting, an onion just picked), when the sorter may hold an onion
+    inspected before the recording began (nothing shows it)."""
+    from irl.domains.onion_sorting import SORTING_TASK, Location
 
     values = len(SORTING_TASK.factors["prediction"])
-    out, inspected = [], False
+    out, known = [], False
     for step in seen:
-        inspected |= step.inspected is not None
+        known |= step.inspected is not None or (not step.occluded and (
+            int(np.argmax(step.probs["waiting"])) == 1 or step.onion == int(Location.HOVER)))
         sure = float(step.probs["occluded"][int(step.occluded)])
         if not step.occluded:
             for head in ("onion", "end_effector"):
                 sure *= float(np.max(step.probs[head]))
             if step.p_blemished is not None:
                 sure *= max(step.p_blemished, 1.0 - step.p_blemished)
-            elif not inspected:
+            elif not known:
                 sure /= values
         out.append(1.0 - sure)
     return out
@@ -97,30 +101,21 @@ def step_uncertainties(seen: list) -> list[float]:
 
 def _choose(scores: list[list[float]], frames_per_step: int, budget: int
             ) -> list[tuple[int, int]]:
-    """``(session, step)`` of the steps taken (see the module docstring), in the order taken:
-    rounds that take each session's least-sure step left, the least sure first, skipping
-    steps next to one taken until no other is left."""
+    """``(session, step)`` of the steps taken, in the order taken: rounds that take each
+    session's least-sure step left, the least sure first, until ``budget`` frames."""
     order = [sorted(range(len(s)), key=lambda t, s=s: (-s[t], t)) for s in scores]
-    chosen: list[set[int]] = [set() for _ in scores]
     taken: list[tuple[int, int]] = []
-    spaced = True
+    next_ = [0] * len(scores)
     while len(taken) * frames_per_step < budget:
-        round_ = []
-        for k, steps in enumerate(order):
-            t = next((t for t in steps if t not in chosen[k] and not (
-                spaced and (t - 1 in chosen[k] or t + 1 in chosen[k]))), None)
-            if t is not None:
-                round_.append((-scores[k][t], k, t))
+        round_ = sorted((-scores[k][order[k][next_[k]]], k) for k in range(len(scores))
+                        if next_[k] < len(order[k]))
         if not round_:
-            if not spaced:
-                break
-            spaced = False
-            continue
-        for _, k, t in sorted(round_):
+            break
+        for _, k in round_:
             if len(taken) * frames_per_step >= budget:
                 break
-            chosen[k].add(t)
-            taken.append((k, t))
+            taken.append((k, order[k][next_[k]]))
+            next_[k] += 1
     return taken
 
 
