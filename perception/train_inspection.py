@@ -18,6 +18,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -190,8 +191,8 @@ def _class_weights(classes: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig,
                      net_config: InspectionNetConfig | None = None, *,
                      rule: str = "noisy-or", device: str | torch.device = "cpu",
-                     on_epoch: Callable[[int, dict], None] | None = None
-                     ) -> tuple[InspectionClassifier, dict]:
+                     on_epoch: Callable[[int, dict], None] | None = None,
+                     init: Path | str | None = None) -> tuple[InspectionClassifier, dict]:
     """Train the network to see rot on ``train`` context crops; keep the epoch of lowest
     weighted validation loss on ``val`` (inference crops); fit its calibrations there.
 
@@ -199,6 +200,8 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
     temperature; Platt's scaling to the onion's class uses every validation crop, its classes
     weighted equally (so ``train_prior`` is 0.5). On CUDA the forward and backward passes run
     in mixed precision (float16 autocast with a gradient scaler); on the CPU in float32.
+    ``init`` is an inspection classifier (:meth:`InspectionClassifier.save`) whose network to
+    start from instead of random weights (fine-tuning; its network must be ``net_config``).
 
     Returns
     -------
@@ -224,7 +227,14 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
         raise ValueError("val holds no crop with a clear label")
     val_y = np.asarray(val.labels, float)[val_known]
     val_w = np.asarray(val.weights, float)[val_known]
-    net = InspectionNet(net_config).to(device)
+    net = InspectionNet(net_config)
+    if init is not None:
+        start = InspectionClassifier.load(init).net
+        if start.config != net_config:
+            raise ValueError(f"cannot start from {init}: its network is {start.config}, not "
+                             f"{net_config}")
+        net.load_state_dict(start.state_dict())
+    net = net.to(device)
     steps_per_epoch = max(1, math.ceil(len(crops) / config.batch_size))
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, epochs=config.epochs,

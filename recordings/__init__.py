@@ -8,7 +8,9 @@
   (:mod:`recordings.sources`, :mod:`recordings.segmentation`, :mod:`recordings.video_import`);
 - robots' bags: ROS 2 and ROS 1 bags (and Foxglove protobuf MCAP files) imported as sessions
   (:mod:`recordings.bags`), sessions exported as rosbag2 folders (:mod:`recordings.ros_export`);
-- labelled datasets for perception (:mod:`recordings.dataset`);
+- labelled datasets for perception (:mod:`recordings.dataset`), and the formats annotation
+  tools read and write: COCO (:mod:`recordings.coco`), YOLO (:mod:`recordings.yolo`), state
+  labels as CSV (:mod:`recordings.states_csv`);
 - all Rerun logging (:mod:`recordings.rerun`, imported on demand: it loads the Rerun SDK).
 """
 

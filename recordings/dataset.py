@@ -32,6 +32,12 @@ pixels show rot, not under the hand: the inspection classifier's labels, where t
 measured them), and every record names its ``difficulty`` level. The detector trains on both
 views, the inspection classifier on the inspection views, the state classifier on the camera
 view.
+
+Frames imported from an annotation tool (``onionsort label import``) name their file
+(``image``) and may lack depth (no ``depth`` key: the colour-only models read them). A frame
+given no state labels is *box-only*: its record holds ``color``, ``boxes``, ``classes``,
+``source`` and ``image`` alone, and serves the detector and the inspection classifier, never the
+state classifier or calibration (:func:`read_steps` and :func:`split_sessions` leave it out).
 """
 
 from __future__ import annotations
@@ -51,8 +57,8 @@ from recordings.schema import check_task, task_of
 from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
-           "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_split", "read_steps",
-           "split_names", "split_sessions"]
+           "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_records",
+           "read_split", "read_steps", "split_names", "split_sessions"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -62,7 +68,8 @@ _LABELS = {"camera": "labels.json", "inspection": "inspection.json"}
 MIN_VISIBLE_PIXELS = 25
 """Onions with fewer visible pixels (slivers behind the hand or the passer-by) get no box."""
 _RECORD_KEYS = ("color", "depth", "source", "boxes", "classes", "state", "action", "occluded",
-                "occluded_fraction", "phase", "step", "session", "frame", "lineup", "index")
+                "occluded_fraction", "phase", "step", "session", "frame", "lineup", "index",
+                "image")
 """Keys of a frame record besides the task's factors; a factor may not take one of these."""
 
 
@@ -162,6 +169,39 @@ class DatasetWriter:
         records = self._records[split, "inspection"]
         records.append(_write_robot_view(self.root / split, f"{len(records):06d}", rgb, labels,
                                          lineup, index, view, difficulty))
+
+    def add_image(self, split: str, view: str, record: dict, color: np.ndarray, *,
+                  depth_mm: np.ndarray | None = None, png: bytes | None = None) -> dict:
+        """Add a frame that comes with its record (an imported one) to ``split`` in ``view``.
+
+        ``color`` (H, W, 3) uint8 RGB is written as PNG, or ``png`` (the PNG file of exactly
+        those pixels) as it is; ``depth_mm`` (H, W) uint16 millimetres, camera view only.
+        ``record`` gets the image paths (``color``, ``depth`` when there is depth) and is
+        returned. A record without ``state`` is box-only: the detector and the inspection
+        classifier use it, the state classifier and calibration do not (:func:`read_steps`).
+        """
+        _check_split(split)
+        if view not in VIEWS:
+            raise ValueError(f"view must be one of {VIEWS}; got {view!r}")
+        if depth_mm is not None and view != "camera":
+            raise ValueError("only the camera view has depth")
+        records = self._records[split, view]
+        name = f"{len(records):06d}"
+        folder = self.root / split
+        sub = "color" if view == "camera" else "inspection"
+        if png is not None:
+            tmp = folder / sub / f"{name}.png.partial"
+            tmp.write_bytes(png)
+            tmp.replace(folder / sub / f"{name}.png")
+        else:
+            _write_rgb(folder / sub / f"{name}.png", color)
+        record = {**record, "color": f"{sub}/{name}.png"}
+        record.pop("depth", None)
+        if depth_mm is not None:
+            _write_png(folder / "depth" / f"{name}.png", np.asarray(depth_mm, np.uint16))
+            record["depth"] = f"depth/{name}.png"
+        records.append(record)
+        return record
 
     def add_part(self, split: str, part: DatasetPart) -> None:
         """Add the records of a :class:`DatasetPart` of ``split`` (its images are written
@@ -338,6 +378,16 @@ def read_split(root: Path | str, split: str, view: str = "camera", *,
         )
 
 
+def read_records(root: Path | str, split: str, view: str = "camera") -> list[dict]:
+    """The records of one split of a dataset folder in ``view``, without reading a frame."""
+    root = Path(root)
+    views = read_metadata(root).get("views", ["camera"])
+    _check_split(split)
+    if view not in views:
+        raise ValueError(f"view must be one of the dataset's views {views}; got {view!r}")
+    return json.loads((root / split / _LABELS[view]).read_text())
+
+
 def dataset_task(root: Path | str) -> TaskDescription:
     """The task of a dataset folder's records: ``dataset.json``'s ``"task"``, or the
     onion-sorting task for a dataset written before the field."""
@@ -372,7 +422,8 @@ class DatasetStep:
 def read_steps(root: Path | str, split: str, frames_per_step: int, *,
                session: int | None = None, image_map: ImageMap | None = None
                ) -> list[list[DatasetStep]]:
-    """The complete steps of each session of a split (or ``"all"``), sessions in order; with
+    """The complete steps of each session of a split (or ``"all"``), sessions in order
+    (box-only frames, whose records have no ``state``, are left out); with
     ``session``, of that session of the split alone (a list of one, or none where it has no
     complete step), its frames alone read (:func:`split_sessions` names them); with
     ``image_map``, every colour image (frames and inspection views) changed by it as it is
@@ -389,8 +440,9 @@ def read_steps(root: Path | str, split: str, frames_per_step: int, *,
         views = {(f.record["session"], f.record["frame"]): f.color
                  for f in read_split(root, name, view="inspection",
                                      where=lambda r: r.get("source", "human") == "human"
-                                     and wanted(r), image_map=image_map)}
-        steps = group_steps(read_split(root, name, where=wanted, image_map=image_map),
+                                     and "state" in r and wanted(r), image_map=image_map)}
+        steps = group_steps(read_split(root, name, where=lambda r: "state" in r and wanted(r),
+                                       image_map=image_map),
                             step=lambda f: (f.record["session"], f.record["step"]),
                             phase=lambda f: f.record["phase"], frames_per_step=frames_per_step,
                             incomplete="drop", source=f"{root}/{name}")
@@ -411,4 +463,4 @@ def split_sessions(root: Path | str, split: str) -> list[tuple[str, int]]:
     read_metadata(root)
     return [(name, session) for name in split_names(split)
             for session in sorted({rec["session"] for rec in json.loads(
-                (root / name / _LABELS["camera"]).read_text())})]
+                (root / name / _LABELS["camera"]).read_text()) if "state" in rec})]

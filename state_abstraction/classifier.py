@@ -373,7 +373,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
                      test: Sequence[LabelledStep], config: ClassifierConfig,
                      out: Path | str, *, on_epoch: Callable[[dict], None] | None = None,
                      device: str | torch.device = "cpu",
-                     photometric: Callable[[torch.Tensor], torch.Tensor] | None = None) -> dict:
+                     photometric: Callable[[torch.Tensor], torch.Tensor] | None = None,
+                     init: Path | str | None = None) -> dict:
     """Train on ``train``, keep the best epoch on ``val``, report metrics on ``test``.
 
     Each training step's depth is zeroed with probability ``config.depth_dropout``. The best
@@ -397,6 +398,10 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
         Photometric augmentation of the training steps alone (:func:`augment_colours`; e.g.
         ``perception.photometric.PhotometricAugment()``, which the ``train`` stage passes),
         drawing from torch's generator; never applied to the validation or test steps.
+    init : path, optional
+        A classifier checkpoint (:meth:`StateClassifier.save`) to start from instead of random
+        weights: fine-tuning (its input, ``width``, ``height``, ``frames`` and ``channels``,
+        must be ``config``'s).
 
     Returns
     -------
@@ -414,7 +419,17 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     device = torch.device(device)
     amp = device.type == "cuda"
     scaler = torch.amp.GradScaler("cuda", enabled=amp)
-    model = StateClassifier(config).to(device)
+    model = StateClassifier(config)
+    if init is not None:
+        start = StateClassifier.load(init)
+        shape = ("width", "height", "frames", "channels")
+        if any(getattr(start.config, k) != getattr(config, k) for k in shape):
+            raise ValueError(f"cannot start from {init}: it reads "
+                             + ", ".join(f"{k} {getattr(start.config, k)}" for k in shape)
+                             + "; this training " + ", ".join(f"{k} {getattr(config, k)}"
+                                                               for k in shape))
+        model.load_state_dict(start.state_dict())
+    model = model.to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * ((len(x_tr) + config.batch_size - 1) // config.batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=steps)

@@ -23,7 +23,7 @@ RULES: dict[str, set[str]] = {
     "perception": {"torch", "torchvision", "cv2", "numpy"},
     "state_abstraction": {"torch", "cv2", "numpy", "irl"},
     "recordings": {"mcap", "mcap_protobuf", "foxglove_schemas_protobuf", "rosbags", "rerun",
-                   "cv2", "numpy", "irl"},
+                   "cv2", "numpy", "irl", "yaml"},
     "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},
     "onionsort": {"irl", "perception", "state_abstraction", "recordings", "robot", "numpy",
                   "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray", "threadpoolctl"},

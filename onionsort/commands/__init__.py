@@ -11,6 +11,7 @@ COMMAND_MODULES = [
     "onionsort.commands.import_video",
     "onionsort.commands.export",
     "onionsort.commands.dataset",
+    "onionsort.commands.label",
     "onionsort.commands.train",
     "onionsort.commands.perceive",
     "onionsort.commands.calibrate",

@@ -50,6 +50,10 @@ METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
 #: The four reward learners of the paper: what ``experiment`` runs by default
 IRL_METHODS = METHODS[:4]
 EXPORT_FORMATS = ("ros2",)
+#: :data:`onionsort.stages.label.LABEL_FORMATS`, repeated for the same reason
+LABEL_FORMATS = ("coco", "yolo")
+#: :data:`onionsort.stages.label_select.SELECT_FORMATS`, repeated for the same reason
+SELECT_FORMATS = ("coco", "labelstudio")
 ROS2_STORAGES = ("mcap", "sqlite3")
 
 

@@ -8,6 +8,8 @@ Examples
     onionsort train detector --data runs/data --out runs/perception --resume
     onionsort train inspection --data runs/data --out runs/perception
     onionsort train state-classifier --data runs/data --out runs/plain --no-augment
+    onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \
+        --init runs/perception/detector.pt --epochs 6 --lr 5e-4 --out runs/lab-models
 
 Every model is trained with photometric augmentation unless ``--no-augment``: each training
 sample is seen through a camera of its own (``perception.photometric``); evaluation never is.
@@ -39,11 +41,12 @@ def register(subparsers) -> None:
                             help="the inspection classifier: does a view of the held onion "
                                  "show rot")
     for p, epochs, batch_size in ((sc, 12, 32), (det, 24, 16), (ins, 30, 128)):
-        if p is ins:
-            p.add_argument("--data", type=Path, required=True, action="append",
-                           help="dataset folder (repeat it to pool several)")
-        else:
-            p.add_argument("--data", type=Path, required=True, help="dataset folder")
+        p.add_argument("--data", type=Path, required=True, action="append",
+                       help="dataset folder (repeat it to pool several, e.g. a lab's frames "
+                            "from `onionsort label import` and rendered ones)")
+        p.add_argument("--data-weights", type=_weights, default=(), metavar="W,W,...",
+                       help="how many times each --data's training frames count, in their "
+                            "order, e.g. 3,1 (1 each)")
         p.add_argument("--out", type=Path, required=True, help="run folder for the checkpoints")
         p.add_argument("--epochs", type=int, default=epochs)
         p.add_argument("--batch-size", type=int, default=batch_size)
@@ -77,8 +80,10 @@ def register(subparsers) -> None:
                          "also reads steps without depth (0.5)")
     sc.set_defaults(func=run_state_classifier)
     det.add_argument("--images-per-epoch", type=int, default=1600)
-    det.add_argument("--init", type=Path, default=None,
-                     help="a detector.pt to fine-tune instead of training from scratch")
+    for p, what in ((det, "a detector.pt"), (sc, "a state_classifier.pt"),
+                    (ins, "an inspection_classifier.pt")):
+        p.add_argument("--init", type=Path, default=None, metavar="CHECKPOINT",
+                       help=f"{what} to fine-tune instead of training from scratch")
     det.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (0.002)")
     det.add_argument("--resume", action="store_true",
                      help="continue the run in --out from its last checkpoint")
@@ -91,7 +96,7 @@ def run_state_classifier(args: argparse.Namespace) -> int:
     metrics = train_state_classifier(ClassifierTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, batch_size=args.batch_size,
         seed=args.seed, depth_dropout=args.depth_dropout, device=args.device,
-        augment=args.augment))
+        augment=args.augment, init=args.init, data_weights=args.data_weights))
     for key, label in (("test", ""), ("test_without_depth", " without depth")):
         if metrics.get(key):
             print(f"state classifier, test split{label}: "
@@ -104,13 +109,27 @@ def run_detector(args: argparse.Namespace) -> int:
     from onionsort.stages.train import DetectorTrainConfig, train_detector
 
     test = train_detector(DetectorTrainConfig(
-        data=args.data, out=args.out, epochs=args.epochs, images_per_epoch=args.images_per_epoch,
-        batch_size=args.batch_size, seed=args.seed, resume=args.resume,
-        device=args.device, init=args.init, lr=args.lr, augment=args.augment))["test"]
+        data=tuple(args.data), out=args.out, epochs=args.epochs,
+        images_per_epoch=args.images_per_epoch, batch_size=args.batch_size, seed=args.seed,
+        resume=args.resume, device=args.device, init=args.init, lr=args.lr,
+        data_weights=args.data_weights, augment=args.augment))["test"]
     print(f"detector, test split: mAP@0.5 {test['map50']:.3f}, mAP@0.5:0.95 "
           f"{test['map50_95']:.3f}")
     print(f"wrote {args.out / 'detector.pt'}")
     return 0
+
+
+def _weights(text: str) -> tuple[int, ...]:
+    """Positive integers joined by commas, for argparse ``type=``."""
+    try:
+        weights = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected positive integers joined by commas, e.g. 3,1; got {text!r}") from None
+    if not weights or min(weights) < 1:
+        raise argparse.ArgumentTypeError(
+            f"expected positive integers joined by commas, e.g. 3,1; got {text!r}")
+    return weights
 
 
 def _level_weights(text: str) -> dict[str, float]:
@@ -141,7 +160,8 @@ def run_inspection(args: argparse.Namespace) -> int:
         data=tuple(args.data), out=args.out, epochs=args.epochs, batch_size=args.batch_size,
         seed=args.seed, detector=args.detector, level_weights=args.level_weights,
         device=args.device, fusion=args.fusion,
-        visibility=args.visibility, camera=args.camera, augment=args.augment))
+        visibility=args.visibility, camera=args.camera, augment=args.augment, init=args.init,
+        data_weights=args.data_weights))
     val = metrics["val"]
     print(f"inspection classifier, val split: rot call accuracy {val['accuracy']:.3f} on "
           f"{val['n']} views, temperature {metrics['temperature']:.3f}")

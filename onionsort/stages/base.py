@@ -18,7 +18,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["DEVICES", "check_device", "check_difficulty", "check_output_folder", "log_config",
-           "output_folder", "refuse_existing", "resolve_device", "write_json", "write_text"]
+           "output_folder", "pool_datasets", "refuse_existing", "resolve_device", "write_json",
+           "write_text"]
 
 #: Where torch runs: ``auto`` takes CUDA when a device is present, else the CPU.
 DEVICES = ("auto", "cpu", "cuda")
@@ -60,6 +61,25 @@ def write_text(path: Path, text: str) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def pool_datasets(config) -> None:
+    """Normalise a training config's ``data`` (one dataset folder or several, pooled) and
+    ``data_weights`` (how many times each dataset's training frames count: positive
+    integers, one per dataset; 1 each where not given), in place on the frozen ``config``."""
+    data = (config.data,) if isinstance(config.data, str | Path) else tuple(config.data)
+    if not data:
+        raise ValueError("data must name at least one dataset folder; got none")
+    weights = tuple(config.data_weights) or (1,) * len(data)
+    if len(weights) != len(data):
+        raise ValueError(f"data_weights must give one weight per dataset ({len(data)}); got "
+                         f"{len(weights)}: {','.join(map(str, weights))}")
+    for w in weights:
+        if isinstance(w, bool) or not float(w).is_integer() or w < 1:
+            raise ValueError("data_weights must be positive integers (how many times each "
+                             f"dataset's training frames count); got {w}")
+    object.__setattr__(config, "data", tuple(Path(d) for d in data))
+    object.__setattr__(config, "data_weights", tuple(int(w) for w in weights))
 
 
 def check_output_folder(folder: Path, what: str = "--out") -> Path:

@@ -27,7 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config, write_json
+from onionsort.stages.base import (
+    check_device,
+    check_output_folder,
+    log_config,
+    pool_datasets,
+    write_json,
+)
 
 __all__ = ["INSPECTION_CAMERAS", "MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
            "inspection_views", "measure_inspection", "train_inspection_stage"]
@@ -148,7 +154,8 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 continue
             source = rec.get("source", "human")
             level = rec.get("difficulty") or (
-                levels[rec["session"]] if levels and source == "human" else default_level)
+                levels[rec["session"]] if levels and source == "human" and "session" in rec
+                else default_level)
             rot = rec.get("rot_pixels")
             visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
             blemished = bool(rec["classes"][k])
@@ -159,9 +166,11 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
             if source == "robot":
                 rows["onion"].append(f"{name}/lineup{rec['lineup']}/{rec['index']}")
                 rows["view"].append(int(rec.get("view", 0)))
-            else:
-                onion_id = (rec.get("onions") or [k])[k]
-                rows["onion"].append(f"{name}/session{rec['session']}/{onion_id}")
+            elif rec.get("onions"):
+                rows["onion"].append(f"{name}/session{rec['session']}/{rec['onions'][k]}")
+                rows["view"].append(-1)
+            else:  # an imported view names no onion: an onion of its own
+                rows["onion"].append(f"{name}/{rec.get('image', rec['color'])}")
                 rows["view"].append(-1)
             if detector is None:
                 rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
@@ -206,7 +215,9 @@ class InspectionTrainStageConfig:
     the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
     Sawyer's inspection then reads instead). ``augment``: each training crop also seen through
     a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
-    validation.
+    validation. ``data_weights``: how many times each dataset's training views count
+    (positive integers, 1 each by default), times the level weights; ``init``: an inspection
+    classifier to fine-tune instead of training from scratch.
     """
 
     data: Path | tuple[Path, ...]
@@ -221,14 +232,13 @@ class InspectionTrainStageConfig:
     visibility: float | None = None
     camera: str = "both"
     augment: bool = True
+    init: Path | None = None
+    data_weights: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
 
-        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
-        if not data:
-            raise ValueError("data must name at least one dataset folder; got none")
-        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        pool_datasets(self)
         object.__setattr__(self, "out", Path(self.out))
         check_device(self.device)
         if self.fusion is not None and self.fusion not in FUSION_RULES:
@@ -284,11 +294,18 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     check_output_folder(config.out)
     torch.set_num_threads(torch_threads())
     detector = _load_detector(config.detector, device)
-    train = InspectionViews.concat([inspection_views(d, "train") for d in config.data])
-    val = InspectionViews.concat([inspection_views(d, "val", detector=detector)
+    if config.init is not None and not Path(config.init).is_file():
+        raise FileNotFoundError(f"{config.init}: no such inspection classifier to start from")
+    parts = [inspection_views(d, "train", allow_empty=len(config.data) > 1)
+             for d in config.data]
+    train = InspectionViews.concat(parts)
+    counts = np.repeat(config.data_weights, [len(p) for p in parts]).astype(float)
+    val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
+                                                   allow_empty=len(config.data) > 1)
                                   for d in config.data])
-    val = val.subset(val.found)
+    val = val.subset(val.found.astype(bool))  # an empty set's columns are float
     if config.camera == "robot":
+        counts = counts[train.source == "robot"]
         train, val = (views.subset(views.source == "robot") for views in (train, val))
         if not len(train) or not len(val):
             raise ValueError(f"{', '.join(map(str, config.data))} hold no robot views in "
@@ -296,15 +313,20 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
                              "them with `onionsort dataset --robot-onions N`")
     logger.info("inspection views: %d train (%d show rot), %d val", len(train),
                 int((train.labels == 1).sum()), len(val))
-    train_set = CropSet(train.crops, train.labels, train.classes,
-                        train.weights(config.level_weights))
+    if not len(train) or not len(val):
+        raise ValueError(f"{', '.join(map(str, config.data))} hold no inspection view of an "
+                         f"onion in their {'train' if not len(train) else 'val'} splits")
+    weights = train.weights(config.level_weights)
+    if (counts != 1).any():  # each dataset's views counted its weight's times
+        weights = weights * counts * len(weights) / (weights * counts).sum()
+    train_set = CropSet(train.crops, train.labels, train.classes, weights)
     val_set = CropSet(val.crops, val.labels, val.classes, val.weights(config.level_weights))
     classifier, metrics = train_inspection(
         train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
                                                   batch_size=config.batch_size,
                                                   seed=config.seed,
                                                   photometric=config.augment),
-        device=device, on_epoch=on_epoch)
+        device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
@@ -316,6 +338,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     metrics.update({"rules": rules, "rule": classifier.rule,
                     "level_weights": dict(config.level_weights), "device": str(device),
                     "n_val": len(val), "data": [str(d) for d in config.data],
+                    "data_weights": list(config.data_weights),
                     "camera": config.camera})
     # the robot's classifier and its metrics beside the shared ones: robot_inspection_...
     prefix = "robot_" if config.camera == "robot" else ""

@@ -21,7 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config, resolve_device
+from onionsort.stages.base import (
+    check_device,
+    check_output_folder,
+    log_config,
+    pool_datasets,
+    resolve_device,
+)
 from onionsort.stages.parallel import torch_threads
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
@@ -45,15 +51,18 @@ def _check_positive(config, *names: str) -> None:
 
 @dataclass(frozen=True)
 class ClassifierTrainConfig:
-    """``onionsort train state-classifier``: dataset folder, run folder, hyperparameters.
+    """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters.
 
-    ``depth_dropout``: probability that a training step's depth is zeroed
-    (:class:`state_abstraction.classifier.ClassifierConfig`); ``augment``: each training
+    ``data`` is one dataset folder or several, whose splits are pooled, each dataset's
+    training steps counted ``data_weights`` times (1 each by default); ``depth_dropout``:
+    probability that a training step's depth is zeroed
+    (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
+    checkpoint to fine-tune instead of training from scratch; ``augment``: each training
     step's frames seen through a camera of their own
     (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
     """
 
-    data: Path
+    data: Path | tuple[Path, ...]
     out: Path
     epochs: int = 12
     batch_size: int = 32
@@ -61,9 +70,11 @@ class ClassifierTrainConfig:
     depth_dropout: float = 0.5
     device: str = "auto"
     augment: bool = True
+    init: Path | None = None
+    data_weights: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "data", Path(self.data))
+        pool_datasets(self)
         object.__setattr__(self, "out", Path(self.out))
         check_device(self.device)
         _check_positive(self, "epochs", "batch_size")
@@ -73,13 +84,14 @@ class ClassifierTrainConfig:
 
 @dataclass(frozen=True)
 class DetectorTrainConfig:
-    """``onionsort train detector``: dataset folder, run folder, hyperparameters, ``resume``
-    (continue the run in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to
-    fine-tune instead of training from scratch), the peak learning rate ``lr`` and
-    ``augment`` (each training image seen through a camera of its own,
-    :class:`perception.photometric.PhotometricAugment`; never at evaluation)."""
+    """``onionsort train detector``: dataset folders (as :class:`ClassifierTrainConfig`'s
+    ``data`` and ``data_weights``), run folder, hyperparameters, ``resume`` (continue the run
+    in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to fine-tune instead
+    of training from scratch), the peak learning rate ``lr`` and ``augment`` (each training
+    image seen through a camera of its own, :class:`perception.photometric.PhotometricAugment`;
+    never at evaluation)."""
 
-    data: Path
+    data: Path | tuple[Path, ...]
     out: Path
     epochs: int = 24
     images_per_epoch: int = 1600
@@ -90,9 +102,10 @@ class DetectorTrainConfig:
     init: Path | None = None
     lr: float = 2e-3
     augment: bool = True
+    data_weights: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "data", Path(self.data))
+        pool_datasets(self)
         object.__setattr__(self, "out", Path(self.out))
         check_device(self.device)
         _check_positive(self, "epochs", "images_per_epoch", "batch_size")
@@ -141,36 +154,45 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     from state_abstraction.classifier import ClassifierConfig, train_classifier
 
     log_config("train state-classifier", config)
-    meta = _metadata(config.data)
+    frames = {d: int(_metadata(d).get("config", {}).get("frames_per_step", 3))
+              for d in config.data}
+    if len(set(frames.values())) > 1:
+        raise ValueError("the datasets' steps have different numbers of frames: "
+                         + ", ".join(f"{d} {n}" for d, n in frames.items()))
+    if config.init is not None and not Path(config.init).is_file():
+        raise FileNotFoundError(f"--init {config.init}: no such state classifier checkpoint")
     check_output_folder(config.out)
     torch.set_num_threads(torch_threads())
-    model = ClassifierConfig(frames=int(meta.get("config", {}).get("frames_per_step", 3)),
+    model = ClassifierConfig(frames=frames[config.data[0]],
                              epochs=config.epochs, batch_size=config.batch_size,
                              seed=config.seed, depth_dropout=config.depth_dropout)
     splits = {}
     for split in ("train", "val", "test"):
-        splits[split] = [step for session in read_steps(config.data, split, model.frames)
-                         for step in session]
+        splits[split] = [step for data, weight in zip(config.data, config.data_weights,
+                                                      strict=True)
+                         for session in read_steps(data, split, model.frames)
+                         for step in session
+                         for _ in range(weight if split == "train" else 1)]
         logger.info("%s: %d steps of %d frames", split, len(splits[split]), model.frames)
     for split in ("train", "val"):
         if not splits[split]:
-            raise ValueError(f"split {split!r} of {config.data} holds no complete step of "
-                             f"{model.frames} frames")
+            raise ValueError(f"split {split!r} of {', '.join(map(str, config.data))} holds no "
+                             f"complete step of {model.frames} frames")
     with _EpochBar("state classifier", model.epochs) as bar:
         return train_classifier(splits["train"], splits["val"], splits["test"], model,
                                 config.out, on_epoch=bar.update,
-                                device=resolve_device(config.device),
+                                device=resolve_device(config.device), init=config.init,
                                 photometric=PhotometricAugment() if config.augment else None)
 
 
 def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
-                    empty_inspection_share: float = EMPTY_INSPECTION_SHARE, seed: int = 0
-                    ) -> list[tuple[np.ndarray, list, list]]:
+                    empty_inspection_share: float = EMPTY_INSPECTION_SHARE, seed: int = 0,
+                    allow_empty: bool = False) -> list[tuple[np.ndarray, list, list]]:
     """The labelled images the detector uses from a dataset split: ``(image, boxes, classes)``.
 
     Every camera frame; inspection views with an onion (each ``inspection_repeat`` times, the
     same triple object); ``empty_inspection_share`` of the views without one (chosen with
-    ``seed``).
+    ``seed``). A split without frames is an error, or empty with ``allow_empty``.
     """
     from recordings.dataset import read_split
 
@@ -185,7 +207,7 @@ def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
                               * inspection_repeat)
             elif rng.random() < empty_inspection_share:
                 images.append((f.color, [], []))
-    if not images:
+    if not images and not allow_empty:
         raise ValueError(f"split {split!r} of {root} holds no frames")
     return images
 
@@ -208,13 +230,21 @@ def train_detector(config: DetectorTrainConfig) -> dict:
     if config.resume and not (config.out / "detector_last.pt").is_file():
         raise FileNotFoundError(f"cannot resume: {config.out / 'detector_last.pt'} does not "
                                 "exist")
-    _metadata(config.data)
+    for data in config.data:
+        _metadata(data)
     check_output_folder(config.out)
     torch.set_num_threads(torch_threads())
-    images = {split: detector_images(config.data, split, seed=config.seed,
-                                     inspection_repeat=INSPECTION_REPEAT if split == "train"
-                                     else 1)
+    images = {split: [image for data, weight in zip(config.data, config.data_weights,
+                                                    strict=True)
+                      for image in detector_images(
+                          data, split, seed=config.seed, allow_empty=len(config.data) > 1,
+                          inspection_repeat=INSPECTION_REPEAT if split == "train" else 1)
+                      * (weight if split == "train" else 1)]
               for split in ("train", "val", "test")}
+    for split in ("train", "val"):
+        if not images[split]:
+            raise ValueError(f"split {split!r} of {', '.join(map(str, config.data))} holds no "
+                             "frames")
     if config.init is not None and not Path(config.init).is_file():
         raise FileNotFoundError(f"--init {config.init}: no such detector checkpoint")
     model = TrainConfig(epochs=config.epochs, images_per_epoch=config.images_per_epoch,

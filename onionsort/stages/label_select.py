@@ -1,0 +1,236 @@
+"""The ``label select`` stage: the frames of recorded sessions most worth a person's labels.
+
+Perception runs on every complete step of the sessions (their sensor side only; ground truth,
+where a file has it, is never read). A step's *uncertainty* is the chance, by the models' own
+probabilities, that its state guess is wrong (:func:`step_uncertainties`): the occluded call
+and, on a step not called occluded, each factor's guess (the prediction's from the
+inspection's fused probability, or unknown before the session's first inspection). The
+least-sure steps are taken, spread over the sessions by rounds that take each session's
+least-sure step left (the least sure first), until ``frames`` frames; every frame of a taken
+step is labelled, so the state classifier gets whole steps. Steps next to each other are
+taken when they are the least sure: a session's first steps, before perception can know what
+the sorter holds, are often wrong together.
+
+The frames are written as a labelling task pre-annotated with the models' output:
+
+- ``coco``: ``images/`` and ``annotations/instances_default.json`` with the detector's boxes as
+  annotations with a ``score`` (each image naming its ``session``, ``step``, ``frame`` and
+  ``session_file``), a ``states.csv`` with perception's guesses, and the inspection views of
+  those frames in ``inspection/`` in the same layout: what ``label import`` reads back once a
+  person has corrected it;
+- ``labelstudio``: ``images/``, ``tasks.json`` in Label Studio's import format with
+  ``predictions`` and ``labeling_config.xml``, the interface that reads them.
+
+``selection.json`` lists the frames taken, each with its uncertainty.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.stages.base import check_device, log_config
+from onionsort.stages.label import STATES_FILE, _staging
+
+__all__ = ["SELECT_FORMATS", "LabelSelectConfig", "select_frames", "step_uncertainties"]
+
+logger = logging.getLogger(__name__)
+
+SELECT_FORMATS = ("coco", "labelstudio")
+
+
+@dataclass(frozen=True)
+class LabelSelectConfig:
+    """``onionsort label select``: the sessions, how many frames, the output folder (new),
+    its format (``coco`` or ``labelstudio``), the models (None: the shipped ones) and where
+    torch runs them."""
+
+    sessions: tuple[Path, ...]
+    out: Path
+    frames: int = 200
+    format: str = "coco"
+    models: Path | None = None
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sessions", tuple(Path(p) for p in self.sessions))
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1; got {self.frames}")
+        if self.format not in SELECT_FORMATS:
+            raise ValueError(f"format must be one of {SELECT_FORMATS}; got {self.format!r}")
+        if not self.sessions:
+            raise ValueError("sessions must name at least one session file; got none")
+        missing = [str(p) for p in self.sessions if not p.is_file()]
+        if missing:
+            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+
+
+def step_uncertainties(seen: list) -> list[float]:
+    """The chance, by the models' own probabilities, that each perceived step of one session
+    (:class:`state_abstraction.perceive.PerceivedStep`, in order) has its state guess wrong:
+    ``1 - p(occluded call) * prod_f p(guess of f)`` over the state's factors. The prediction
+    factor's ``p`` is ``max(p_blemished, 1 - p_blemished)`` where the inspection has seen the
+    onion in focus; 1 where it has not since a new onion was taken up (then ``unknown`` is
+    right); and one over the factor's values before the session's first inspection or new
+    onion (as :func:`state_abstraction.perceive.track_predictions` starts its memory over:
+    a claimed onion waiting, an onion just picked), when the sorter may hold an onion
+    inspected before the recording began (nothing shows it)."""
+    from irl.domains.onion_sorting import SORTING_TASK, Location
+
+    values = len(SORTING_TASK.factors["prediction"])
+    out, known = [], False
+    for step in seen:
+        known |= step.inspected is not None or (not step.occluded and (
+            int(np.argmax(step.probs["waiting"])) == 1 or step.onion == int(Location.HOVER)))
+        sure = float(step.probs["occluded"][int(step.occluded)])
+        if not step.occluded:
+            for head in ("onion", "end_effector"):
+                sure *= float(np.max(step.probs[head]))
+            if step.p_blemished is not None:
+                sure *= max(step.p_blemished, 1.0 - step.p_blemished)
+            elif not known:
+                sure /= values
+        out.append(1.0 - sure)
+    return out
+
+
+def _choose(scores: list[list[float]], frames_per_step: int, budget: int
+            ) -> list[tuple[int, int]]:
+    """``(session, step)`` of the steps taken, in the order taken: rounds that take each
+    session's least-sure step left, the least sure first, until ``budget`` frames."""
+    order = [sorted(range(len(s)), key=lambda t, s=s: (-s[t], t)) for s in scores]
+    taken: list[tuple[int, int]] = []
+    next_ = [0] * len(scores)
+    while len(taken) * frames_per_step < budget:
+        round_ = sorted((-scores[k][order[k][next_[k]]], k) for k in range(len(scores))
+                        if next_[k] < len(order[k]))
+        if not round_:
+            break
+        for _, k in round_:
+            if len(taken) * frames_per_step >= budget:
+                break
+            taken.append((k, order[k][next_[k]]))
+            next_[k] += 1
+    return taken
+
+
+def select_frames(config: LabelSelectConfig, models=None) -> dict:
+    """Choose and write the frames (see the module docstring); returns ``frames`` (the list
+    of ``selection.json``) and ``steps_seen``."""
+    from irl.domains.onion_sorting import SORTING_TASK as task
+    from onionsort.stages.label import _check_new_folder
+    from onionsort.stages.models import PerceptionModels
+    from recordings.reader import open_session
+
+    log_config("label select", config)
+    _check_new_folder(config.out)
+    sessions = [open_session(p) for p in config.sessions]
+    models = PerceptionModels.load(config.models, config.device) if models is None else models
+    fps = models.frames_per_step
+    for path, s in zip(config.sessions, sessions, strict=True):
+        if s.frames_per_step != fps:
+            raise ValueError(f"{path}: its steps have {s.frames_per_step} frames; the state "
+                             f"classifier reads steps of {fps}")
+    steps, perceived, scores = [], [], []
+    for session in sessions:
+        mine = session.step_frames()
+        seen = models.perceive([([f.color for f in step],
+                                 [f.depth for f in step] if session.has_depth else None,
+                                 [f.inspection if f.inspection_png is not None else None
+                                  for f in step]) for step in mine]) if mine else []
+        steps.append(mine)
+        perceived.append(seen)
+        scores.append(step_uncertainties(seen))
+    taken = _choose(scores, fps, config.frames)
+    if not taken:
+        raise ValueError(f"{', '.join(map(str, config.sessions))} hold no complete step")
+    chosen = []
+    for k, t in sorted(taken):
+        frames = steps[k][t][:config.frames] if fps > config.frames else steps[k][t]
+        for f in frames:
+            chosen.append((k, t, f))
+    with _staging(config.out) as tmp:
+        selection = _write(config, tmp, chosen, sessions, perceived, scores, models, task)
+    return {"frames": selection, "steps_seen": sum(len(s) for s in steps)}
+
+
+def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task) -> list:
+    from onionsort.stages.base import write_json
+    from recordings.annotated import write_png
+    from recordings.coco import CocoImage, write_coco
+    from recordings.dataset import CLASSES
+    from recordings.labelstudio import LabelStudioTask, labeling_config, write_tasks
+    from recordings.states_csv import StatesRow, write_states
+
+    def name(k: int, frame) -> str:
+        return f"{config.sessions[k].stem}_{frame.index:06d}.png"
+
+    colors = [f.color for _, _, f in chosen]
+    detections = []
+    for i in range(0, len(colors), 32):
+        detections.extend(models.detector.detect(colors[i:i + 32]))
+    view_of = [(k, t, f) for k, t, f in chosen if f.inspection_png is not None]
+    views = models.inspector().detections([f.inspection for _, _, f in view_of]) \
+        if view_of else []
+    selection, rows, coco, ls_tasks = [], [], [], []
+    for (k, t, f), color, det in zip(chosen, colors, detections, strict=True):
+        seen = perceived[k][t]
+        factors = {"onion": seen.onion, "end_effector": seen.end_effector,
+                   "prediction": seen.prediction}
+        where = {"session": k, "step": int(f.step), "frame": int(f.index),
+                 "session_file": config.sessions[k].name}
+        selection.append({**where, "image": name(k, f), "uncertainty": scores[k][t]})
+        write_png(tmp / "images" / name(k, f), color)
+        boxes = np.asarray(det.boxes, float).reshape(-1, 4).tolist()
+        height, width = color.shape[:2]
+        if config.format == "coco":
+            coco.append(CocoImage(name(k, f), width, height, boxes,
+                                  np.asarray(det.classes, int).tolist(),
+                                  np.asarray(det.scores, float).tolist(), extra=where))
+            rows.append(StatesRow(None, name(k, f), k, int(f.step), int(f.index),
+                                  bool(seen.occluded), factors, int(seen.action)))
+        else:
+            choices = {n: task.value_name(n, v) for n, v in factors.items()}
+            choices.update(action=task.action_names[seen.action],
+                           occluded="yes" if seen.occluded else "no")
+            ls_tasks.append(LabelStudioTask(
+                f"images/{name(k, f)}", width, height, boxes,
+                [CLASSES[c] for c in np.asarray(det.classes, int)],
+                np.asarray(det.scores, float).tolist(), choices, -scores[k][t], where))
+    if config.format == "coco":
+        write_coco(tmp / "annotations" / "instances_default.json", coco, CLASSES)
+        write_states(tmp / STATES_FILE, rows, task)
+        inspection = tmp / "inspection"
+        view_images, view_rows = [], []
+        for (k, t, f), det in zip(view_of, views, strict=True):
+            seen = perceived[k][t]
+            write_png(inspection / "images" / name(k, f), f.inspection)
+            h, w = f.inspection.shape[:2]
+            view_images.append(CocoImage(
+                name(k, f), w, h, np.asarray(det.boxes, float).reshape(-1, 4).tolist(),
+                np.asarray(det.classes, int).tolist(), np.asarray(det.scores, float).tolist(),
+                extra={"session": k, "step": int(f.step), "frame": int(f.index)}))
+            view_rows.append(StatesRow(None, name(k, f), k, int(f.step), int(f.index),
+                                       bool(seen.occluded),
+                                       {"onion": seen.onion, "end_effector": seen.end_effector,
+                                        "prediction": seen.prediction}, int(seen.action)))
+        if view_images:
+            write_coco(inspection / "annotations" / "instances_default.json", view_images,
+                       CLASSES)
+            write_states(inspection / STATES_FILE, view_rows, task)
+    else:
+        described = models.describe()
+        write_tasks(tmp / "tasks.json", ls_tasks, "onionsort " + ",".join(
+            f"{k}:{str(v)[:12]}" for k, v in described.items() if k != "folder"))
+        choices = {n: task.factors[n] for n in ("onion", "end_effector", "prediction")}
+        choices.update(action=task.action_names, occluded=("no", "yes"))
+        (tmp / "labeling_config.xml").write_text(labeling_config(CLASSES, choices))
+    write_json(tmp / "selection.json", {"measure": "the chance that the step's state guess is "
+                                                   "wrong, by the models' probabilities",
+                                        "frames": selection})
+    return selection
