@@ -170,6 +170,11 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     cameras = {camera for camera, _ in shifted}
     assert len(cameras) == 3  # one per session (3 sessions of 12 frames), main and close views
     assert {shape for _, shape in shifted} == {(240, 320, 3), (120, 160, 3)}
+    # reproducible from its seed: the same cameras and figures again
+    shifted.clear()
+    assert main([*argv, "--json", "--camera-shift", "11"]) == 0
+    assert json.loads(capsys.readouterr().out) == result
+    assert {camera for camera, _ in shifted} == cameras
     from onionsort.commands.eval_perception import _print_shift
 
     _print_shift(result, result["camera_shift"]["shifted"], 11)
