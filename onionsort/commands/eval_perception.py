@@ -126,6 +126,7 @@ def figures(r: dict) -> dict[str, float | None]:
                 out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
                 out[f"{who}: fused by {rule}, precision"] = f["precision"]
                 out[f"{who}: fused by {rule}, recall"] = f["recall"]
+                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
     return out
 
 
