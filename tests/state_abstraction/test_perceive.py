@@ -191,6 +191,23 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     assert named["inspection clean robot: fused by noisy-or, ECE"] == 0.07
 
 
+def test_eval_perception_through_other_cameras_names_the_plots_it_wrote(tmp_path, capsys,
+                                                                        monkeypatch):
+    """``--camera-shift`` with ``--plots``: the table, then the plots written (as without)."""
+    import onionsort.stages
+
+    figures = {"map_by_view": {"all": {"map50": 0.8}}, "accuracy": {"onion": 1.0},
+               "prediction_after_first_inspection": None, "occlusion_recall": 1.0,
+               "occlusion_precision": 1.0, "session_swaps": {"sessions": 2, "swapped": 0}}
+    plot = tmp_path / "pr" / "pr.png"
+    monkeypatch.setattr(onionsort.stages, "eval_perception", lambda config: {
+        **figures, "plots": [str(plot)], "camera_shift": {"seed": 3, "shifted": figures}})
+    assert main(["eval-perception", "--data", str(tmp_path), "--camera-shift", "3", "--plots",
+                 str(tmp_path / "pr")]) == 0
+    out = capsys.readouterr().out
+    assert "through other cameras (seed 3)" in out and f"wrote {plot}" in out
+
+
 def test_missing_models_name_the_training_command(random_models, tmp_path):
     with pytest.raises(FileNotFoundError, match="onionsort train state-classifier"):
         PerceptionModels.load(tmp_path)
