@@ -53,6 +53,7 @@ __all__ = [
     "DOMAINS",
     "METHODS",
     "PAPER_BETA",
+    "REWARD_METHODS",
     "SweepConfig",
     "Trial",
     "TrialResult",
@@ -83,6 +84,9 @@ REACHABLE_STATES: dict[str, Callable[[], Sequence[int]]] = {
 #: since (:func:`irl.learners.register_learner`; with ``workers > 1`` it must be registered on
 #: import of a module the workers import too).
 METHODS = tuple(LEARNERS)
+#: The paper's four reward learners: what a sweep runs unless told (behaviour cloning is asked
+#: for by name, as ``onionsort experiment --methods`` asks for it).
+REWARD_METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
 #: The Boltzmann rationality the paper uses for its learners (Section 5).
 PAPER_BETA = 0.03
 #: Bootstrap settings of :func:`summarize`.
@@ -139,7 +143,7 @@ class SweepConfig:
         A key of :data:`DOMAINS`.
     points : tuple of (occlusion, noise)
     methods : tuple of str
-        Keys of :data:`irl.learners.LEARNERS`.
+        Keys of :data:`irl.learners.LEARNERS`; by default :data:`REWARD_METHODS`.
     batches : int
         Batches (independent data sets) per point.
     trajectories : int or tuple of int
@@ -157,7 +161,7 @@ class SweepConfig:
 
     domain: str
     points: tuple[tuple[float, float], ...]
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = REWARD_METHODS
     batches: int = 10
     trajectories: int | tuple[int, ...] = 10
     length: int | tuple[int, ...] = 20

@@ -149,8 +149,8 @@ class CameraShift:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "seed", _seed_words(self.seed))
-        _planck_xy(self.temperature_k)  # in the locus' range
-        checks = {"exposure_ev": (-4.0, 4.0), "gamma": (0.2, 5.0), "defocus_px": (0.0, 10.0),
+        checks = {"temperature_k": (1667.0, 25000.0),  # the Planckian locus' fit
+                  "exposure_ev": (-4.0, 4.0), "gamma": (0.2, 5.0), "defocus_px": (0.0, 10.0),
                   "noise": (0.0, 50.0)}
         for name, (low, high) in checks.items():
             if not low <= getattr(self, name) <= high:

@@ -299,6 +299,23 @@ def test_the_parsers_repeated_choices_are_the_libraries():
     assert (_args.LABEL_FORMATS, _args.SELECT_FORMATS) == (LABEL_FORMATS, SELECT_FORMATS)
 
 
+def test_the_parsers_default_learners_are_the_stages():
+    """``demo --methods`` and ``experiment --methods`` repeat their stages' defaults (the
+    parser may not import the stages): the two must not drift apart."""
+    from irl.experiments import REWARD_METHODS
+    from onionsort.cli import build_parser
+    from onionsort.commands import _args
+    from onionsort.stages.demo import METHODS as DEMO_METHODS
+    from onionsort.stages.experiment import ExperimentConfig
+
+    parser = build_parser()
+    demo = parser.parse_args(["demo"])
+    experiment = parser.parse_args(["experiment", "sorting"])
+    assert demo.methods == DEMO_METHODS
+    assert tuple(experiment.methods.split(",")) == ExperimentConfig(domain="sorting").methods \
+        == REWARD_METHODS == _args.IRL_METHODS
+
+
 def test_building_the_parser_loads_neither_irl_torch_nor_the_stages():
     """Every command builds the whole parser when it starts: its choices must not import the
     learners (and scipy), torch or every stage (that took 1.6 of a command's 2.1 s start)."""

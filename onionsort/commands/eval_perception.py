@@ -55,7 +55,6 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from onionsort.stages import PerceptionEvalConfig, eval_perception
-    from onionsort.stages.calibrate import describe_session_swaps
 
     r = eval_perception(PerceptionEvalConfig(data=args.data, split=args.split,
                                              models=args.models, depth=not args.no_depth,
@@ -68,7 +67,17 @@ def run(args) -> int:
         return 0
     if "camera_shift" in r:
         _print_shift(r, r["camera_shift"]["shifted"], r["camera_shift"]["seed"])
-        return 0
+    else:
+        _print_figures(r)
+    for path in r.get("plots", []):
+        print(f"wrote {path}")
+    return 0
+
+
+def _print_figures(r: dict) -> None:
+    """One ``eval_perception`` result, as measured (no camera shift)."""
+    from onionsort.stages.calibrate import describe_session_swaps
+
     print(f"detector: mAP@0.5 {r['map50']:.3f}, mAP@0.5:0.95 {r['map50_95']:.3f}")
     for view, m in r["map_by_view"].items():
         if view != "all":
@@ -84,9 +93,6 @@ def run(args) -> int:
     print(describe_session_swaps(r["session_swaps"]))
     if "inspection_classifier" in r:
         _print_inspection(r["inspection_classifier"])
-    for path in r.get("plots", []):
-        print(f"wrote {path}")
-    return 0
 
 
 def _print_inspection(report: dict) -> None:
@@ -126,6 +132,7 @@ def figures(r: dict) -> dict[str, float | None]:
                 out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
                 out[f"{who}: fused by {rule}, precision"] = f["precision"]
                 out[f"{who}: fused by {rule}, recall"] = f["recall"]
+                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
     return out
 
 

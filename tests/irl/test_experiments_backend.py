@@ -126,8 +126,8 @@ def test_numba_and_numpy_sweeps_agree(built):
     runs = {}
     for backend in ("numpy", "numba"):
         built.clear()
-        cfg = SweepConfig("sorting", ((0.2, 0.3), (0.4, 0.45)), batches=1, trajectories=3,
-                          length=10, seed=3, backend=backend)
+        cfg = SweepConfig("sorting", ((0.2, 0.3), (0.4, 0.45)), methods=METHODS, batches=1,
+                          trajectories=3, length=10, seed=3, backend=backend)
         results = list(run_sweep(cfg))
         # behaviour cloning has no weights: its policy's probabilities stand for them
         runs[backend] = results, [e.action_probabilities_ if e.theta_ is None else e.theta_

@@ -121,6 +121,16 @@ def test_sweep_config_takes_lists_and_single_values():
     assert SweepConfig("sorting", ((0.2, 0.3),)).trajectories == (10,)
 
 
+def test_a_sweep_runs_the_reward_learners_unless_told():
+    """Registering behaviour cloning did not add it to every sweep: the library's default is
+    the paper's four reward learners, as ``onionsort experiment``'s is."""
+    from irl.experiments import METHODS, REWARD_METHODS
+
+    assert SweepConfig("sorting", ((0.2, 0.3),)).methods == REWARD_METHODS
+    assert REWARD_METHODS == ("mmap-birl", "map-birl", "hidden-data-em", "maxent")
+    assert {"bc", "bc-em"} <= set(METHODS) - set(REWARD_METHODS)
+
+
 @pytest.mark.parametrize("kwargs, message", [
     ({"trajectories": (2, 0)}, "trajectories must be integers >= 1; got 0"),
     ({"trajectories": ()}, "trajectories must have at least one value"),

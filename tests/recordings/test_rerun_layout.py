@@ -212,3 +212,37 @@ def test_evaluation_without_views_or_pinholes_keeps_2d_out_of_3d(tmp_path):
     assert "Sawyer station (3D)" not in kinds  # nothing 3D to show
     assert {"Sawyer station", "view 0", "decisions"} <= set(kinds)
     assert "view 1" not in kinds and "depth" not in kinds
+
+
+def test_the_check_flags_the_layout_that_issue_41_reported(tmp_path):
+    """The check itself can fail: the evaluation layout as it was (a 3D view of everything
+    under the root, 2D inspection views without a pinhole, a view of an entity never logged)
+    and a second blueprint are each reported."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    from recordings.rerun.common import close_recording, open_recording, send_layout
+
+    old = rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial3DView(origin="evaluate", contents=["$origin/**"], name="3D"),
+        rrb.Spatial2DView(origin="evaluate/inspection/view_0", name="view 0"),
+        rrb.TimeSeriesView(origin="evaluate/inspection/p_blemished", name="P(blemished)")))
+    out = tmp_path / "old.rrd"
+    rec = open_recording("layout_check", out, old)
+    rec.set_time("step", sequence=0)
+    rec.log("evaluate/inspection/view_0", rr.Image(np.zeros((4, 6, 3), np.uint8)))
+    rec.log("evaluate/scene/belt", rr.Boxes3D(half_sizes=[[1.0, 0.2, 0.05]]))
+    close_recording(rec)
+    problems = layout_problems(out)
+    assert any("3D view '3D' holds /evaluate/inspection/view_0" in p for p in problems)
+    assert any("view 'P(blemished)'" in p and "shows no data" in p for p in problems)
+    assert not any("'view 0'" in p for p in problems)  # a 2D view of a 2D image is fine
+
+    twice = tmp_path / "twice.rrd"
+    rec = open_recording("layout_check", twice, rrb.Blueprint(
+        rrb.Spatial2DView(origin="evaluate/inspection/view_0", name="view 0")))
+    rec.log("evaluate/inspection/view_0", rr.Image(np.zeros((4, 6, 3), np.uint8)))
+    send_layout(rec, rrb.Blueprint(rrb.Spatial2DView(origin="evaluate/inspection/view_0",
+                                                     name="view 0")))
+    close_recording(rec)
+    assert any("2 blueprints" in p for p in layout_problems(twice))

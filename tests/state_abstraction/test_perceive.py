@@ -170,12 +170,42 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     cameras = {camera for camera, _ in shifted}
     assert len(cameras) == 3  # one per session (3 sessions of 12 frames), main and close views
     assert {shape for _, shape in shifted} == {(240, 320, 3), (120, 160, 3)}
+    # reproducible from its seed: the same cameras and figures again
+    shifted.clear()
+    assert main([*argv, "--json", "--camera-shift", "11"]) == 0
+    assert json.loads(capsys.readouterr().out) == result
+    assert {camera for camera, _ in shifted} == cameras
     from onionsort.commands.eval_perception import _print_shift
 
     _print_shift(result, result["camera_shift"]["shifted"], 11)
     text = capsys.readouterr().out
     assert "through other cameras (seed 11)" in text and "unchanged  changed" in text
     assert "sessions read backwards" in text
+    # the fused calls' figures include the fused probability's calibration (ECE)
+    from onionsort.commands.eval_perception import figures
+
+    fused = {"accuracy": 0.9, "precision": 1.0, "recall": 0.8, "ece": 0.07}
+    level = {"found": 1.0, "rot_accuracy": 0.9, "view_accuracy": 0.8,
+             "fused": {"noisy-or": fused}}
+    named = figures({**result, "inspection_classifier": {"levels": {"clean": {"robot": level}}}})
+    assert named["inspection clean robot: fused by noisy-or, ECE"] == 0.07
+
+
+def test_eval_perception_through_other_cameras_names_the_plots_it_wrote(tmp_path, capsys,
+                                                                        monkeypatch):
+    """``--camera-shift`` with ``--plots``: the table, then the plots written (as without)."""
+    import onionsort.stages
+
+    figures = {"map_by_view": {"all": {"map50": 0.8}}, "accuracy": {"onion": 1.0},
+               "prediction_after_first_inspection": None, "occlusion_recall": 1.0,
+               "occlusion_precision": 1.0, "session_swaps": {"sessions": 2, "swapped": 0}}
+    plot = tmp_path / "pr" / "pr.png"
+    monkeypatch.setattr(onionsort.stages, "eval_perception", lambda config: {
+        **figures, "plots": [str(plot)], "camera_shift": {"seed": 3, "shifted": figures}})
+    assert main(["eval-perception", "--data", str(tmp_path), "--camera-shift", "3", "--plots",
+                 str(tmp_path / "pr")]) == 0
+    out = capsys.readouterr().out
+    assert "through other cameras (seed 3)" in out and f"wrote {plot}" in out
 
 
 def test_missing_models_name_the_training_command(random_models, tmp_path):
