@@ -411,10 +411,10 @@ def sample_posterior(
     right). So the readings of :func:`swap_readings` are weighed one by one: each is fitted
     without the swap on the demonstrations so read, weighted by its prior probability times
     its Laplace evidence, and drawn from as above in proportion to its weight
-    (:attr:`Posterior.components`), its chains' ``n_draws`` and ``max_draws`` scaled by its
-    share of the samples; the lightest readings, together at most :data:`LAPLACE_SHARE` of
-    the weight, are drawn from their Laplace approximation. Readings outside that set are not
-    weighed.
+    (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
+    samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
+    together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
+    approximation. Readings outside that set are not weighed.
 
     Returns
     -------
@@ -517,9 +517,10 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     swap and weighted by its prior probability times its Laplace evidence.
 
     Each reading gives its share of the samples (:func:`_apportion`). With ``"mcmc"``, a
-    reading's chains run ``n_draws`` (and at most ``max_draws``) scaled by its share, so that
-    every reading's samples are thinned from as many draws each as the plain posterior's; a
-    reading that holds every sample is drawn exactly as without a swap. The readings of least
+    reading's chains first run ``n_draws`` scaled by its share, so that its samples are
+    thinned from as many draws each as the plain posterior's, and are extended by as many at
+    a time while they disagree (R-hat), up to ``max_draws`` as without a swap; a reading that
+    holds every sample is drawn exactly as without a swap. The readings of least
     weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
     approximation (the Gaussian whose evidence gave their weight) instead of by chains of
     their own, each of which would cost a warm-up as long as the main reading's. The chains
@@ -557,10 +558,10 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         _, theta_z, value_and_grad, laplace, _ = fitted[i]
         if by_laplace[i]:
             opts = {**draw, "method": "laplace"}
-        else:  # the draws per chain scaled by the reading's share
+        else:  # the first draws per chain scaled by the reading's share, extended by as
+            # many at a time while the chains disagree, up to max_draws as without a swap
             scaled = max(-(-draw["n_draws"] * n // n_samples), 4)
-            opts = {**draw, "n_draws": scaled,
-                    "max_draws": max(scaled, -(-draw["max_draws"] * n // n_samples))}
+            opts = {**draw, "n_draws": scaled, "max_draws": max(scaled, draw["max_draws"])}
         thetas[i], diag, _ = _draw(value_and_grad, theta_z, prior_precision, n,
                                    laplace=laplace, **opts)
         diag = replace(diag, ess=np.minimum(diag.ess, n))  # what it gave, at most

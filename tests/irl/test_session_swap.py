@@ -153,8 +153,8 @@ def test_a_posterior_file_keeps_its_readings(tmp_path):
 def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     """The readings' weights are those of the Laplace draws (the same numbers); chains run for
     every reading with samples but the lightest, which together hold at most LAPLACE_SHARE of
-    the weight and are drawn from their Laplace approximation; each reading's chains run
-    n_draws scaled by its share of the samples."""
+    the weight and are drawn from their Laplace approximation; each reading's chains start
+    with n_draws scaled by its share of the samples, and may extend to max_draws."""
     from irl import posterior
 
     _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
@@ -181,7 +181,7 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     assert len(chained) >= 2 and len(runs) == len(chained)
     for c, (_, n_draws, max_draws) in zip(chained, runs, strict=True):
         assert n_draws == max(-(-100 * c.n_samples // 400), 4)
-        assert max_draws == max(n_draws, -(-300 * c.n_samples // 400))
+        assert max_draws == 300  # as long as without a swap, while the chains disagree
     assert post.n_samples == 400 and post.theta.shape == (400, 1)
     assert np.all(np.isfinite(post.diagnostics.r_hat))  # the chains' R-hat, not the Gaussian's
 
