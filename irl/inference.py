@@ -354,6 +354,12 @@ class _Emissions:
         (:meth:`irl.observation.ObservationModel.separable_likelihoods`), else None."""
         return self.observation_model.separable_likelihoods(self.obs[:, t0:t1])
 
+    def kronecker(self, t0: int, t1: int):
+        """``(head, tail, action, shift, min_log)`` of steps t0..t1-1 when the model's state
+        parts are themselves a product of two
+        (:meth:`irl.observation.ObservationModel.kronecker_likelihoods`), else None."""
+        return self.observation_model.kronecker_likelihoods(self.obs[:, t0:t1])
+
     def log(self, t: int) -> np.ndarray:
         """``log O(obs[:, t] | s, a)``, shape (N, S, A), a fresh array."""
         return self.observation_model.log_likelihoods(self.obs[:, t])
@@ -498,7 +504,8 @@ def _numba_pass(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
     """The scaled pass as one compiled loop (:mod:`irl._numba`); ``None`` when it does not
     apply (a time-indexed policy, a batch whose local factors are too large to hold) or its
     range check fails. A batch whose factors are not kept goes in as a state part and an action
-    part when the model factors that way (``N T S`` floats instead of ``N T S A``)."""
+    part when the model factors that way (``N T S`` floats instead of ``N T S A``), its state
+    part as two factors where the model reads the state that way (``N T (S / n + n)``)."""
     from irl import _numba
 
     n_demos, length = shape
@@ -510,16 +517,24 @@ def _numba_pass(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
     csr = mdp._action_major_csr
     operator = (csr.indptr, csr.indices, csr.data)
     pi = np.ascontiguousarray(np.exp(log_policy).T)
-    tail = (np.asarray(lengths, dtype=np.int64), np.exp(log_p0), float(F))
-    parts = None
-    if emissions.factors is None and n_demos * length * S <= _NUMBA_ELEMENTS:
-        parts = emissions.separable(0, length)
-    if parts is not None:
+    tail_args = (np.asarray(lengths, dtype=np.int64), np.exp(log_p0), float(F))
+    parts = kron = None
+    if emissions.factors is None:  # the state parts as two factors, else whole if they fit
+        kron = emissions.kronecker(0, length)
+        if kron is None and n_demos * length * S <= _NUMBA_ELEMENTS:
+            parts = emissions.separable(0, length)
+    if kron is not None:
+        head, tail, action, shift, min_log = kron
+        if min_log + log_pi_min < -F:
+            return None
+        ok, ll, occupancy, initial = _numba.scaled_forward_backward_kronecker(
+            *operator, pi, head, tail, action, shift, *tail_args)
+    elif parts is not None:
         state, action, shift, min_log = parts
         if min_log + log_pi_min < -F:
             return None
         ok, ll, occupancy, initial = _numba.scaled_forward_backward_separable(
-            *operator, pi, state, action, shift, *tail)
+            *operator, pi, state, action, shift, *tail_args)
     else:
         if emissions.factors is None and n_demos * length * S * A > _NUMBA_FACTOR_ELEMENTS:
             return None  # the numpy pass computes them chunk by chunk instead
@@ -527,7 +542,7 @@ def _numba_pass(mdp, log_policy, emissions: _Emissions, shape, lengths, log_p0):
         if not blk.possible or blk.min_log + log_pi_min < -F:
             return None
         ok, ll, occupancy, initial = _numba.scaled_forward_backward(
-            *operator, pi, blk.factor, blk.shift, *tail)
+            *operator, pi, blk.factor, blk.shift, *tail_args)
     if not ok:
         return None
     return PosteriorStats(log_likelihood=ll, occupancy=occupancy, initial=initial)

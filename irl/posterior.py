@@ -52,6 +52,7 @@ from irl.solvers import OptimalQSolver, solve_policy_derivatives
 from irl.stats import effective_sample_size, split_rhat
 
 __all__ = [
+    "LAPLACE_SHARE",
     "METHODS",
     "Diagnostics",
     "PolicyRisk",
@@ -410,7 +411,10 @@ def sample_posterior(
     right). So the readings of :func:`swap_readings` are weighed one by one: each is fitted
     without the swap on the demonstrations so read, weighted by its prior probability times
     its Laplace evidence, and drawn from as above in proportion to its weight
-    (:attr:`Posterior.components`). Readings outside that set are not weighed.
+    (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
+    samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
+    together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
+    approximation. Readings outside that set are not weighed.
 
     Returns
     -------
@@ -501,10 +505,26 @@ def swap_readings(p_swapped: np.ndarray) -> list[tuple[int, ...]]:
     return list(readings)
 
 
+#: The readings of least weight whose draws come from their Laplace approximation, not from
+#: chains of their own: as many as together hold at most this share of the posterior's
+#: weight (with ``method="mcmc"``; see :func:`_draw_swap_readings`).
+LAPLACE_SHARE = 0.05
+
+
 def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples, draw):
     """The posterior of a learner with a ``session_swap``: a mixture over readings of the
     demonstrations (:func:`swap_readings`), each reading's reward posterior drawn as without a
-    swap and weighted by its prior probability times its Laplace evidence."""
+    swap and weighted by its prior probability times its Laplace evidence.
+
+    Each reading gives its share of the samples (:func:`_apportion`). With ``"mcmc"``, a
+    reading's chains first run ``n_draws`` scaled by its share, so that its samples are
+    thinned from as many draws each as the plain posterior's, and are extended by as many at
+    a time while they disagree (R-hat), up to ``max_draws`` as without a swap; a reading that
+    holds every sample is drawn exactly as without a swap. The readings of least
+    weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
+    approximation (the Gaussian whose evidence gave their weight) instead of by chains of
+    their own, each of which would cost a warm-up as long as the main reading's. The chains
+    run first, in the readings' order, then the Gaussian draws."""
     swap = estimator.session_swap
     plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
@@ -524,20 +544,39 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
     counts = _apportion(weights, n_samples)
-    thetas, diags, components = [], [], []
-    for (z, theta_z, value_and_grad, laplace, log_weight), w, n in zip(fitted, weights, counts,
-                                                                      strict=True):
-        components.append(SwapComponent(swapped=z, weight=float(w), log_weight=log_weight,
-                                        n_samples=int(n)))
-        if n:
-            theta, diag, _ = _draw(value_and_grad, theta_z, prior_precision, int(n),
-                                   laplace=laplace, **draw)
-            thetas.append(theta)
-            diags.append(replace(diag, ess=np.minimum(diag.ess, n)))  # what it gave, at most
-    logger.info("posterior over %d readings of %d demonstrations: %s", len(readings), N,
+    by_laplace = np.zeros(len(readings), dtype=bool)
+    if draw["method"] == "mcmc":
+        order = np.argsort(weights, kind="stable")
+        by_laplace[order[np.cumsum(weights[order]) <= LAPLACE_SHARE]] = True
+    thetas: list[np.ndarray | None] = [None] * len(readings)
+    chains: list[Diagnostics] = []
+    gaussian: list[Diagnostics] = []
+    for i in [*np.flatnonzero(~by_laplace), *np.flatnonzero(by_laplace)]:
+        n = int(counts[i])
+        if not n:
+            continue
+        _, theta_z, value_and_grad, laplace, _ = fitted[i]
+        if by_laplace[i]:
+            opts = {**draw, "method": "laplace"}
+        else:  # the first draws per chain scaled by the reading's share, extended by as
+            # many at a time while the chains disagree, up to max_draws as without a swap
+            scaled = max(-(-draw["n_draws"] * n // n_samples), 4)
+            opts = {**draw, "n_draws": scaled, "max_draws": max(scaled, draw["max_draws"])}
+        thetas[i], diag, _ = _draw(value_and_grad, theta_z, prior_precision, n,
+                                   laplace=laplace, **opts)
+        diag = replace(diag, ess=np.minimum(diag.ess, n))  # what it gave, at most
+        (gaussian if by_laplace[i] and draw["method"] == "mcmc" else chains).append(diag)
+    components = tuple(SwapComponent(swapped=z, weight=float(w), log_weight=f[-1],
+                                     n_samples=int(n))
+                       for (z, *f), w, n in zip(fitted, weights, counts, strict=True))
+    logger.info("posterior over %d readings of %d demonstrations: %s%s", len(readings), N,
                 ", ".join(f"swapped {list(c.swapped)} {c.weight:.3f}"
-                          for c in sorted(components, key=lambda c: -c.weight)[:4]))
-    return np.vstack(thetas), _combined(diags), tuple(components)
+                          for c in sorted(components, key=lambda c: -c.weight)[:4]),
+                f"; {int(counts[by_laplace].sum())} samples of readings of weight "
+                f"{weights[by_laplace].sum():.3f} in all drawn from their Laplace "
+                "approximation" if counts[by_laplace].sum() else "")
+    return (np.vstack([t for t in thetas if t is not None]), _combined(chains, gaussian),
+            components)
 
 
 def _apportion(weights: np.ndarray, n: int) -> np.ndarray:
@@ -549,17 +588,20 @@ def _apportion(weights: np.ndarray, n: int) -> np.ndarray:
     return counts
 
 
-def _combined(diags: list[Diagnostics]) -> Diagnostics:
+def _combined(diags: list[Diagnostics], gaussian: Sequence[Diagnostics] = ()) -> Diagnostics:
     """The diagnostics of several components' draws: the worst R-hat of each weight, summed
     sizes (each component's ESS at most the samples it gave) and costs (the chains' and the
-    Hessians' gradients; not the fits of the readings), the mean acceptance."""
+    Hessians' gradients; not the fits of the readings), the mean acceptance. ``gaussian``: the
+    diagnostics of readings drawn from their Laplace approximation beside chains (``diags``),
+    which count in the sizes and costs only."""
+    every = [*diags, *gaussian]
     return Diagnostics(
-        r_hat=np.max([d.r_hat for d in diags], axis=0), ess=np.sum([d.ess for d in diags], axis=0),
+        r_hat=np.max([d.r_hat for d in diags], axis=0), ess=np.sum([d.ess for d in every], axis=0),
         acceptance=float(np.mean([d.acceptance for d in diags])), n_chains=diags[0].n_chains,
         n_warmup=diags[0].n_warmup, n_draws=max(d.n_draws for d in diags),
         n_divergent=sum(d.n_divergent for d in diags),
-        n_gradients=sum(d.n_gradients for d in diags),
-        hessian_clipped=sum(d.hessian_clipped for d in diags))
+        n_gradients=sum(d.n_gradients for d in every),
+        hessian_clipped=sum(d.hessian_clipped for d in every))
 
 
 # -- what the posterior says about the MAP policy ----------------------------------------------

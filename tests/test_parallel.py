@@ -93,6 +93,35 @@ def test_bad_workers_are_refused(bad):
         ParallelOptions(executor="threads")
 
 
+def test_default_workers_leave_a_core_to_each_thread_of_a_piece(monkeypatch, tmp_path):
+    from onionsort.stages import parallel
+    from onionsort.stages.calibrate import CalibrateConfig
+    from onionsort.stages.perceive import PerceiveConfig
+    from onionsort.stages.record import RecordConfig
+
+    assert [parallel.default_workers(1, cores) for cores in (1, 2, 16)] == [1, 2, 16]
+    assert [parallel.default_workers(2, cores) for cores in (1, 2, 3, 16)] == [1, 1, 1, 8]
+    monkeypatch.setattr(parallel, "machine_cores", lambda: 2)
+    session = tmp_path / "a.mcap"
+    session.touch()
+    perceive = PerceiveConfig(sessions=(session,))
+    calibrate = CalibrateConfig(data=Path("d"), out=Path("o"))
+    record = RecordConfig(out=Path("o"))
+    # on two cores, one piece's torch keeps both busy: perceive and calibrate run in the
+    # command; record (one thread a piece) gets both cores
+    assert (perceive.n_workers, calibrate.n_workers, record.n_workers) == (1, 1, 2)
+    assert perceive.parallel_options().workers == 1  # resolved for run_pieces
+    # an explicit count is obeyed, and a stage handed another's options keeps its count
+    assert PerceiveConfig(sessions=(session,), workers=2).n_workers == 2
+    handed = CalibrateConfig(data=Path("d"), out=Path("o"),
+                             **vars(record.parallel_options()))
+    assert handed.n_workers == 2
+    monkeypatch.setattr(parallel, "machine_cores", lambda: 16)
+    assert (perceive.n_workers, record.n_workers) == (8, 16)
+    ray = ParallelOptions(executor="ray")
+    assert ray.parallel_options().workers is None  # a new Ray instance's CPUs: the cores
+
+
 RECORD = ["record", "--sessions", "3", "--steps-per-session", "3", "--frames-per-step", "3",
           "--seed", "5"]
 

@@ -98,6 +98,16 @@ class ObservationModel(abc.ABC):
         """
         return None
 
+    def kronecker_likelihoods(self, obs):
+        """:meth:`separable_likelihoods` with the state part itself a product, for a model
+        whose state is read through independent factors (None otherwise, the default):
+        ``(head, tail, action, shift, min_log)``, with ``state[..., i * n + j] = head[..., i] *
+        tail[..., j]`` for ``n = tail.shape[-1]``. ``S / n + n`` floats per observation instead
+        of ``S``: the compiled forward-backward takes a whole batch's parts this way, never
+        holding (nor touching the memory of) its ``N T S`` state parts.
+        """
+        return None
+
     def scaled_likelihoods(self, obs, *, action_major: bool = False
                            ) -> tuple[np.ndarray, np.ndarray, float]:
         """``O(obs[...] | s, a) = exp(shift[...]) * factor[..., s, a]``, scaled so that nothing

@@ -112,6 +112,17 @@ class FactoredObservationModel(ObservationModel):
         """As :meth:`ObservationModel.separable_likelihoods`: the state part is the product of
         the factors' columns, the action part the action confusion's column, each divided by
         its maximum (the shift is the sum of their log-maxima)."""
+        head, tail, action, shift, min_log = self.kronecker_likelihoods(obs)
+        obs_shape = shift.shape
+        m = shift.size
+        state = (head.reshape(m, -1)[:, :, None] * tail.reshape(m, -1)[:, None, :])
+        return state.reshape((*obs_shape, self.n_states)), action, shift, min_log
+
+    def kronecker_likelihoods(self, obs):
+        """As :meth:`ObservationModel.kronecker_likelihoods`: ``head`` is the product of the
+        columns of every factor but the last (ones of one column for a single factor),
+        ``tail`` the last factor's column, so that ``head[..., i] * tail[..., j]`` is the state
+        part :meth:`separable_likelihoods` returns at ``s = i * n_last + j``, bit for bit."""
         obs = np.asarray(obs)
         flat = obs.reshape(-1)
         m = flat.size
@@ -133,10 +144,14 @@ class FactoredObservationModel(ObservationModel):
         low[occluded] = 0.0
         possible = np.isfinite(shift)
         min_log = float(low[possible].min()) if possible.any() else 0.0
-        state = columns[0]
-        for col in columns[1:-1]:
-            state = (state[:, :, None] * col[:, None, :]).reshape(m, -1)
-        return (state.reshape((*obs.shape, self.n_states)),
+        if len(columns) == 2:  # one factor: the state part is its column, times 1.0
+            head = np.ones((m, 1))
+        else:
+            head = columns[0]
+            for col in columns[1:-2]:
+                head = (head[:, :, None] * col[:, None, :]).reshape(m, -1)
+        tail = columns[-2]
+        return (head.reshape((*obs.shape, -1)), tail.reshape((*obs.shape, -1)),
                 columns[-1].reshape((*obs.shape, self.n_actions)), shift.reshape(obs.shape),
                 min_log)
 

@@ -156,8 +156,9 @@ def add_parallel_arguments(parser: argparse.ArgumentParser, *, pieces: str) -> N
                             "tasks (pip install -e \".[ray]\")")
     group.add_argument("--workers", type=int, metavar="N",
                        help=f"{pieces} at a time: local worker processes, or the CPUs of a new "
-                            "local Ray instance (default: this machine's cores; 1: one after "
-                            "another in this process)")
+                            "local Ray instance (default: one per core, or one per two cores "
+                            "where a piece runs on torch's threads, as in perceive and "
+                            "calibrate; 1: one after another in this process)")
     group.add_argument("--ray-address", metavar="ADDRESS",
                        help="the Ray cluster to join, e.g. auto or ray://head:10001 (default: "
                             "$RAY_ADDRESS, else a local Ray instance of --workers CPUs)")

@@ -23,6 +23,7 @@ import functools
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from onionsort.stages.base import (
     refuse_existing,
 )
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
-from onionsort.stages.parallel import ParallelOptions, run_pieces
+from onionsort.stages.parallel import TORCH_THREADS, ParallelOptions, run_pieces
 
 __all__ = [
     "CalibrateConfig",
@@ -89,6 +90,8 @@ class CalibrateConfig(ParallelOptions):
     inspection: bool = True
     overwrite: bool = False
     device: str = "auto"
+    #: Measuring a session is mostly the classifiers' work, on torch's threads.
+    piece_threads: ClassVar[int] = TORCH_THREADS
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -43,10 +43,20 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import ClassVar, TypeVar
 
-__all__ = ["EXECUTORS", "RAY_EXTRA", "ParallelOptions", "RayExecutor", "WorkerLost",
-           "run_pieces", "torch_threads", "worker_threads"]
+__all__ = [
+    "EXECUTORS",
+    "RAY_EXTRA",
+    "TORCH_THREADS",
+    "ParallelOptions",
+    "RayExecutor",
+    "WorkerLost",
+    "default_workers",
+    "run_pieces",
+    "torch_threads",
+    "worker_threads",
+]
 
 #: Where the pieces of a stage can run.
 EXECUTORS = ("local", "ray")
@@ -72,8 +82,9 @@ class ParallelOptions:
         ``local`` (worker processes on this machine) or ``ray`` (a Ray cluster, or a local
         Ray instance).
     workers : int or None
-        Local worker processes, or the CPUs of a new local Ray instance (None: this machine's
-        cores). 1 runs the pieces in this process, one after another.
+        Local worker processes, or the CPUs of a new local Ray instance (None: as many as the
+        machine's cores take pieces of this stage, :func:`default_workers`). 1 runs the pieces
+        in this process, one after another.
     ray_address : str or None
         The Ray cluster to join with ``executor="ray"`` (None: ``RAY_ADDRESS``, else a new local
         instance).
@@ -82,6 +93,10 @@ class ParallelOptions:
     executor: str = "local"
     workers: int | None = None
     ray_address: str | None = None
+    #: Cores one piece of this stage keeps busy when it runs in the command: 1 for most, the
+    #: torch threads it would get there (:func:`torch_threads`) for a stage whose pieces are
+    #: mostly a network's work (perceive, calibrate). The default ``workers`` follows from it.
+    piece_threads: ClassVar[int] = 1
 
     def __post_init__(self) -> None:
         if self.executor not in EXECUTORS:
@@ -97,13 +112,40 @@ class ParallelOptions:
 
     @property
     def n_workers(self) -> int:
-        """``workers``, or this machine's cores."""
-        return self.workers if self.workers is not None else max(os.cpu_count() or 1, 1)
+        """``workers``, or :func:`default_workers` for this stage's ``piece_threads``."""
+        return self.workers if self.workers is not None else default_workers(self.piece_threads)
 
     def parallel_options(self) -> ParallelOptions:
-        """These fields alone (to hand on to another stage)."""
-        return ParallelOptions(executor=self.executor, workers=self.workers,
+        """These fields alone (to hand on to another stage, or to :func:`run_pieces`), with a
+        local pool's default worker count resolved for this stage: a stage run inside another
+        (the demo's calibration and perceiving) runs on the workers its caller chose."""
+        workers = self.n_workers if self.executor == "local" else self.workers
+        return ParallelOptions(executor=self.executor, workers=workers,
                                ray_address=self.ray_address)
+
+
+def machine_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # no affinity on this system (macOS, Windows)
+        return max(os.cpu_count() or 1, 1)
+
+
+def default_workers(piece_threads: int = 1, cores: int | None = None) -> int:
+    """Workers of a stage whose ``workers`` is not given: ``cores // min(piece_threads,
+    cores)``, at least 1 (and never more than the pieces: :func:`run_pieces` starts at most
+    one worker per piece).
+
+    A worker runs a piece on one thread (:func:`worker_threads`); in the command it would run
+    on ``piece_threads``. Where one piece already keeps all the cores busy (perceiving on two
+    cores: torch's two threads), a second worker only adds its start-up (importing torch,
+    loading the models) and makes two processes fight for the cores, so the stage runs its
+    pieces in the command, one after another; a stage whose pieces run on one thread (recording,
+    rendering, evaluating, learning) gets a worker per core. On 16 cores, perceiving gets 8.
+    """
+    cores = machine_cores() if cores is None else cores
+    return max(1, cores // max(1, min(piece_threads, cores)))
 
 
 def worker_threads() -> int | None:
@@ -112,10 +154,15 @@ def worker_threads() -> int | None:
     return _WORKER_THREADS
 
 
-def torch_threads(default: int = 2) -> int:
+#: Threads a stage runs torch on in the command (outside a worker), by default.
+TORCH_THREADS = 2
+
+
+def torch_threads(default: int = TORCH_THREADS) -> int:
     """Threads a stage runs torch on: 1 in a worker of :func:`run_pieces`, else ``default``.
 
-    A pool has as many workers as the machine has cores (or fewer, with fewer pieces), so one
+    A pool has at most as many workers as the machine has cores (or fewer, with fewer pieces,
+    or where each piece would use more than one core: :func:`default_workers`), so one
     thread each keeps them from oversubscribing the cores: two torch pools of two threads each
     on two cores wait on each other's spinning threads and run several times slower."""
     return worker_threads() or default

@@ -17,12 +17,13 @@ import functools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from onionsort.stages.base import check_device, check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
-from onionsort.stages.parallel import ParallelOptions, run_pieces
+from onionsort.stages.parallel import TORCH_THREADS, ParallelOptions, run_pieces
 
 __all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
 
@@ -56,6 +57,8 @@ class PerceiveConfig(ParallelOptions):
     replace: bool = False
     batch_size: int = 32
     device: str = "auto"
+    #: Perceiving a session is mostly the networks' work, on torch's threads.
+    piece_threads: ClassVar[int] = TORCH_THREADS
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -148,3 +148,55 @@ def test_a_posterior_file_keeps_its_readings(tmp_path):
     assert back.components == post.components and len(back.components) == 4
     a = sample_posterior(est, demos, n_samples=100, seed=0, method="laplace")
     np.testing.assert_array_equal(a.theta, post.theta)  # a seed reproduces them
+
+
+def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
+    """The readings' weights are those of the Laplace draws (the same numbers); chains run for
+    every reading with samples but the lightest, which together hold at most LAPLACE_SHARE of
+    the weight and are drawn from their Laplace approximation; each reading's chains start
+    with n_draws scaled by its share of the samples, and may extend to max_draws."""
+    from irl import posterior
+
+    _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
+    demos = [est.session_swap.apply(demos[0]), demos[1]]
+    runs = []
+    real = posterior._run_chains
+
+    def spy(value_and_grad, mean, chol, **kw):
+        runs.append((mean.copy(), kw["n_draws"], kw["max_draws"]))
+        return real(value_and_grad, mean, chol, **kw)
+
+    monkeypatch.setattr(posterior, "_run_chains", spy)
+    monkeypatch.setattr(posterior, "LAPLACE_SHARE", 0.2)  # so that a reading is left out here
+    post = sample_posterior(est, demos, n_samples=400, seed=0, method="mcmc", n_draws=100,
+                            n_warmup=50)
+    gauss = sample_posterior(est, demos, n_samples=400, seed=0, method="laplace")
+    weights = np.array([c.weight for c in post.components])
+    np.testing.assert_array_equal(weights, [c.weight for c in gauss.components])
+    order = np.argsort(weights, kind="stable")
+    light = order[np.cumsum(weights[order]) <= 0.2]
+    assert light.size and weights[light].sum() <= 0.2
+    chained = [c for i, c in enumerate(post.components) if c.n_samples and i not in light]
+    assert len(chained) >= 2 and len(runs) == len(chained)
+    for c, (_, n_draws, max_draws) in zip(chained, runs, strict=True):
+        assert n_draws == max(-(-100 * c.n_samples // 400), 4)
+        assert max_draws == 300  # as long as without a swap, while the chains disagree
+    assert post.n_samples == 400 and post.theta.shape == (400, 1)
+    assert np.all(np.isfinite(post.diagnostics.r_hat))  # the chains' R-hat, not the Gaussian's
+
+
+def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():
+    """Where one reading gets every sample, the draws for a seed are those of the plain
+    posterior of that reading (the same chains, the same length)."""
+    _dom, est, swap, demos = sorting_problem(seed=2, rate=0.1)
+    read = [swap.apply(demos[0]), swap.apply(demos[1]), demos[2]]
+    kw = {"n_samples": 8, "seed": 3, "method": "mcmc", "n_chains": 2, "n_warmup": 20,
+          "n_draws": 20}
+    post = sample_posterior(est, read, **kw)
+    holding = [c for c in post.components if c.n_samples]
+    assert len(holding) == 1 and holding[0].swapped == (0, 1)
+    plain = irl.MMAPBIRL(**{**est.get_params(), "session_swap": None})
+    alone = sample_posterior(plain, [swap.apply(d) if i in (0, 1) else d
+                                     for i, d in enumerate(read)], **kw)
+    np.testing.assert_array_equal(post.theta, alone.theta)
