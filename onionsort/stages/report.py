@@ -35,6 +35,7 @@ from pathlib import Path
 
 from onionsort.configs.report import ReportConfig
 from onionsort.stages.base import check_output_folder, log_config, write_text
+from onionsort.stages.table1 import METHODS, PAPER_TABLE_1, table
 
 __all__ = ["KINDS", "PR_FIGURE", "REPORT_FILE", "ReportConfig", "report", "run_kind"]
 
@@ -233,8 +234,6 @@ def _recordings(folder: Path) -> list[str]:
 
 
 def _demo(folder: Path) -> list[str]:
-    from onionsort.stages.demo import METHODS, PAPER_TABLE_1, table
-
     results = _read(folder / "results.json")
     started = {}
     if (folder / "progress" / "config.json").is_file():
