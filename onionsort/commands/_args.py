@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from onionsort.configs.export import EXPORT_FORMATS as EXPORT_FORMATS
+from onionsort.configs.export import ROS2_STORAGES as ROS2_STORAGES
+
 
 def add_session_arguments(parser: argparse.ArgumentParser, *, occlusion: float) -> None:
     """``--seed``, ``--occlusion``, ``--steps-per-session`` and ``--frames-per-step``."""
@@ -42,19 +45,17 @@ FUSION_RULES = ("noisy-or", "log-odds")
 INSPECTION_CAMERAS = ("both", "robot")
 #: The choices below are repeated too, so that building the parser (every command does, at
 #: start) imports neither ``irl`` (and scipy) nor every stage: :data:`onionsort.stages.base.
-#: DEVICES`, :data:`irl.inference.BACKENDS`, :data:`irl.experiments.METHODS`,
-#: :data:`onionsort.stages.export.EXPORT_FORMATS` and ``ROS2_STORAGES``
+#: DEVICES`, :data:`irl.inference.BACKENDS` and :data:`irl.experiments.METHODS`
+#: (the export's choices come from its config, :mod:`onionsort.configs.export`)
 DEVICES = ("auto", "cpu", "cuda")
 BACKENDS = ("numpy", "numba")
 METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
 #: The four reward learners of the paper: what ``experiment`` runs by default
 IRL_METHODS = METHODS[:4]
-EXPORT_FORMATS = ("ros2",)
 #: :data:`onionsort.stages.label.LABEL_FORMATS`, repeated for the same reason
 LABEL_FORMATS = ("coco", "yolo")
 #: :data:`onionsort.stages.label_select.SELECT_FORMATS`, repeated for the same reason
 SELECT_FORMATS = ("coco", "labelstudio")
-ROS2_STORAGES = ("mcap", "sqlite3")
 
 
 def add_device_argument(parser: argparse.ArgumentParser) -> None:

@@ -17,33 +17,22 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from onionsort.commands._args import EXPORT_FORMATS, ROS2_STORAGES, subcommand
+from onionsort.commands._args import subcommand
+from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.configs.export import ExportConfig
 
 
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "export", __doc__,
                         "export a session as a ROS 2 bag (rosbag2 folder)")
-    parser.add_argument("session", type=Path, metavar="SESSION", help="a session file (.mcap)")
-    parser.add_argument("--format", choices=EXPORT_FORMATS, default="ros2",
-                        help="what to write: ros2, a rosbag2 folder (the default, and the only "
-                             "format for now)")
-    parser.add_argument("--out", type=Path, required=True,
-                        help="the folder to create (refused if it exists)")
-    parser.add_argument("--raw-images", action="store_true",
-                        help="decoded rgb8 sensor_msgs/Image instead of the session's JPEG and "
-                             "PNG bytes as CompressedImage")
-    parser.add_argument("--storage", choices=ROS2_STORAGES, default="mcap",
-                        help="the rosbag2 storage plugin: mcap (default) or sqlite3")
+    add_config_arguments(parser, ExportConfig)
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from onionsort.stages import ExportConfig, export_session
+    from onionsort.stages import export_session
 
-    s = export_session(ExportConfig(session=args.session, out=args.out, format=args.format,
-                                    raw_images=args.raw_images, storage=args.storage))
+    s = export_session(config_from_args(ExportConfig, args))
     print(f"exported {s.n_frames} frames of {args.session} to {s.path} ({s.storage}, "
           f"{s.n_messages} messages on {len(s.topics)} topics)")
     return 0

@@ -20,23 +20,21 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from onionsort.commands._args import subcommand
+from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.configs.report import ReportConfig
 
 
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "report", __doc__,
                         "write a run folder's settings and results as RUN_DIR/report.md")
-    parser.add_argument("run", type=Path, metavar="RUN_DIR",
-                        help="a folder of `onionsort demo`, `experiment`, `learn` or "
-                             "`evaluate`")
+    add_config_arguments(parser, ReportConfig)
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from onionsort.stages.report import ReportConfig, report, run_kind
+    from onionsort.stages.report import report, run_kind
 
-    path = report(ReportConfig(run=args.run))
+    path = report(config_from_args(ReportConfig, args))
     print(f"wrote {path} ({run_kind(args.run)} run)")
     return 0

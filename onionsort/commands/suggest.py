@@ -14,25 +14,24 @@ Examples
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from onionsort.commands._args import subcommand
+from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.configs.suggest import SuggestConfig
 
 
 def register(subparsers) -> None:
     parser = subcommand(subparsers, "suggest", __doc__,
                         "the states where another demonstration would help the robot most")
-    parser.add_argument("run", type=Path, metavar="RUN_DIR",
-                        help="a folder of `onionsort learn --posterior`")
-    parser.add_argument("--top", type=int, default=5, help="states to list (5)")
+    add_config_arguments(parser, SuggestConfig)
     parser.add_argument("--json", action="store_true", help="print the list as JSON")
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from onionsort.stages.suggest import SuggestConfig, suggest
+    from onionsort.stages.suggest import suggest
 
-    rows = suggest(SuggestConfig(run=args.run, top=args.top))
+    rows = suggest(config_from_args(SuggestConfig, args))
     if args.json:
         print(json.dumps(rows))
         return 0

@@ -62,18 +62,12 @@ from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
 from onionsort.stages.report import ReportConfig, report
+from onionsort.stages.table1 import METHODS, PAPER_TABLE_1, table
 
 __all__ = ["METHODS", "PAPER_TABLE_1", "DemoConfig", "demo", "table"]
 
 logger = logging.getLogger(__name__)
 
-#: The paper's Table 1 (50 physical onions): TP, FP, TN, FN, precision, recall.
-PAPER_TABLE_1 = {
-    "mmap-birl": {"tp": 23, "fp": 2, "tn": 18, "fn": 7, "precision": 0.92, "recall": 0.767},
-    "hidden-data-em": {"tp": 16, "fp": 10, "tn": 15, "fn": 9, "precision": 0.615,
-                       "recall": 0.64},
-}
-METHODS = ("mmap-birl", "map-birl", "hidden-data-em")
 #: The demo's line-up and recording sizes, full and quick.
 SIZES = {False: {"sessions": 12, "steps": 20, "heldout": 1500, "onions": 50, "blemished": 30},
          True: {"sessions": 4, "steps": 12, "heldout": 360, "onions": 10, "blemished": 6}}
@@ -542,32 +536,3 @@ def _ile(model: dict) -> dict[str, float]:
     return {"ile": float(inverse_learning_error(domain.mdp, domain.true_theta, **learned)),
             "normalized_ile": float(normalized_inverse_learning_error(
                 domain.mdp, domain.true_theta, **learned))}
-
-
-def table(results: dict) -> str:
-    """The paper's Table 1 beside ours, as Markdown (ours with 95% intervals; with deferral,
-    the same line-ups sorted deferring, precision and recall over the onions not deferred)."""
-    rows = ["| method | source | TP | FP | TN | FN | precision | recall "
-            "| ILE (% of the expert's value) |",
-            "|---|---|---|---|---|---|---|---|---|"]
-    ours = f"ours (simulation, {results.get('repeats', 1)} repeat(s))"
-    for method in results["methods"]:
-        sources = [(ours, results["methods"][method])]
-        if method in results.get("deferring", {}):
-            deferring = results["deferring"][method]
-            sources.append((f"ours, deferring below {results['defer_below']:g} "
-                            f"({deferring['deferred']} deferred, rate "
-                            f"{deferring['deferral_rate']:.3f})", deferring))
-        if method in PAPER_TABLE_1:
-            sources.insert(0, ("paper (physical robot)", PAPER_TABLE_1[method]))
-        for source, r in sources:
-            ile = f"{r['ile']:.3f}" if "ile" in r else "-"
-            if "normalized_ile" in r:
-                ile += f" ({r['normalized_ile']:.1f}%)"
-            p, rc = f"{r['precision']:.3f}", f"{r['recall']:.3f}"
-            if "precision_ci" in r:
-                p += " [{:.2f}, {:.2f}]".format(*r["precision_ci"])
-                rc += " [{:.2f}, {:.2f}]".format(*r["recall_ci"])
-            rows.append(f"| {method} | {source} | {r['tp']} | {r['fp']} | {r['tn']} | "
-                        f"{r['fn']} | {p} | {rc} | {ile} |")
-    return "\n".join(rows)

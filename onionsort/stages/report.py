@@ -31,10 +31,11 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
+from onionsort.configs.report import ReportConfig
 from onionsort.stages.base import check_output_folder, log_config, write_text
+from onionsort.stages.table1 import METHODS, PAPER_TABLE_1, table
 
 __all__ = ["KINDS", "PR_FIGURE", "REPORT_FILE", "ReportConfig", "report", "run_kind"]
 
@@ -61,25 +62,6 @@ SWEEP_FIGURES = (
 CELLS = ("tp", "fp", "tn", "fn")
 _EXPECTED = ("a run folder of `onionsort demo`, `onionsort experiment`, `onionsort learn` or "
              "`onionsort evaluate` (results.json, summary.json, model.json or evaluation.json)")
-
-
-@dataclass(frozen=True)
-class ReportConfig:
-    """Which run folder to report on.
-
-    Attributes
-    ----------
-    run : Path
-        A folder written by ``onionsort demo``, ``experiment``, ``learn`` or ``evaluate``;
-        ``report.md`` (and ``report_pr.png`` where there are sorting counts) go into it.
-    """
-
-    run: Path
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.run, str | Path):
-            raise TypeError(f"run must be a path; got {type(self.run).__name__}")
-        object.__setattr__(self, "run", Path(self.run))
 
 
 def report(config: ReportConfig) -> Path:
@@ -252,8 +234,6 @@ def _recordings(folder: Path) -> list[str]:
 
 
 def _demo(folder: Path) -> list[str]:
-    from onionsort.stages.demo import METHODS, PAPER_TABLE_1, table
-
     results = _read(folder / "results.json")
     started = {}
     if (folder / "progress" / "config.json").is_file():

@@ -16,32 +16,12 @@ Example::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
+from onionsort.configs.suggest import SuggestConfig
 from onionsort.stages.base import log_config
 
 __all__ = ["SuggestConfig", "suggest"]
-
-
-@dataclass(frozen=True)
-class SuggestConfig:
-    """Which learning run, and how many states to list.
-
-    Attributes
-    ----------
-    run : Path
-        A folder written by ``onionsort learn --posterior``.
-    top : int
-        The most states to list (5).
-    """
-
-    run: Path
-    top: int = 5
-
-    def __post_init__(self) -> None:
-        if isinstance(self.top, bool) or not isinstance(self.top, int) or self.top < 1:
-            raise ValueError(f"top must be an int >= 1; got {self.top!r}")
 
 
 def suggest(config: SuggestConfig) -> list[dict]:
