@@ -31,6 +31,17 @@ without changing its decision. Under ``noisy-or`` a view showing rot settles a b
 (a clean view lowers the odds by ``1 - visibility`` at most), and a good onion is never settled
 early (one more view could show rot); under ``log-odds`` a view can say as much either way, and
 a call settles only once the views so far outweigh all those to come.
+
+**Calibrating the fused probability.** Neither rule's fused probability is calibrated as it
+stands: the views are not independent given the class, and ``noisy-or`` with a small
+``visibility`` leaves a good onion near the prior odds times ``(1 - visibility)^K`` (about 0.2
+after 5 clean views), while a view of rot puts a blemished one near 1. A ``calibration``
+``(low, high)``, both ``> 0``, scales the fused evidence ``E`` (the sum of the views' terms) by
+one temperature on each side of 0: the log-odds become ``logit(prior) + low E`` where ``E < 0``
+and ``logit(prior) + high E`` where ``E >= 0``. It is monotone (more blemished evidence never
+lowers the probability) and leaves the sign of ``E`` alone: at a threshold equal to the
+prior, every call is the call uncalibrated; only how sure it is changes. :func:`settled`
+applies it to its bounds, so that a call settled under it stays settled.
 """
 
 from __future__ import annotations
@@ -39,6 +50,7 @@ import numpy as np
 
 __all__ = [
     "FUSION_RULES",
+    "check_calibration",
     "cost_threshold",
     "expected_calibration_error",
     "fuse",
@@ -69,8 +81,30 @@ def _check_probability(value, name: str, *, open_interval: bool = True) -> float
     return v
 
 
+def check_calibration(calibration) -> tuple[float, float] | None:
+    """``calibration`` as ``(low, high)`` floats (None stays None).
+
+    Raises
+    ------
+    ValueError
+        Unless it is None or two finite numbers > 0 (a map that could lower the probability
+        as the evidence of a blemish grows is refused).
+    """
+    if calibration is None:
+        return None
+    try:
+        low, high = (float(x) for x in calibration)
+    except (TypeError, ValueError):
+        raise ValueError(f"calibration must be two slopes (low, high); got {calibration!r}") \
+            from None
+    if not (np.isfinite(low) and np.isfinite(high) and low > 0 and high > 0):
+        raise ValueError(f"calibration must be two finite slopes > 0 (monotone); got "
+                         f"{calibration!r}")
+    return low, high
+
+
 def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: float = 0.5,
-         visibility: float = 0.8) -> float:
+         visibility: float = 0.8, calibration=None) -> float:
     """One probability that the onion is blemished from its views' probabilities.
 
     Parameters
@@ -87,6 +121,9 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
         to.
     visibility : float in (0, 1]
         The chance that a view of a blemished onion shows its rot (``"noisy-or"`` only).
+    calibration : (float, float) or None
+        ``(low, high)``, both ``> 0``: the fused evidence ``E`` scaled by ``low`` where it is
+        negative and by ``high`` where it is not (see the module docstring); None: as fused.
 
     Raises
     ------
@@ -95,7 +132,8 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
     """
     if np.asarray(view_p).size == 0:
         raise ValueError("view_p must hold at least one view's probability; got none")
-    odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility)
+    odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility,
+                    calibration=calibration)
     return float(1.0 / (1.0 + np.exp(-odds)))
 
 
@@ -125,15 +163,27 @@ def _checked(view_p, rule: str, prior, train_prior, visibility) -> tuple[np.ndar
 
 
 def log_odds(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: float = 0.5,
-             visibility: float = 0.8) -> float:
+             visibility: float = 0.8, calibration=None) -> float:
     """The fused log-odds that the onion is blemished (:func:`fuse` before the sigmoid); with
-    no views, the line's prior log-odds. Arguments as for :func:`fuse`."""
+    no views, the line's prior log-odds. Arguments as for
+    :func:`fuse`."""
     p, prior, train_prior, v = _checked(view_p, rule, prior, train_prior, visibility)
-    return float(logit(prior)) + float(np.sum(_view_terms(p, rule, train_prior, v)))
+    return _calibrated(float(logit(prior)), float(np.sum(_view_terms(p, rule, train_prior, v))),
+                       check_calibration(calibration))
+
+
+def _calibrated(base: float, evidence, calibration: tuple[float, float] | None):
+    """``base + evidence`` as fused, or with ``evidence`` scaled by ``calibration``'s slope of
+    its side of 0."""
+    if calibration is None:
+        return base + evidence
+    low, high = calibration
+    return base + (low if evidence < 0 else high) * evidence
 
 
 def settled(view_p, remaining: int, rule: str = "noisy-or", *, threshold: float = 0.5,
-            prior: float = 0.5, train_prior: float = 0.5, visibility: float = 0.8) -> bool:
+            prior: float = 0.5, train_prior: float = 0.5, visibility: float = 0.8,
+            calibration=None) -> bool:
     """Whether the call on an onion seen in views ``view_p`` (those that showed it; possibly
     none) can no longer change: whatever ``remaining`` more views show (or if they miss the
     onion), its fused probability stays on the same side of ``threshold``.
@@ -141,20 +191,24 @@ def settled(view_p, remaining: int, rule: str = "noisy-or", *, threshold: float 
     Each further view adds a term between its values at ``p = 1e-6`` and ``p = 1 - 1e-6`` (or
     nothing, if it misses the onion), so the call is settled when the log-odds stay at or
     above the threshold's after ``remaining`` of the lowest terms, or below it after as many
-    of the highest. Other arguments as for :func:`fuse`.
+    of the highest; a ``calibration`` maps both bounds (it is monotone). Other arguments as
+    for :func:`fuse`.
     """
     if isinstance(remaining, bool) or not isinstance(remaining, int | np.integer) \
             or remaining < 0:
         raise ValueError(f"remaining must be an int >= 0; got {remaining!r}")
     threshold = _check_probability(threshold, "threshold")
+    calibration = check_calibration(calibration)
     odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility)
     if remaining == 0:
         return True  # nothing left to see
     low, high = _view_terms(np.array([0.0, 1.0]), rule, train_prior, visibility)
+    base = float(logit(prior))
+    lowest = _calibrated(base, odds - base + remaining * min(low, 0.0), calibration)
+    highest = _calibrated(base, odds - base + remaining * max(high, 0.0), calibration)
     cut = float(np.log(threshold) - np.log1p(-threshold))  # not clipped, as the call is not
     margin = 1e-9 * max(1.0, abs(cut))  # the call itself compares probabilities, not log-odds
-    return bool(odds + remaining * min(low, 0.0) >= cut + margin
-                or odds + remaining * max(high, 0.0) < cut - margin)
+    return bool(lowest >= cut + margin or highest < cut - margin)
 
 
 def cost_threshold(miss: float, waste: float) -> float:

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from perception.fusion import FUSION_RULES, fuse, settled
+from perception.fusion import FUSION_RULES, check_calibration, fuse, settled
 
 __all__ = [
     "CROP_MARGIN",
@@ -298,13 +298,19 @@ class InspectionClassifier:
         views; the ``noisy-or`` rule's).
     rule : {"noisy-or", "log-odds"}
         The fusion rule chosen for this model (on validation onions).
+    fused_calibration : dict
+        Per fusion rule, the slopes ``(low, high)`` that calibrate the fused probability
+        (:func:`perception.fusion.fuse`'s ``calibration``; fitted on held-out onions by
+        :func:`onionsort.stages.inspection.fit_fused_calibration`); a rule not in it is fused
+        as it stands.
     device : torch.device
     """
 
     def __init__(self, net: InspectionNet, temperature: float = 1.0,
                  platt: tuple[float, float] = (1.0, 0.0), train_prior: float = 0.5, *,
                  rot_prior: float = 0.5, visibility: float = 0.8, rule: str = "noisy-or",
-                 metadata: dict | None = None, device: str | torch.device = "cpu") -> None:
+                 metadata: dict | None = None, device: str | torch.device = "cpu",
+                 fused_calibration: dict | None = None) -> None:
         if not temperature > 0:
             raise ValueError(f"temperature must be > 0; got {temperature}")
         if not 0.0 < train_prior < 1.0:
@@ -324,6 +330,20 @@ class InspectionClassifier:
         self.visibility = float(visibility)
         self.rule = rule
         self.metadata = dict(metadata or {})
+        self.fused_calibration: dict[str, tuple[float, float]] = {}
+        for key, value in (fused_calibration or {}).items():
+            self.set_fused_calibration(key, value)
+
+    def set_fused_calibration(self, rule: str, calibration) -> None:
+        """Calibrate the fused probability of ``rule`` by ``calibration`` ``(low, high)``, > 0
+        (None: fuse as it stands)."""
+        if rule not in FUSION_RULES:
+            raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
+        checked = check_calibration(calibration)
+        if checked is None:
+            self.fused_calibration.pop(rule, None)
+        else:
+            self.fused_calibration[rule] = checked
 
     @classmethod
     def load(cls, path: Path | str, device: str | torch.device = "cpu") -> InspectionClassifier:
@@ -399,14 +419,15 @@ class InspectionClassifier:
         calibration: under ``rule``, for a line whose share of blemished onions is
         ``prior``."""
         return fuse(view_p, rule, prior=prior, train_prior=self._train_prior(rule),
-                    visibility=self.visibility)
+                    visibility=self.visibility, calibration=self.fused_calibration.get(rule))
 
     def settled(self, view_p: Sequence[float], remaining: int, rule: str, *,
                 threshold: float, prior: float = 0.5) -> bool:
         """:func:`perception.fusion.settled` for views this classifier read: whether the
         call at ``threshold`` stays the same whatever ``remaining`` more views show."""
         return settled(view_p, remaining, rule, threshold=threshold, prior=prior,
-                       train_prior=self._train_prior(rule), visibility=self.visibility)
+                       train_prior=self._train_prior(rule), visibility=self.visibility,
+                       calibration=self.fused_calibration.get(rule))
 
     def _train_prior(self, rule: str) -> float:
         """The share the per-view probabilities of ``rule`` are calibrated to."""

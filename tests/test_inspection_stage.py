@@ -65,6 +65,11 @@ def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(d
     assert shipped.robot_inspection is None or shipped.inspector(camera="robot").classifier \
         is shipped.robot_inspection
     assert "robot_inspection_sha256" in models.describe()
+    if "fused_calibration" in metrics:  # fitted on the robot's val onions, applied on loading
+        assert models.robot_inspection.fused_calibration == {
+            rule: (fit["low"], fit["high"])
+            for rule, fit in metrics["fused_calibration"]["rules"].items()}
+        assert models.inspection.fused_calibration == {}
     # the robot's views are measured with its own classifier, the sorter's with the shared one
     report = measure_inspection(models, dataset, "all", views=3)
     assert report["robot_rule"] == "log-odds" and report["rule"] == shipped.inspection.rule

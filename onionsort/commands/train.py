@@ -7,12 +7,20 @@ Examples
     onionsort train detector --data runs/data --out runs/perception
     onionsort train detector --data runs/data --out runs/perception --resume
     onionsort train inspection --data runs/data --out runs/perception
+    onionsort train robot-fusion --data runs/heldout-a --data runs/heldout-b \\
+        --models runs/perception --out runs/perception
     onionsort train state-classifier --data runs/data --out runs/plain --no-augment
     onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \
         --init runs/perception/detector.pt --epochs 6 --lr 5e-4 --out runs/lab-models
 
 Every model is trained with photometric augmentation unless ``--no-augment``: each training
 sample is seen through a camera of its own (``perception.photometric``); evaluation never is.
+
+``robot-fusion`` trains no network: it fits the calibration of the robot's fused P(blemished)
+(a temperature on each side of the fused evidence's 0: monotone, and the call unchanged) on
+held-out robot onions and writes ``robot_fusion_calibration.json``, which the robot's
+inspection then applies. ``train inspection --camera robot`` writes one too, fitted on its
+validation onions.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from onionsort.commands._args import add_device_argument
+from onionsort.commands._args import add_device_argument, add_models_argument
 
 __all__ = ["register"]
 
@@ -88,6 +96,22 @@ def register(subparsers) -> None:
     det.add_argument("--resume", action="store_true",
                      help="continue the run in --out from its last checkpoint")
     det.set_defaults(func=run_detector)
+    fus = models.add_parser("robot-fusion",
+                            help="calibrate the robot's fused P(blemished) on held-out onions")
+    fus.add_argument("--data", type=Path, required=True, action="append",
+                     help="held-out dataset folder with robot onions (repeat it to pool "
+                          "several); never the data the calibration is then measured on")
+    fus.add_argument("--split", choices=("train", "val", "test", "all"), default="all",
+                     help="the split whose robot onions fit it (all)")
+    fus.add_argument("--views", type=int, default=None,
+                     help="the first VIEWS views of each onion (default: as many as the "
+                          "robot takes)")
+    fus.add_argument("--out", type=Path, required=True,
+                     help="folder to write robot_fusion_calibration.json into (the models "
+                          "folder, for the robot to apply it)")
+    add_models_argument(fus)
+    add_device_argument(fus)
+    fus.set_defaults(func=run_robot_fusion)
 
 
 def run_state_classifier(args: argparse.Namespace) -> int:
@@ -169,4 +193,19 @@ def run_inspection(args: argparse.Namespace) -> int:
         print(f"  fused by {rule}: accuracy {m['accuracy']:.3f}, log-loss {m['log_loss']:.3f} "
               f"on {m['n_onions']} onions")
     print(f"fusion rule: {metrics['rule']}; wrote {args.out / metrics['file']}")
+    return 0
+
+
+def run_robot_fusion(args: argparse.Namespace) -> int:
+    from onionsort.stages.inspection import FusionCalibrationConfig, fit_robot_fusion_stage
+
+    doc = fit_robot_fusion_stage(FusionCalibrationConfig(
+        data=tuple(args.data), out=args.out, split=args.split, models=args.models,
+        views=args.views, device=args.device))
+    for rule, fit in doc["rules"].items():
+        print(f"  fused by {rule}: slopes {fit['low']:.3f} below 0, {fit['high']:.3f} above, on "
+              f"{fit['onions']} onions "
+              f"({fit['blemished']} blemished); ECE here {fit['ece_before']:.3f} -> "
+              f"{fit['ece_after']:.3f}")
+    print(f"wrote {args.out / 'robot_fusion_calibration.json'}")
     return 0

@@ -35,8 +35,19 @@ from onionsort.stages.base import (
     write_json,
 )
 
-__all__ = ["INSPECTION_CAMERAS", "MIN_CROP_PIXELS", "InspectionTrainStageConfig", "InspectionViews",
-           "inspection_views", "measure_inspection", "train_inspection_stage"]
+__all__ = [
+    "INSPECTION_CAMERAS",
+    "MIN_CROP_PIXELS",
+    "FusionCalibrationConfig",
+    "InspectionTrainStageConfig",
+    "InspectionViews",
+    "fit_fused_calibration",
+    "fit_robot_fusion_stage",
+    "fit_side_slopes",
+    "inspection_views",
+    "measure_inspection",
+    "train_inspection_stage",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -344,6 +355,20 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     prefix = "robot_" if config.camera == "robot" else ""
     metrics["file"] = prefix + INSPECTION_FILE
     classifier.save(config.out / metrics["file"])
+    if config.camera == "robot":  # the robot's fused P(blemished), calibrated on val onions
+        from robot.inspection_poses import INSPECTION_VIEWS
+
+        shown = val.view < INSPECTION_VIEWS  # the views the robot shows an onion from
+        if len(set(val.classes[shown].tolist())) == 2:
+            fitted = fit_fused_calibration(
+                classifier, val.subset(shown),
+                {rule: classifier.calibrated(z[shown], rule) for rule in FUSION_RULES})
+            metrics["fused_calibration"] = _write_fused_calibration(
+                config.out, fitted, {"fitted_on": "the validation onions of the training data",
+                                     "data": [str(d) for d in config.data]})
+        else:
+            logger.warning("the validation onions are of one class: the robot's fused "
+                           "probability is left uncalibrated (`onionsort train robot-fusion`)")
     write_json(config.out / f"{prefix}inspection_metrics.json", metrics)
     return metrics
 
@@ -360,6 +385,152 @@ def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray
     fused = np.array([classifier.fuse(p[groups[k]], rule) for k in keys])
     classes = np.array([views.classes[groups[k][0]] for k in keys])
     return fused, classes, keys
+
+
+def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.ndarray]
+                          ) -> dict[str, dict]:
+    """Per fusion rule, the calibration ``(low, high)`` of the fused probability of
+    ``classifier`` on the onions of ``views`` (found views only): each onion's fused evidence
+    ``E`` (its log-odds fused at prior 1/2, uncalibrated) is scaled by one temperature where
+    ``E < 0`` and by another where ``E >= 0`` (:func:`perception.fusion.fuse`), each fitted on
+    the onions of its side against their class with Platt's targets (``(n+ + 1) / (n+ + 2)``
+    and ``1 / (n- + 2)``, the counts of the side's classes, so that a side of one class gives a
+    finite slope; :func:`perception.inspection.fit_temperature`). The sign of ``E`` is kept, so
+    on a line of prior 1/2 every call at the cost threshold 1/2 stays as it was; only how sure
+    it is changes. A side with no onion keeps slope 1. ``p``: per rule, each row's per-view
+    probability (:meth:`~perception.inspection.InspectionClassifier.calibrated`).
+
+    Returns
+    -------
+    dict
+        Per rule: ``low``, ``high``, ``onions``, ``blemished`` and the expected calibration
+        error on these onions before and after (``ece_before``, ``ece_after``; in-sample).
+
+    Raises
+    ------
+    ValueError
+        If the views hold no onion of one class.
+    """
+    from perception.fusion import expected_calibration_error, fuse, log_odds
+
+    out = {}
+    for rule, probabilities in p.items():
+        groups = defaultdict(list)
+        for i, key in enumerate(views.onion):
+            if views.found[i]:
+                groups[key].append(i)
+        keys = sorted(groups)
+        y = np.array([views.classes[groups[k][0]] for k in keys], float)
+        if not len(y) or y.min() == y.max():
+            raise ValueError(f"fitting the fused calibration needs good and blemished onions "
+                             f"seen; got {int(y.sum())} blemished of {len(y)}")
+        args = {"prior": 0.5, "train_prior": classifier._train_prior(rule),
+                "visibility": classifier.visibility}
+        evidence = np.array([log_odds(probabilities[groups[k]], rule, **args) for k in keys])
+        low, high = fit_side_slopes(evidence, y)
+        before = np.array([fuse(probabilities[groups[k]], rule, **args) for k in keys])
+        after = np.array([fuse(probabilities[groups[k]], rule, calibration=(low, high), **args)
+                          for k in keys])
+        out[rule] = {"low": low, "high": high, "onions": len(y), "blemished": int(y.sum()),
+                     "ece_before": expected_calibration_error(before, y),
+                     "ece_after": expected_calibration_error(after, y)}
+    return out
+
+
+def fit_side_slopes(evidence: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The slopes ``(low, high)`` of :func:`fit_fused_calibration` from each onion's fused
+    ``evidence`` (N,) (log-odds at prior 1/2) and class ``y`` (N,)."""
+    from perception.inspection import fit_temperature
+
+    evidence, y = np.asarray(evidence, float), np.asarray(y, float)
+    slopes = []
+    for side in (evidence < 0, evidence >= 0):
+        e, c = evidence[side], y[side]
+        if not len(e) or not np.any(e):
+            slopes.append(1.0)
+            continue
+        n_pos, n_neg = c.sum(), len(c) - c.sum()
+        targets = np.where(c == 1, (n_pos + 1) / (n_pos + 2), 1 / (n_neg + 2))
+        slopes.append(float(1.0 / fit_temperature(e, targets)))
+    return slopes[0], slopes[1]
+
+
+def _write_fused_calibration(folder: Path, fitted: dict, provenance: dict) -> dict:
+    """Write :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``folder``; return
+    what was written."""
+    from onionsort.stages.models import ROBOT_FUSION_FILE
+
+    doc = {"format": 1, "rules": fitted, **provenance}
+    write_json(Path(folder) / ROBOT_FUSION_FILE, doc)
+    return doc
+
+
+@dataclass(frozen=True)
+class FusionCalibrationConfig:
+    """``onionsort train robot-fusion``: held-out dataset folders whose robot onions fit the
+    calibration (pooled), their ``split``, the ``models`` folder whose robot inspection
+    classifier fuses them (None: the shipped one), the first ``views`` of each onion (None:
+    the robot's :data:`~robot.inspection_poses.INSPECTION_VIEWS`), the ``out`` folder, the
+    torch ``device``."""
+
+    data: Path | tuple[Path, ...]
+    out: Path
+    split: str = "all"
+    models: Path | None = None
+    views: int | None = None
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
+        if not data:
+            raise ValueError("data must name at least one dataset folder; got none")
+        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        if self.split not in ("train", "val", "test", "all"):
+            raise ValueError(f"split must be train, val, test or all; got {self.split!r}")
+        if self.views is not None and (isinstance(self.views, bool)
+                                       or not isinstance(self.views, int) or self.views < 1):
+            raise ValueError(f"views must be an int >= 1; got {self.views!r}")
+
+
+def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
+    """Fit the calibration of the robot's fused P(blemished) on held-out robot onions
+    (:func:`fit_fused_calibration`, each view read by the robot's inspection classifier and
+    cropped round the detector's box, as at inference) and write
+    :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``config.out``, which
+    :meth:`~onionsort.stages.models.PerceptionModels.load` applies to the robot's classifier.
+    Returns what was written."""
+    from onionsort.stages.models import PerceptionModels
+    from perception.fusion import FUSION_RULES
+
+    log_config("train robot-fusion", config)
+    models = PerceptionModels.load(config.models, config.device)
+    if models.robot_inspection is None:
+        raise ValueError(f"{models.folder} has no robot inspection classifier to calibrate")
+    clf = models.robot_inspection
+    for rule in FUSION_RULES:  # fitted on the evidence as fused, never on top of a calibration
+        clf.set_fused_calibration(rule, None)
+    parts = [inspection_views(d, config.split, detector=models.detector, allow_empty=True)
+             for d in config.data]
+    views = InspectionViews.concat(parts)
+    from robot.inspection_poses import INSPECTION_VIEWS
+
+    shown = INSPECTION_VIEWS if config.views is None else config.views
+    keep = (views.source == "robot") & views.found.astype(bool) & (views.view < shown)
+    views = views.subset(keep)
+    if not len(views):
+        raise ValueError(f"{', '.join(map(str, config.data))} hold no robot view of an onion "
+                         f"in split {config.split!r}; render them with `onionsort dataset "
+                         "--robot-onions N`")
+    z = clf.logits(views.crops)
+    fitted = fit_fused_calibration(clf, views, {rule: clf.calibrated(z, rule)
+                                                for rule in FUSION_RULES})
+    Path(config.out).mkdir(parents=True, exist_ok=True)
+    return _write_fused_calibration(config.out, fitted, {
+        "fitted_on": "held-out robot onions", "data": [str(d) for d in config.data],
+        "split": config.split, "views": shown,
+        "models": models.describe()})
 
 
 def _fused_scores(classifier, views: InspectionViews, rule: str, p: np.ndarray) -> dict:

@@ -22,10 +22,12 @@ __all__ = [
     "CALIBRATION_FILE",
     "DEFAULT_MODELS",
     "INSPECTION_FILE",
+    "ROBOT_FUSION_FILE",
     "ROBOT_INSPECTION_FILE",
     "PerceptionModels",
     "checkpoint_config",
     "model_mismatch",
+    "read_fused_calibration",
 ]
 
 DEFAULT_MODELS = Path(__file__).resolve().parent.parent / "models"
@@ -34,6 +36,10 @@ DETECTOR_FILE = "detector.pt"
 INSPECTION_FILE = "inspection_classifier.pt"
 ROBOT_INSPECTION_FILE = "robot_" + INSPECTION_FILE  # the Sawyer's own, where there is one
 CALIBRATION_FILE = "calibration.json"
+ROBOT_FUSION_FILE = "robot_fusion_calibration.json"
+"""Beside the robot's inspection classifier: the calibration of its fused P(blemished), per
+fusion rule (:func:`onionsort.stages.inspection.fit_fused_calibration`). Not among the hashed
+model files: the sorter's observation model (``calibration.json``) does not read it."""
 #: The keys of :meth:`PerceptionModels.describe` that identify the models.
 HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
 _FILES = {"state_classifier_sha256": CLASSIFIER_FILE, "detector_sha256": DETECTOR_FILE,
@@ -68,7 +74,7 @@ class PerceptionModels:
         stage loads the models once for all the pieces it runs."""
         where = DEFAULT_MODELS if folder is None else Path(folder)
         files = tuple((name, (where / name).stat().st_mtime_ns)
-                      for name in (*_FILES.values(), ROBOT_INSPECTION_FILE)
+                      for name in (*_FILES.values(), ROBOT_INSPECTION_FILE, ROBOT_FUSION_FILE)
                       if (where / name).is_file())  # a model trained again is loaded again
         key = (where.resolve(), device, files)
         if key not in _LOADED:
@@ -80,7 +86,9 @@ class PerceptionModels:
         """Load ``state_classifier.pt``, ``detector.pt`` and ``inspection_classifier.pt``
         from ``folder`` (default: shipped) onto ``device`` (``auto``, ``cpu`` or ``cuda``;
         :func:`onionsort.stages.base.resolve_device`), and ``robot_inspection_classifier.pt``
-        where the folder has one (the Sawyer's inspection reads it instead of the shared one).
+        where the folder has one (the Sawyer's inspection reads it instead of the shared one),
+        with the calibration of its fused probability from :data:`ROBOT_FUSION_FILE` where the
+        folder has that too.
 
         Raises
         ------
@@ -101,14 +109,18 @@ class PerceptionModels:
         torch.set_num_threads(torch_threads())
         folder = cls.check_folder(folder)
         robot = folder / ROBOT_INSPECTION_FILE
+        robot_inspection = (InspectionClassifier.load(robot, device=where) if robot.is_file()
+                            else None)
+        if robot_inspection is not None and (folder / ROBOT_FUSION_FILE).is_file():
+            for rule, calibration in read_fused_calibration(folder / ROBOT_FUSION_FILE).items():
+                robot_inspection.set_fused_calibration(rule, calibration)
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
                    detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
                    hashes=_hashes(folder),
                    inspection=InspectionClassifier.load(folder / INSPECTION_FILE,
                                                         device=where),
                    device=str(where),
-                   robot_inspection=(InspectionClassifier.load(robot, device=where)
-                                     if robot.is_file() else None))
+                   robot_inspection=robot_inspection)
 
     @staticmethod
     def check_folder(folder: Path | str | None = None) -> Path:
@@ -222,6 +234,32 @@ def _hashes(folder: Path) -> dict[str, str]:
     out = {key: _digest(folder / name) for key, name in _FILES.items()}
     if (folder / ROBOT_INSPECTION_FILE).is_file():
         out["robot_inspection_sha256"] = _digest(folder / ROBOT_INSPECTION_FILE)
+    return out
+
+
+def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float]]:
+    """The slopes ``(low, high)`` of each fusion rule in a :data:`ROBOT_FUSION_FILE`.
+
+    Raises
+    ------
+    ValueError
+        Naming the file, if it is not such a file or a calibration in it is not monotone.
+    """
+    import json
+
+    from perception.fusion import FUSION_RULES, check_calibration
+
+    path = Path(path)
+    try:
+        rules = json.loads(path.read_text())["rules"]
+        out = {rule: check_calibration((value["low"], value["high"]))
+               for rule, value in rules.items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
+    unknown = sorted(set(out) - set(FUSION_RULES))
+    if unknown:
+        raise ValueError(f"{path} names unknown fusion rules {unknown}; the rules are "
+                         f"{FUSION_RULES}")
     return out
 
 
