@@ -357,7 +357,7 @@ def _robot_views_started(out: Path) -> bool:
 def test_a_dataset_killed_while_rendering_the_robots_views_does_not_read_as_complete(tmp_path):
     out = tmp_path / "data"
     argv = _cli("dataset", "--frames", 36, "--steps-per-session", 4, "--robot-onions", 30,
-                "--seed", 4, "--out", out)
+                "--robot-views", 3, "--seed", 4, "--out", out)
     with (tmp_path / "log").open("wb") as fh:
         proc = subprocess.Popen(argv, stdout=fh, stderr=fh, start_new_session=True)
         deadline = time.monotonic() + 300
