@@ -147,19 +147,11 @@ def screenshot(url: str, *, size: tuple[int, int] = (1600, 900), wait_s: float =
 
 def save_png(png: bytes, path: Path, colors: int = 256) -> Path:
     """Write ``png`` to ``path`` as an optimized palette PNG through a temporary name."""
+    from make_figures import save_png as save_image  # docs/, this script's folder
     from PIL import Image
 
-    image = Image.open(io.BytesIO(png)).convert("RGB")
-    image = image.quantize(colors=colors, method=Image.Quantize.MEDIANCUT)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        image.save(tmp, format="png", optimize=True)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    return save_image(Image.open(io.BytesIO(png)), Path(path), colors=colors)
 
 
 def ensure_demo(run: Path, *, allow_run: bool = True) -> Path:
