@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 __all__ = ["IMAGE_SUFFIXES", "AnnotatedImage", "BadAnnotations", "LoadedImage", "check_box",
-           "load_image", "read_color", "split_name", "write_png"]
+           "load_image", "read_color", "split_name"]
 
 #: Image files the readers take (OpenCV decodes them).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
@@ -146,16 +146,3 @@ def load_image(image: AnnotatedImage, fit: tuple[int, int], depth: Path | None =
         if same is not None and same.dtype == np.uint8 and same.ndim == 3 and same.shape[2] == 3:
             png = raw  # the file as it is: its pixels, bit for bit
     return LoadedImage(color, boxes, png, depth_mm)
-
-
-def write_png(path: Path | str, rgb: np.ndarray) -> Path:
-    """Write ``rgb`` (H, W, 3) uint8 as a PNG file (through a temporary name)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise ValueError(f"could not encode an image of shape {rgb.shape} as PNG for {path}")
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_bytes(buf.tobytes())
-    tmp.replace(path)
-    return path

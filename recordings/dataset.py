@@ -58,7 +58,7 @@ from recordings.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
            "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_records",
-           "read_split", "read_steps", "split_names", "split_sessions"]
+           "read_split", "read_steps", "split_names", "split_sessions", "write_rgb_png"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -194,7 +194,7 @@ class DatasetWriter:
             tmp.write_bytes(png)
             tmp.replace(folder / sub / f"{name}.png")
         else:
-            _write_rgb(folder / sub / f"{name}.png", color)
+            write_rgb_png(folder / sub / f"{name}.png", color)
         record = {**record, "color": f"{sub}/{name}.png"}
         record.pop("depth", None)
         if depth_mm is not None:
@@ -266,13 +266,13 @@ def _write_frame(folder: Path, frame: TruthFrame, session: int, name: str, view_
                  task: TaskDescription, difficulty: str | None) -> tuple[dict, dict | None]:
     """Write a frame's images into a split's ``folder`` as ``name`` (its inspection view as
     ``view_name``); its records (the view's None without one)."""
-    _write_rgb(folder / "color" / f"{name}.png", frame.color)
+    write_rgb_png(folder / "color" / f"{name}.png", frame.color)
     depth_mm = np.clip(np.nan_to_num(frame.depth) * 1000.0, 0, 65535).astype(np.uint16)
     _write_png(folder / "depth" / f"{name}.png", depth_mm)
     camera = frame_record(frame, session, name, task=task, difficulty=difficulty)
     if frame.inspection is None:
         return camera, None
-    _write_rgb(folder / "inspection" / f"{view_name}.png", frame.inspection)
+    write_rgb_png(folder / "inspection" / f"{view_name}.png", frame.inspection)
     return camera, frame_record(frame, session, view_name, view="inspection", task=task,
                                 difficulty=difficulty)
 
@@ -280,7 +280,7 @@ def _write_frame(folder: Path, frame: TruthFrame, session: int, name: str, view_
 def _write_robot_view(folder: Path, name: str, rgb: np.ndarray, labels, lineup: int,
                       index: int, view: int, difficulty: str | None) -> dict:
     """Write a robot's inspection view into a split's ``folder`` as ``name``; its record."""
-    _write_rgb(folder / "inspection" / f"{name}.png", rgb)
+    write_rgb_png(folder / "inspection" / f"{name}.png", rgb)
     kept = [tuple(label) for label in labels if label[2] >= MIN_VISIBLE_PIXELS]
     record = {"color": f"inspection/{name}.png", "source": "robot",
               "boxes": [[int(v) for v in k[0]] for k in kept],
@@ -295,7 +295,9 @@ def _write_robot_view(folder: Path, name: str, rgb: np.ndarray, labels, lineup: 
     return record
 
 
-def _write_rgb(path: Path, rgb: np.ndarray) -> None:
+def write_rgb_png(path: Path, rgb: np.ndarray) -> None:
+    """Write ``rgb`` (H, W, 3) uint8 as a PNG in ``path``'s existing folder, through a
+    temporary name."""
     _write_png(path, cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
 
 

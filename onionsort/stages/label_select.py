@@ -161,9 +161,8 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
 
 def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task) -> list:
     from onionsort.stages.base import write_json
-    from recordings.annotated import write_png
     from recordings.coco import CocoImage, write_coco
-    from recordings.dataset import CLASSES
+    from recordings.dataset import CLASSES, write_rgb_png
     from recordings.labelstudio import LabelStudioTask, labeling_config, write_tasks
     from recordings.states_csv import StatesRow, write_states
 
@@ -178,6 +177,7 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
     views = models.inspector().detections([f.inspection for _, _, f in view_of]) \
         if view_of else []
     selection, rows, coco, ls_tasks = [], [], [], []
+    (tmp / "images").mkdir(parents=True, exist_ok=True)
     for (k, t, f), color, det in zip(chosen, colors, detections, strict=True):
         seen = perceived[k][t]
         factors = {"onion": seen.onion, "end_effector": seen.end_effector,
@@ -185,7 +185,7 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
         where = {"session": k, "step": int(f.step), "frame": int(f.index),
                  "session_file": config.sessions[k].name}
         selection.append({**where, "image": name(k, f), "uncertainty": scores[k][t]})
-        write_png(tmp / "images" / name(k, f), color)
+        write_rgb_png(tmp / "images" / name(k, f), color)
         boxes = np.asarray(det.boxes, float).reshape(-1, 4).tolist()
         height, width = color.shape[:2]
         if config.format == "coco":
@@ -206,10 +206,12 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
         write_coco(tmp / "annotations" / "instances_default.json", coco, CLASSES)
         write_states(tmp / STATES_FILE, rows, task)
         inspection = tmp / "inspection"
+        if view_of:
+            (inspection / "images").mkdir(parents=True)
         view_images, view_rows = [], []
         for (k, t, f), det in zip(view_of, views, strict=True):
             seen = perceived[k][t]
-            write_png(inspection / "images" / name(k, f), f.inspection)
+            write_rgb_png(inspection / "images" / name(k, f), f.inspection)
             h, w = f.inspection.shape[:2]
             view_images.append(CocoImage(
                 name(k, f), w, h, np.asarray(det.boxes, float).reshape(-1, 4).tolist(),
