@@ -22,3 +22,18 @@ COMMAND_MODULES = [
     "onionsort.commands.demo",
     "onionsort.commands.report",
 ]
+
+
+def add_command(subparsers, name: str, doc: str, help_: str, config_cls, run):
+    """Add the subparser ``name``, whose description is the command module's docstring
+    ``doc`` and whose options are the :func:`~onionsort.configs.option` fields of
+    ``config_cls``; ``run(args)`` runs it. Returns the subparser."""
+    import argparse
+
+    from onionsort.configs import add_config_arguments
+
+    parser = subparsers.add_parser(name, help=help_, description=doc,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_arguments(parser, config_cls)
+    parser.set_defaults(func=run)
+    return parser
