@@ -27,7 +27,8 @@ COMMAND_MODULES = [
 def add_command(subparsers, name: str, doc: str, help_: str, config_cls, run):
     """Add the subparser ``name``, whose description is the command module's docstring
     ``doc`` and whose options are the :func:`~onionsort.configs.option` fields of
-    ``config_cls``; ``run(args)`` runs it. Returns the subparser."""
+    ``config_cls``; ``run(args)`` runs it. Returns the subparser, whose ``config_class`` is
+    ``config_cls`` (for the tests and the docs)."""
     import argparse
 
     from onionsort.configs import add_config_arguments
@@ -36,4 +37,5 @@ def add_command(subparsers, name: str, doc: str, help_: str, config_cls, run):
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, config_cls)
     parser.set_defaults(func=run)
+    parser.config_class = config_cls
     return parser

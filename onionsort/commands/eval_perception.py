@@ -25,43 +25,30 @@ Examples
 from __future__ import annotations
 
 import json
-from pathlib import Path
+from dataclasses import dataclass
 
-from onionsort.commands._args import add_device_argument, add_models_argument, subcommand
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.calibrate import PerceptionEvalConfig
+
+
+@dataclass(frozen=True)
+class EvalPerceptionCommand(PerceptionEvalConfig):
+    """The command's options: the stage's, and ``--json``."""
+
+    json: bool = option(False, after="camera_shift", help="print one JSON object")
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "eval-perception", __doc__,
-                        "measure the detector and the state classifier on a dataset")
-    parser.add_argument("--data", type=Path, required=True, help="labelled dataset folder")
-    parser.add_argument("--split", default="test",
-                        help="split to evaluate on: train, val, test or all (test)")
-    parser.add_argument("--no-depth", action="store_true", help="classifier on colour alone")
-    parser.add_argument("--no-inspection", action="store_true",
-                        help="without the inspection view")
-    parser.add_argument("--views", type=int, default=None,
-                        help="fuse the Sawyer's first VIEWS views of each onion (default: all "
-                             "the dataset holds)")
-    parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
-                        help="draw the inspection's precision-recall curves into DIR")
-    parser.add_argument("--camera-shift", type=int, default=None, metavar="SEED",
-                        help="measure through other cameras too, drawn from SEED (an int >= 0; "
-                             "default: none), and print each figure unchanged and changed")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-    add_models_argument(parser)
-    add_device_argument(parser)
-    parser.set_defaults(func=run)
+    add_command(subparsers, "eval-perception", __doc__,
+                "measure the detector and the state classifier on a dataset",
+                EvalPerceptionCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import PerceptionEvalConfig, eval_perception
+    from onionsort.stages import eval_perception
 
-    r = eval_perception(PerceptionEvalConfig(data=args.data, split=args.split,
-                                             models=args.models, depth=not args.no_depth,
-                                             inspection=not args.no_inspection,
-                                             device=args.device, views=args.views,
-                                             plots=args.plots,
-                                             camera_shift=args.camera_shift))
+    r = eval_perception(config_from_args(PerceptionEvalConfig, args))
     if args.json:
         print(json.dumps(r))
         return 0

@@ -41,7 +41,7 @@ _KEY = "onionsort.option"
 class Option:
     """How a config field appears on the command line (see :func:`option`)."""
 
-    help: str
+    help: str | None
     flag: str | None = None
     positional: bool = False
     choices: Sequence[str] | None = None
@@ -66,7 +66,7 @@ class Option:
         return ["--" + negated + name.replace("_", "-")]
 
 
-def option(default=dataclasses.MISSING, *, help: str, flag: str | None = None,
+def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = None,
            positional: bool = False, choices: Sequence[str] | None = None,
            metavar: str | None = None, type: Callable[[str], Any] | None = None,
            group: str | None = None, nargs: str | None = None, action: Any = None,
@@ -164,7 +164,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
         default = _default(f)
         required = default is dataclasses.MISSING
         default = None if required else default
-        help_ = opt.help.format(**words) if "{" in opt.help else opt.help
+        help_ = opt.help.format(**words) if opt.help and "{" in opt.help else opt.help
         kwargs: dict[str, Any] = {"help": help_}
         if not opt.positional:
             kwargs["dest"] = f.name
