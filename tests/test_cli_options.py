@@ -20,7 +20,7 @@ from tests.test_docs import gen  # scripts/gen_cli_docs.py
 ROOT = Path(__file__).resolve().parent.parent
 BEFORE = ROOT / "tests" / "data" / "cli_flags_before_issue_39.tsv"
 #: A command-line text for each option parser that is not a plain type, by its name.
-TEXTS = {"floats": "0.5,0.25", "parse": "bc", "_levels": "paper,hard", "_weights": "3,1",
+TEXTS = {"floats": "0.5,0.25", "parse": "bc", "levels": "paper,hard", "_weights": "3,1",
          "_level_weights": "clean=2", "_classes": "good=sound"}
 
 
