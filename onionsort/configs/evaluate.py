@@ -66,8 +66,7 @@ class EvaluateConfig:
         onion goes to a check tray and is counted apart. None never defers.
     """
 
-    run: Path | None = option(None, positional=True, metavar="RUN_DIR",
-                              help="folder of `onionsort learn` (not with --policy expert)")
+    run: Path | None = None  # the command's option takes several (commands/evaluate.py)
     policy: str = option("learned", choices=POLICIES,
                          help="the run's learned policy (default), or the task's own: the "
                               "robot's perception measured apart from learning")
