@@ -24,11 +24,12 @@ COMMAND_MODULES = [
 ]
 
 
-def add_command(subparsers, name: str, doc: str, help_: str, config_cls, run):
+def add_command(subparsers, name: str, doc: str | None, help_: str, config_cls, run):
     """Add the subparser ``name``, whose description is the command module's docstring
-    ``doc`` and whose options are the :func:`~onionsort.configs.option` fields of
-    ``config_cls``; ``run(args)`` runs it. Returns the subparser, whose ``config_class`` is
-    ``config_cls`` (for the tests and the docs)."""
+    ``doc`` (none for a command's model or action) and whose options are the
+    :func:`~onionsort.configs.option` fields of ``config_cls``; ``run(args)`` runs it.
+    Returns the subparser, whose ``config_class`` is ``config_cls`` (for the tests and the
+    docs)."""
     import argparse
 
     from onionsort.configs import add_config_arguments

@@ -71,14 +71,15 @@ def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = 
            metavar: str | None = None, type: Callable[[str], Any] | None = None,
            group: str | None = None, nargs: str | None = None, action: Any = None,
            exclusive: str | None = None, required: bool | None = None,
-           after: str | None = None):
+           after: str | None = None, default_factory=dataclasses.MISSING):
     """A config field that is also a command-line option.
 
     Parameters
     ----------
-    default
-        The field's default; none makes the field required (a positional argument when
-        ``positional``, else a required option).
+    default, default_factory
+        The field's default, or what makes it (as :func:`dataclasses.field`'s); neither makes
+        the field required (a positional argument when ``positional``, else a required
+        option).
     help
         The option's help (also the field's documentation).
     flag
@@ -112,7 +113,7 @@ def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = 
                          choices=tuple(choices) if choices is not None else None,
                          metavar=metavar, type=type, group=group, nargs=nargs, action=action,
                          exclusive=exclusive, required=required, after=after)}
-    return dataclasses.field(default=default, metadata=meta)
+    return dataclasses.field(default=default, default_factory=default_factory, metadata=meta)
 
 
 def config_options(config_cls) -> list[tuple[dataclasses.Field, Option, Any]]:
