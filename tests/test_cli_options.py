@@ -177,21 +177,29 @@ def test_the_cli_reference_shows_the_defaults_of_the_configs():
             assert f"| `{shown}` |" in row if shown else "|  |" in row, (prog, flag)
 
 
-def test_building_the_parser_imports_no_stage_torch_irl_scipy_or_robot():
-    code = ("import sys; from onionsort.cli import build_parser; build_parser(); "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('torch', 'irl', 'scipy', 'robot', 'numpy') or m.startswith('onionsort.stages')))")
+def test_a_commands_help_imports_no_stage_torch_irl_scipy_numpy_or_robot():
+    """A command's start builds every parser from the configs; ``python -X importtime`` lists
+    each module that start imports: none of the stages, the learners (and scipy), torch, or
+    the robot's world (numpy and gymnasium)."""
     import subprocess
 
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True)
-    assert done.stdout.strip() == "[]"
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "onionsort.cli", "record",
+                           "--help"], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-2000:]
+    imported = {line.rsplit("|", 1)[1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:") and "|" in line}
+    assert {"onionsort.configs.record", "onionsort.configs.parallel"} <= imported
+    heavy = ("torch", "irl", "scipy", "numpy", "robot", "gymnasium", "perception", "recordings")
+    assert sorted(m for m in imported if m.split(".")[0] in heavy
+                  or m.startswith("onionsort.stages")) == []
 
 
 def test_the_repeated_choices_are_the_librarys():
+    from irl.posterior import METHODS as POSTERIOR_METHODS
     from onionsort.configs import common
     from robot.difficulty import DIFFICULTY_LEVELS
     from robot.inspection_poses import INSPECTION_VIEWS
 
     assert tuple(DIFFICULTY_LEVELS) == common.DIFFICULTY_LEVELS
     assert common.INSPECTION_VIEWS == INSPECTION_VIEWS
+    assert set(POSTERIOR_METHODS) == set(common.POSTERIOR_METHODS)  # in the order of the help

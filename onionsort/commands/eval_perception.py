@@ -101,35 +101,15 @@ def _print_inspection(report: dict) -> None:
                       f"({f['onions']} onions)")
 
 
-def figures(r: dict) -> dict[str, float | None]:
-    """The figures of one ``eval_perception`` result by name, in the order printed."""
-    out: dict[str, float | None] = {f"detector mAP@0.5, {view}": m["map50"]
-                                    for view, m in r["map_by_view"].items()}
-    out.update({f"state: {k}": v for k, v in r["accuracy"].items()})
-    out["state: prediction after the first inspection"] = r["prediction_after_first_inspection"]
-    out["occluded: recall"] = r["occlusion_recall"]
-    out["occluded: precision"] = r["occlusion_precision"]
-    for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
-        for source, m in sources.items():
-            who = f"inspection {level} {source}"
-            out[f"{who}: onion found"] = m["found"]
-            out[f"{who}: rot call per view"] = m["rot_accuracy"]
-            out[f"{who}: class call per view"] = m["view_accuracy"]
-            for rule, f in m["fused"].items():
-                out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
-                out[f"{who}: fused by {rule}, precision"] = f["precision"]
-                out[f"{who}: fused by {rule}, recall"] = f["recall"]
-                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
-    return out
-
-
 def _print_shift(r: dict, shifted: dict, seed: int) -> None:
     def num(x) -> str:
         return "-" if x is None else f"{x:.3f}"
 
+    from onionsort.stages.calibrate import perception_figures
+
     print(f"through other cameras (seed {seed}): each session and robot line-up a camera of "
           "its own; depth unchanged")
-    before, after = figures(r), figures(shifted)
+    before, after = perception_figures(r), perception_figures(shifted)
     width = max(map(len, before))
     print(f"  {'figure':{width}s}  unchanged  changed   drop")
     for name, value in before.items():

@@ -25,7 +25,7 @@ from onionsort.configs.suggest import SuggestConfig
 class SuggestCommand(SuggestConfig):
     """The command's options: the stage's, and ``--json``."""
 
-    json: bool = option(False, after="top", help="print the list as JSON")
+    json: bool = option(False, help="print the list as JSON")
 
 
 def register(subparsers) -> None:

@@ -120,18 +120,15 @@ def config_options(config_cls) -> list[tuple[dataclasses.Field, Option, Any]]:
     """The fields of ``config_cls`` that are command-line options, in the order they are
     listed: each with its :class:`Option` and its resolved annotation.
 
-    The fields a class adds come before those it inherits (the options of a shared base,
-    such as where the pieces run, come last), each in declaration order; a field a class
-    declares again stays where its base lists it. Then every option with ``after`` is moved
-    to just after the field it names."""
+    The fields come in the dataclass's order (a base's first; a field a class declares again
+    stays where its base lists it), except that those of a base whose ``cli_last`` is true
+    (the shared options of where the pieces run) come last; then every option with ``after``
+    is moved to just after the field it names."""
     hints = typing.get_type_hints(config_cls)
     fields = {f.name: f for f in dataclasses.fields(config_cls) if _KEY in f.metadata}
-    mro = config_cls.__mro__
-    names: list[str] = []
-    for i, cls in enumerate(mro):
-        inherited = {n for base in mro[i + 1:] for n in vars(base).get("__annotations__", {})}
-        names += [n for n in vars(cls).get("__annotations__", {}) if n in fields
-                  and n not in inherited]
+    last = {n for base in config_cls.__mro__ if vars(base).get("cli_last")
+            for n in vars(base).get("__annotations__", {})}
+    names = [n for n in fields if n not in last] + [n for n in fields if n in last]
     for name in [n for n in names if fields[n].metadata[_KEY].after is not None]:
         names.remove(name)
         names.insert(names.index(fields[name].metadata[_KEY].after) + 1, name)

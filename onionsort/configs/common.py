@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from pathlib import Path
 
 from onionsort.configs import option
 from onionsort.configs.export import EXPORT_FORMATS as EXPORT_FORMATS
@@ -139,6 +140,15 @@ def defer_below(needs: str):
                        f"action is right: the learned policy's confidence in it ({needs}), "
                        "weighed over what an inspected onion may be by the inspection's "
                        "P(blemished); the onion goes to a check tray, counted apart")
+
+
+def check_session_files(sessions) -> None:
+    """Refuse an empty list of session files, or one that names a file that is not there."""
+    if not sessions:
+        raise ValueError("sessions must name at least one session file; got none")
+    missing = [str(p) for p in sessions if not Path(p).is_file()]
+    if missing:
+        raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
 
 
 def methods_list(choices) -> Callable[[str], tuple[str, ...]]:

@@ -34,7 +34,7 @@ def level_weights(text: str) -> dict[str, float]:
 
 
 @dataclass(frozen=True, kw_only=True)
-class InspectionTrainStageConfig:
+class InspectionTrainStageConfig(train.TrainOptions):
     """``onionsort train inspection``: dataset folders (one or several: their splits are
     pooled), run folder, hyperparameters.
 
@@ -54,14 +54,8 @@ class InspectionTrainStageConfig:
     classifier to fine-tune instead of training from scratch.
     """
 
-    data: Path | tuple[Path, ...] = train.data()
-    data_weights: tuple[int, ...] = train.data_weights()
-    out: Path = option(help="run folder for the checkpoints")
     epochs: int = option(30, help=None)
     batch_size: int = option(128, help=None)
-    seed: int = common.seed(help=None)
-    augment: bool = train.augment()
-    device: str = common.device()
     detector: Path | None = option(None, help="folder of the detector.pt that finds the onion "
                                               "in the validation views (default: the shipped "
                                               "one)")
@@ -82,12 +76,9 @@ class InspectionTrainStageConfig:
     init: Path | None = train.init("an inspection_classifier.pt")
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device, pool_datasets
         from perception.fusion import FUSION_RULES
 
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
+        super().__post_init__()
         if self.fusion is not None and self.fusion not in FUSION_RULES:
             raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
         if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
@@ -95,9 +86,6 @@ class InspectionTrainStageConfig:
         if self.camera not in INSPECTION_CAMERAS:
             raise ValueError(f"camera must be one of {INSPECTION_CAMERAS}; got "
                              f"{self.camera!r}")
-        for name in ("epochs", "batch_size"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
         for level, weight in self.level_weights.items():
             if not weight > 0:
                 raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")

@@ -144,8 +144,4 @@ class LabelSelectConfig:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.format not in SELECT_FORMATS:
             raise ValueError(f"format must be one of {SELECT_FORMATS}; got {self.format!r}")
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not p.is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+        common.check_session_files(self.sessions)

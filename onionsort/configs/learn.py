@@ -100,11 +100,7 @@ class LearnConfig:
             raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
                              f"{self.posterior_method!r}")
         check_backend(self.backend)
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+        common.check_session_files(self.sessions)
         if self.connect is not None:
             from recordings.rerun.common import check_viewer_url
 

@@ -55,6 +55,8 @@ class ParallelOptions:
     piece_threads: ClassVar[int] = 1
     #: What the pieces are, in the options' help
     cli_help: ClassVar[dict[str, str]] = {"pieces": "pieces"}
+    #: A command lists these options after its own
+    cli_last: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         if self.executor not in EXECUTORS:

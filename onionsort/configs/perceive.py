@@ -50,10 +50,6 @@ class PerceiveConfig(ParallelOptions):
 
         super().__post_init__()
         check_device(self.device)
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+        common.check_session_files(self.sessions)
         if self.batch_size < 1:
             raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from onionsort.configs import common, option
 
-__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "augment", "data", "data_weights",
-           "init", "weights"]
+__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment", "data",
+           "data_weights", "init", "weights"]
 
 
 def weights(text: str) -> tuple[int, ...]:
@@ -54,6 +54,33 @@ def init(what: str):
                   help=f"{what} to fine-tune instead of training from scratch")
 
 
+@dataclass(frozen=True, kw_only=True)
+class TrainOptions:
+    """What training any model takes: ``data``, one dataset folder or several, whose splits
+    are pooled, each dataset's training samples counted ``data_weights`` times (1 each by
+    default); the run folder ``out``; ``epochs`` and ``batch_size`` (each model's config
+    gives its defaults); ``seed``; ``augment``: each training sample seen through a camera of
+    its own (:class:`perception.photometric.PhotometricAugment`), never at evaluation; and
+    where torch trains, ``device``."""
+
+    data: Path | tuple[Path, ...] = data()
+    data_weights: tuple[int, ...] = data_weights()
+    out: Path = option(help="run folder for the checkpoints")
+    epochs: int = option(help=None)
+    batch_size: int = option(help=None)
+    seed: int = common.seed(help=None)
+    augment: bool = augment()
+    device: str = common.device()
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device, pool_datasets
+
+        pool_datasets(self)
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        _check_positive(self, "epochs", "batch_size")
+
+
 def _check_positive(config, *names: str) -> None:
     for name in names:
         if getattr(config, name) < 1:
@@ -61,7 +88,7 @@ def _check_positive(config, *names: str) -> None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ClassifierTrainConfig:
+class ClassifierTrainConfig(TrainOptions):
     """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters.
 
     ``data`` is one dataset folder or several, whose splits are pooled, each dataset's
@@ -73,32 +100,21 @@ class ClassifierTrainConfig:
     (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
     """
 
-    data: Path | tuple[Path, ...] = data()
-    data_weights: tuple[int, ...] = data_weights()
-    out: Path = option(help="run folder for the checkpoints")
     epochs: int = option(12, help=None)
     batch_size: int = option(32, help=None)
-    seed: int = common.seed(help=None)
-    augment: bool = augment()
-    device: str = common.device()
     depth_dropout: float = option(0.5, help="probability that a training step's depth is "
                                             "zeroed, so the model also reads steps without "
                                             "depth (0.5)")
     init: Path | None = init("a state_classifier.pt")
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device, pool_datasets
-
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        _check_positive(self, "epochs", "batch_size")
+        super().__post_init__()
         if not 0.0 <= self.depth_dropout <= 1.0:
             raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
 
 
 @dataclass(frozen=True, kw_only=True)
-class DetectorTrainConfig:
+class DetectorTrainConfig(TrainOptions):
     """``onionsort train detector``: dataset folders (as :class:`ClassifierTrainConfig`'s
     ``data`` and ``data_weights``), run folder, hyperparameters, ``resume`` (continue the run
     in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to fine-tune instead
@@ -106,23 +122,13 @@ class DetectorTrainConfig:
     image seen through a camera of its own, :class:`perception.photometric.PhotometricAugment`;
     never at evaluation)."""
 
-    data: Path | tuple[Path, ...] = data()
-    data_weights: tuple[int, ...] = data_weights()
-    out: Path = option(help="run folder for the checkpoints")
     epochs: int = option(24, help=None)
     batch_size: int = option(16, help=None)
-    seed: int = common.seed(help=None)
-    augment: bool = augment()
-    device: str = common.device()
     images_per_epoch: int = option(1600, help=None)
     init: Path | None = init("a detector.pt")
     lr: float = option(2e-3, help="peak learning rate (0.002)")
     resume: bool = option(False, help="continue the run in --out from its last checkpoint")
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device, pool_datasets
-
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        _check_positive(self, "epochs", "images_per_epoch", "batch_size")
+        super().__post_init__()
+        _check_positive(self, "images_per_epoch")

@@ -46,6 +46,7 @@ __all__ = [
     "detector_map",
     "eval_perception",
     "measure_perception",
+    "perception_figures",
 ]
 
 logger = logging.getLogger(__name__)
@@ -341,6 +342,29 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
     if config.camera_shift is not None:
         out["camera_shift"] = {"seed": config.camera_shift, "shifted": _eval_figures(
             models, config, SessionCameras(config.camera_shift))}
+    return out
+
+
+def perception_figures(r: dict) -> dict[str, float | None]:
+    """The figures of one :func:`eval_perception` result by name, in the order ``onionsort
+    eval-perception`` prints them (beside those through other cameras)."""
+    out: dict[str, float | None] = {f"detector mAP@0.5, {view}": m["map50"]
+                                    for view, m in r["map_by_view"].items()}
+    out.update({f"state: {k}": v for k, v in r["accuracy"].items()})
+    out["state: prediction after the first inspection"] = r["prediction_after_first_inspection"]
+    out["occluded: recall"] = r["occlusion_recall"]
+    out["occluded: precision"] = r["occlusion_precision"]
+    for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
+        for source, m in sources.items():
+            who = f"inspection {level} {source}"
+            out[f"{who}: onion found"] = m["found"]
+            out[f"{who}: rot call per view"] = m["rot_accuracy"]
+            out[f"{who}: class call per view"] = m["view_accuracy"]
+            for rule, f in m["fused"].items():
+                out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
+                out[f"{who}: fused by {rule}, precision"] = f["precision"]
+                out[f"{who}: fused by {rule}, recall"] = f["recall"]
+                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
     return out
 
 
