@@ -5,9 +5,12 @@ Each option is declared once, on a config field, with :func:`option`: its defaul
 and where the command line differs from the field (the flag's name, a positional argument, a
 metavar, choices). :func:`add_config_arguments` adds a config's options to an argparse parser
 and :func:`config_from_args` builds the config from the parsed arguments. The modules of this
-package import nothing but the standard library, so that building the parser (every command
-does, at start) loads neither torch, ``irl`` (and scipy) nor the stages; each stage module
-re-exports its config from here.
+package import nothing but the standard library (a config's checks import what they need when
+a config is made), so that building the parser (every command does, at start) loads neither
+torch, ``irl`` (and scipy), the robot's world nor the stages; each stage module re-exports its
+config from here. Options several stages share are field factories in
+:mod:`onionsort.configs.common`; where a stage's pieces run, the fields of
+:class:`onionsort.configs.parallel.ParallelOptions`.
 
 Example::
 
