@@ -261,9 +261,10 @@ def options_tables(cmd: Command, dependent: set[tuple[str, str]]) -> list[str]:
                 default = ""
             else:
                 default = render_value(action.default)
-            if isinstance(action, argparse._StoreTrueAction | argparse._CountAction) and \
-                    action.default in (False, 0):
-                default = ""
+            if (isinstance(action, argparse._StoreTrueAction | argparse._CountAction)
+                    and action.default in (False, 0)) or (
+                    isinstance(action, argparse._StoreFalseAction) and action.default is True):
+                default = ""  # a switch: given or not
             cell = "required" if action.required and action.option_strings else \
                 (f"`{default}`" if default and default != MACHINE_DEPENDENT else default)
             out.append(f"| {name} | {_cell(value)} | {_cell(cell)} | "

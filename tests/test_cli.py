@@ -293,7 +293,7 @@ def test_experiment_runs_behaviour_cloning_beside_the_reward_learners(tmp_path):
 def test_the_parsers_repeated_choices_are_the_libraries():
     from irl.experiments import METHODS
     from irl.inference import BACKENDS
-    from onionsort.commands import _args
+    from onionsort.configs import common as _args
     from onionsort.stages.base import DEVICES
     from onionsort.stages.export import EXPORT_FORMATS, ROS2_STORAGES
     from onionsort.stages.label import LABEL_FORMATS
@@ -309,7 +309,7 @@ def test_the_parsers_default_learners_are_the_stages():
     parser may not import the stages): the two must not drift apart."""
     from irl.experiments import REWARD_METHODS
     from onionsort.cli import build_parser
-    from onionsort.commands import _args
+    from onionsort.configs import common as _args
     from onionsort.stages.demo import METHODS as DEMO_METHODS
     from onionsort.stages.experiment import ExperimentConfig
 

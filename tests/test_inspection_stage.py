@@ -101,14 +101,14 @@ def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path
 
 
 def test_the_clis_fusion_rules_are_the_librarys():
-    from onionsort.commands import _args
+    from onionsort.configs import common as _args
     from perception.fusion import FUSION_RULES
 
     assert _args.FUSION_RULES == FUSION_RULES
 
 
 def test_the_clis_inspection_cameras_are_the_stages():
-    from onionsort.commands import _args
+    from onionsort.configs import common as _args
     from onionsort.stages.inspection import INSPECTION_CAMERAS
 
     assert _args.INSPECTION_CAMERAS == INSPECTION_CAMERAS

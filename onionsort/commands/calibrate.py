@@ -15,48 +15,24 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from onionsort.commands._args import (
-    add_device_argument,
-    add_models_argument,
-    add_parallel_arguments,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
+from onionsort.configs.calibrate import CalibrateConfig
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "calibrate", __doc__,
-                        "measure perception's confusion matrices -> the observation model")
-    parser.add_argument("--data", type=Path, required=True, help="labelled dataset folder")
-    parser.add_argument("--split", default="test",
-                        help="the held-out split to use: train, val, test or all (test)")
-    parser.add_argument("--out", type=Path, required=True, help="folder for the calibration")
-    parser.add_argument("--smoothing", type=float, default=1.0,
-                        help="additive smoothing of the confusion counts (1.0)")
-    parser.add_argument("--no-depth", action="store_true",
-                        help="measure the classifier on colour alone (for sessions without depth)")
-    parser.add_argument("--no-inspection", action="store_true",
-                        help="measure without the inspection view (imported videos have none)")
-    parser.add_argument("--overwrite", action="store_true",
-                        help="replace a calibration.json already in --out")
-    add_models_argument(parser)
-    add_device_argument(parser)
-    add_parallel_arguments(parser, pieces="dataset's sessions")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "calibrate", __doc__,
+                "measure perception's confusion matrices -> the observation model",
+                CalibrateConfig, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import CalibrateConfig, calibrate
+    from onionsort.stages import calibrate
     from onionsort.stages.calibrate import describe_session_swaps
 
-    calibration, metrics = calibrate(CalibrateConfig(
-        data=args.data, out=args.out, split=args.split, smoothing=args.smoothing,
-        models=args.models, depth=not args.no_depth, inspection=not args.no_inspection,
-        overwrite=args.overwrite, device=args.device, **parallel_options(args)))
-    mode = ("colour only" if args.no_depth else "RGB-D") + (
-        ", no inspection view" if args.no_inspection else "")
+    calibration, metrics = calibrate(config_from_args(CalibrateConfig, args))
+    mode = ("RGB-D" if args.depth else "colour only") + (
+        "" if args.inspection else ", no inspection view")
     print(f"calibrated ({mode}) on {metrics['n_steps']} steps of {args.data} ({args.split}), "
           f"{calibration.n_observed} called unoccluded")
     for name, matrix in calibration.factors.items():

@@ -22,75 +22,21 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from onionsort.commands._args import (
-    METHODS,
-    add_backend_argument,
-    add_connect_argument,
-    add_defer_argument,
-    add_device_argument,
-    add_inspection_arguments,
-    add_models_argument,
-    add_parallel_arguments,
-    add_posterior_method_argument,
-    add_session_swaps_argument,
-    methods_list,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
+from onionsort.configs.demo import DemoConfig
 
 
 def register(subparsers) -> None:
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    parser = subcommand(subparsers, "demo", __doc__,
-                        "record, perceive, calibrate, learn and evaluate: the whole job")
-    parser.add_argument("--seed", type=int, default=0, help="root seed (0)")
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"),
-                        help="run folder (runs/demo)")
-    parser.add_argument("--quick", action="store_true", help="a small, fast run (smoke test)")
-    parser.add_argument("--sessions", type=int, help="sessions recorded per repeat (12; quick 4)")
-    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
-                        help="how hard the world makes perception (clean)")
-    parser.add_argument("--methods", type=methods_list(METHODS),
-                        default=("mmap-birl", "map-birl", "hidden-data-em"),
-                        metavar="METHOD[,METHOD...]",
-                        help="the learners whose policies the Sawyer sorts with ("
-                             + ", ".join(METHODS) + "; default mmap-birl,map-birl,"
-                             "hidden-data-em)")
-    parser.add_argument("--repeats", type=int, default=1,
-                        help="repeat with seeds SEED..SEED+K-1 and report 95%% intervals (1)")
-    add_models_argument(parser)
-    parser.add_argument("--resume", action="store_true",
-                        help="continue the interrupted demo in --out: skip its finished stages")
-    add_connect_argument(parser, what="the recordings of record, learn and evaluate")
-    add_backend_argument(parser)
-    add_inspection_arguments(parser)
-    add_device_argument(parser)
-    add_defer_argument(parser, needs="MMAP-BIRL and MAP-BIRL then also learn the posterior, "
-                                     "and sort the same line-up once more deferring")
-    add_posterior_method_argument(parser)
-    add_session_swaps_argument(parser)
-    add_parallel_arguments(parser, pieces="repeats' recordings and methods")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "demo", __doc__,
+                "record, perceive, calibrate, learn and evaluate: the whole job", DemoConfig, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import DemoConfig, demo
-    from onionsort.stages.demo import table
+    from onionsort.stages import demo
+    from onionsort.stages.table1 import table
 
-    results = demo(DemoConfig(out=args.out, seed=args.seed, quick=args.quick,
-                              models=args.models, sessions=args.sessions, repeats=args.repeats,
-                              difficulty=args.difficulty, connect=args.connect,
-                              resume=args.resume, backend=args.backend,
-                              inspection_views=args.inspection_views,
-                              miss_cost=args.miss_cost, waste_cost=args.waste_cost,
-                              fusion=args.fusion, device=args.device,
-                              defer_below=args.defer_below,
-                              posterior_method=args.posterior_method,
-                              session_swaps=args.session_swaps, methods=args.methods,
-                              **parallel_options(args)))
+    results = demo(config_from_args(DemoConfig, args))
     print(f"effective noise: state error rate {results['state_error_rate']:.3f}, "
           f"(state, action) error rate {results['pair_error_rate']:.3f}")
     if results.get("sessions_read_backwards"):

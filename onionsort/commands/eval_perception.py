@@ -25,43 +25,30 @@ Examples
 from __future__ import annotations
 
 import json
-from pathlib import Path
+from dataclasses import dataclass
 
-from onionsort.commands._args import add_device_argument, add_models_argument, subcommand
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.calibrate import PerceptionEvalConfig
+
+
+@dataclass(frozen=True)
+class EvalPerceptionCommand(PerceptionEvalConfig):
+    """The command's options: the stage's, and ``--json``."""
+
+    json: bool = option(False, after="camera_shift", help="print one JSON object")
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "eval-perception", __doc__,
-                        "measure the detector and the state classifier on a dataset")
-    parser.add_argument("--data", type=Path, required=True, help="labelled dataset folder")
-    parser.add_argument("--split", default="test",
-                        help="split to evaluate on: train, val, test or all (test)")
-    parser.add_argument("--no-depth", action="store_true", help="classifier on colour alone")
-    parser.add_argument("--no-inspection", action="store_true",
-                        help="without the inspection view")
-    parser.add_argument("--views", type=int, default=None,
-                        help="fuse the Sawyer's first VIEWS views of each onion (default: all "
-                             "the dataset holds)")
-    parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
-                        help="draw the inspection's precision-recall curves into DIR")
-    parser.add_argument("--camera-shift", type=int, default=None, metavar="SEED",
-                        help="measure through other cameras too, drawn from SEED (an int >= 0; "
-                             "default: none), and print each figure unchanged and changed")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-    add_models_argument(parser)
-    add_device_argument(parser)
-    parser.set_defaults(func=run)
+    add_command(subparsers, "eval-perception", __doc__,
+                "measure the detector and the state classifier on a dataset",
+                EvalPerceptionCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import PerceptionEvalConfig, eval_perception
+    from onionsort.stages import eval_perception
 
-    r = eval_perception(PerceptionEvalConfig(data=args.data, split=args.split,
-                                             models=args.models, depth=not args.no_depth,
-                                             inspection=not args.no_inspection,
-                                             device=args.device, views=args.views,
-                                             plots=args.plots,
-                                             camera_shift=args.camera_shift))
+    r = eval_perception(config_from_args(PerceptionEvalConfig, args))
     if args.json:
         print(json.dumps(r))
         return 0
@@ -114,35 +101,15 @@ def _print_inspection(report: dict) -> None:
                       f"({f['onions']} onions)")
 
 
-def figures(r: dict) -> dict[str, float | None]:
-    """The figures of one ``eval_perception`` result by name, in the order printed."""
-    out: dict[str, float | None] = {f"detector mAP@0.5, {view}": m["map50"]
-                                    for view, m in r["map_by_view"].items()}
-    out.update({f"state: {k}": v for k, v in r["accuracy"].items()})
-    out["state: prediction after the first inspection"] = r["prediction_after_first_inspection"]
-    out["occluded: recall"] = r["occlusion_recall"]
-    out["occluded: precision"] = r["occlusion_precision"]
-    for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
-        for source, m in sources.items():
-            who = f"inspection {level} {source}"
-            out[f"{who}: onion found"] = m["found"]
-            out[f"{who}: rot call per view"] = m["rot_accuracy"]
-            out[f"{who}: class call per view"] = m["view_accuracy"]
-            for rule, f in m["fused"].items():
-                out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
-                out[f"{who}: fused by {rule}, precision"] = f["precision"]
-                out[f"{who}: fused by {rule}, recall"] = f["recall"]
-                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
-    return out
-
-
 def _print_shift(r: dict, shifted: dict, seed: int) -> None:
     def num(x) -> str:
         return "-" if x is None else f"{x:.3f}"
 
+    from onionsort.stages.calibrate import perception_figures
+
     print(f"through other cameras (seed {seed}): each session and robot line-up a camera of "
           "its own; depth unchanged")
-    before, after = figures(r), figures(shifted)
+    before, after = perception_figures(r), perception_figures(shifted)
     width = max(map(len, before))
     print(f"  {'figure':{width}s}  unchanged  changed   drop")
     for name, value in before.items():

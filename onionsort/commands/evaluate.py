@@ -37,63 +37,38 @@ Examples
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
-from onionsort.commands._args import (
-    add_connect_argument,
-    add_defer_argument,
-    add_device_argument,
-    add_inspection_arguments,
-    add_models_argument,
-    add_parallel_arguments,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.evaluate import EvaluateConfig
+from onionsort.configs.parallel import ParallelOptions
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluateCommand(EvaluateConfig, ParallelOptions):
+    """The command's options: the stage's for several runs at once, where they run, and
+    ``--json``."""
+
+    run: tuple[Path, ...] = option((), positional=True, nargs="*", metavar="RUN_DIR",
+                                   help="folder(s) of `onionsort learn` (not with --policy "
+                                        "expert); several are sorted in parallel, each on the "
+                                        "same line-up, each writing into its own folder")
+    json: bool = option(False, after="mcap", help="print the result as JSON")
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "runs"}
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "evaluate", __doc__,
-                        "the Sawyer sorts onions with a learned policy: precision and recall")
-    parser.add_argument("run", type=Path, metavar="RUN_DIR", nargs="*", default=[],
-                        help="folder(s) of `onionsort learn` (not with --policy expert); "
-                             "several are sorted in parallel, each on the same line-up, each "
-                             "writing into its own folder")
-    parser.add_argument("--policy", choices=("learned", "expert"), default="learned",
-                        help="the run's learned policy (default), or the task's own: the "
-                             "robot's perception measured apart from learning")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="folder for the outputs (default: RUN_DIR; needed with "
-                             "--policy expert)")
-    parser.add_argument("--onions", type=int, default=50, help="onions on the line (50)")
-    parser.add_argument("--blemished", type=int, default=30, help="how many are blemished (30)")
-    parser.add_argument("--seed", type=int, default=0)
-    add_models_argument(parser)
-    parser.add_argument("--ground-truth-inspection", action="store_true",
-                        help="perfect inspection instead of the detector (for comparison)")
-    parser.add_argument("--no-rerun", action="store_true", help="skip the Rerun recording")
-    parser.add_argument("--no-mcap", action="store_true",
-                        help="skip the session MCAP of the run (evaluation.mcap)")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    add_connect_argument(parser, what="the Sawyer's run (evaluation.rrd)")
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
-                        help="perception difficulty of the world (clean)")
-    add_inspection_arguments(parser)
-    parser.add_argument("--every-view", action="store_true",
-                        help="take every inspection view of every onion, even once its call "
-                             "is settled (each onion's call is what its first views settled; "
-                             "later onions see the image noise drawn otherwise)")
-    add_defer_argument(parser, needs="a RUN_DIR of `onionsort learn --posterior`")
-    add_device_argument(parser)
-    add_parallel_arguments(parser, pieces="runs")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "evaluate", __doc__,
+                "the Sawyer sorts onions with a learned policy: precision and recall",
+                EvaluateCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import EvaluateConfig, evaluate
+    from onionsort.stages import evaluate
     from onionsort.stages.evaluate import evaluate_runs
-    from onionsort.stages.parallel import ParallelOptions
 
     if args.policy == "expert" and args.run:
         raise ValueError(f"--policy expert sorts by the task's own policy; it takes no RUN_DIR "
@@ -101,18 +76,11 @@ def run(args) -> int:
     if len(args.run) > 1 and args.out is not None:
         raise ValueError("--out takes one run's outputs; several RUN_DIRs each write into "
                          "their own folder")
-    configs = [EvaluateConfig(
-        run=run, onions=args.onions, blemished=args.blemished, seed=args.seed,
-        models=args.models, ground_truth_inspection=args.ground_truth_inspection,
-        rerun=not args.no_rerun, difficulty=args.difficulty, mcap=not args.no_mcap,
-        connect=args.connect, policy=args.policy, out=args.out,
-        inspection_views=args.inspection_views, every_view=args.every_view,
-        miss_cost=args.miss_cost, waste_cost=args.waste_cost, fusion=args.fusion,
-        device=args.device, defer_below=args.defer_below) for run in (args.run or [None])]
+    configs = [config_from_args(EvaluateConfig, args, run=run) for run in (args.run or [None])]
     if len(configs) == 1:
         done = [evaluate(configs[0])]
     else:
-        done = evaluate_runs(configs, ParallelOptions(**parallel_options(args)))
+        done = evaluate_runs(configs, config_from_args(ParallelOptions, args))
     for config, (result, out) in zip(configs, done, strict=True):
         _report(args, config, result, out)
     return 0
@@ -131,6 +99,6 @@ def _report(args, config, result, out: dict) -> None:
     print(f"{out['method']}: {args.onions} onions ({args.blemished} blemished), "
           f"{args.difficulty} camera, inspection by {how}")
     print(result.table())
-    written = ["evaluation.json", *(["evaluation.rrd"] if not args.no_rerun else []),
-               *(["evaluation.mcap"] if not args.no_mcap else [])]
+    written = ["evaluation.json", *(["evaluation.rrd"] if args.rerun else []),
+               *(["evaluation.mcap"] if args.mcap else [])]
     print(f"wrote {', '.join(str(config.folder / name) for name in written)}")

@@ -19,61 +19,48 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
 
-from onionsort.commands._args import (
-    IRL_METHODS,
-    METHODS,
-    add_backend_argument,
-    add_parallel_arguments,
-    floats,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.common import IRL_METHODS, METHODS
+from onionsort.configs.experiment import ExperimentConfig
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExperimentCommand(ExperimentConfig):
+    """The command's options: the stage's, with the lists as text (the stage parses them)."""
+
+    trajectories: str | None = option(None, help="demonstrations per batch, e.g. 1,2,4,8 "
+                                                 "(default 10)")
+    length: str | None = option(None, help="steps per demonstration, e.g. 10,20 (default 15 / "
+                                           "20)")
+    learner_beta: str | None = option(None, help="beta the learners are fitted with: betas, "
+                                                 "factors of the true beta (x0.5,x1,x2) or "
+                                                 "paper (0.03); default: the true beta")
+    methods: str = option(",".join(IRL_METHODS),
+                          help=f"comma-separated subset of {','.join(METHODS)} (default: the "
+                               "four reward learners; bc and bc-em clone the policy, learning "
+                               "no reward)")
 
 
 def register(subparsers) -> None:
-    p = subcommand(subparsers, "experiment", __doc__,
-                   "ILE and run-time sweeps of the paper's figures")
-    p.add_argument("domain", choices=["forestworld", "sorting"])
-    p.add_argument("--occlusion", type=floats, help="occlusion rates, e.g. 0.1,0.2,0.3")
-    p.add_argument("--noise", type=floats, help="observation-noise levels, e.g. 0,0.3")
-    p.add_argument("--batches", type=int, help="batches per point (default 10; quick 3)")
-    p.add_argument("--trajectories", help="demonstrations per batch, e.g. 1,2,4,8 (default 10)")
-    p.add_argument("--length", help="steps per demonstration, e.g. 10,20 (default 15 / 20)")
-    p.add_argument("--learner-beta", help="beta the learners are fitted with: betas, factors of "
-                   "the true beta (x0.5,x1,x2) or paper (0.03); default: the true beta")
-    p.add_argument("--methods", default=",".join(IRL_METHODS),
-                   help=f"comma-separated subset of {','.join(METHODS)} (default: the four "
-                        "reward learners; bc and bc-em clone the policy, learning no reward)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--quick", action="store_true", help="a small sweep that takes seconds")
-    add_backend_argument(p)
-    p.add_argument("--out", type=Path, help="run folder (default runs/experiment-DOMAIN)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted sweep in --out: keep the trials in its "
-                        "results.csv.partial and run the rest (same options; --backend may "
-                        "differ)")
-    add_parallel_arguments(p, pieces="trials")
-    p.set_defaults(func=run)
+    add_command(subparsers, "experiment", __doc__,
+                "ILE and run-time sweeps of the paper's figures", ExperimentCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import ExperimentConfig, run_experiment
+    from onionsort.stages import run_experiment
     from onionsort.stages.experiment import format_table, parse_list
 
     def listed(name, kind="int"):
         value = getattr(args, name.replace("-", "_"))
         return None if value is None else parse_list(value, name, kind)
 
-    config = ExperimentConfig(
-        domain=args.domain, occlusion=args.occlusion, noise=args.noise, batches=args.batches,
-        trajectories=listed("trajectories"), length=listed("length"),
+    config = config_from_args(
+        ExperimentConfig, args, trajectories=listed("trajectories"), length=listed("length"),
         learner_beta=listed("learner-beta", "learner"),
-        methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
-        seed=args.seed, quick=args.quick, out=args.out,
-        resume=args.resume, **parallel_options(args),
-        backend=args.backend)
+        methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()))
     summary = run_experiment(config)
     print(format_table(summary["points"]))
     print(f"wrote results.csv, summary.json and {len(summary['plots'])} plots to "

@@ -17,16 +17,14 @@ Examples
 
 from __future__ import annotations
 
-from onionsort.commands._args import subcommand
-from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
 from onionsort.configs.export import ExportConfig
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "export", __doc__,
-                        "export a session as a ROS 2 bag (rosbag2 folder)")
-    add_config_arguments(parser, ExportConfig)
-    parser.set_defaults(func=run)
+    add_command(subparsers, "export", __doc__,
+                "export a session as a ROS 2 bag (rosbag2 folder)", ExportConfig, run)
 
 
 def run(args) -> int:

@@ -37,83 +37,33 @@ Examples
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from onionsort.commands._args import (
-    LABEL_FORMATS,
-    SELECT_FORMATS,
-    add_device_argument,
-    add_models_argument,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
+from onionsort.configs.label import LabelExportConfig, LabelImportConfig, LabelSelectConfig
 
 __all__ = ["register"]
 
 
 def register(subparsers) -> None:
     """Add the ``label`` subcommand and its actions."""
-    parser = subcommand(subparsers, "label", __doc__,
-                        "labelled frames in and out: COCO, YOLO and a states CSV")
+    parser = subparsers.add_parser("label", help="labelled frames in and out: COCO, YOLO and a "
+                                                 "states CSV", description=__doc__,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    exp = actions.add_parser("export", help="write a dataset as COCO or YOLO with states.csv")
-    exp.add_argument("data", type=Path, metavar="DATASET", help="a dataset folder")
-    exp.add_argument("--format", choices=LABEL_FORMATS, required=True,
-                     help="coco (COCO 2017 layout) or yolo (Ultralytics layout)")
-    exp.add_argument("--out", type=Path, required=True, help="a new folder")
-    exp.set_defaults(func=run_export)
-    imp = actions.add_parser("import", help="read COCO or YOLO (and a states CSV) as a dataset")
-    imp.add_argument("source", type=Path, metavar="DIR", help="the labelled image set")
-    imp.add_argument("--format", choices=LABEL_FORMATS, required=True,
-                     help="coco (COCO 2017, Roboflow, CVAT, Label Studio) or yolo "
-                          "(Ultralytics, Roboflow)")
-    imp.add_argument("--states", type=Path, default=None, metavar="FILE.csv",
-                     help="the state labels (default: DIR/states.csv where there is one); "
-                          "frames without a row are box-only")
-    imp.add_argument("--depth", type=Path, default=None, metavar="DIR",
-                     help="16-bit PNG depth in millimetres, matched by file name (default: "
-                          "DIR/depth where there is one)")
-    imp.add_argument("--inspection", type=Path, default=None, metavar="DIR",
-                     help="the inspection views, in the same format with their own "
-                          "states.csv (default: DIR/inspection where there is one)")
-    imp.add_argument("--classes", type=_classes, default={},
-                     metavar="good=NAME,blemished=NAME",
-                     help="the set's names of the dataset's classes (default: good, "
-                          "blemished)")
-    imp.add_argument("--out", type=Path, required=True, help="a new dataset folder")
-    imp.set_defaults(func=run_import)
-    sel = actions.add_parser("select", help="the frames of sessions where the models are least "
-                                            "sure, as a pre-annotated labelling task")
-    sel.add_argument("sessions", type=Path, nargs="+", metavar="SESSION",
-                     help="recorded sessions (.mcap)")
-    sel.add_argument("--frames", type=int, required=True, metavar="N",
-                     help="how many frames to choose (whole steps, in rounds over the "
-                          "sessions)")
-    sel.add_argument("--format", choices=SELECT_FORMATS, default="coco",
-                     help="coco (images, annotations with scores, states.csv; what label "
-                          "import reads back) or labelstudio (tasks.json with predictions and "
-                          "labeling_config.xml)")
-    sel.add_argument("--out", type=Path, required=True, help="a new folder")
-    add_models_argument(sel)
-    add_device_argument(sel)
-    sel.set_defaults(func=run_select)
-
-
-def _classes(text: str) -> dict[str, str]:
-    """``class=NAME`` pairs joined by commas, for argparse ``type=``."""
-    out = {}
-    for part in filter(None, (x.strip() for x in text.split(","))):
-        cls, sep, name = part.partition("=")
-        if not sep or cls.strip() not in ("good", "blemished") or not name.strip():
-            raise argparse.ArgumentTypeError(
-                f"expected good=NAME,blemished=NAME; got {part!r}")
-        out[cls.strip()] = name.strip()
-    return out
+    add_command(actions, "export", None, "write a dataset as COCO or YOLO with states.csv",
+                LabelExportConfig, run_export)
+    add_command(actions, "import", None, "read COCO or YOLO (and a states CSV) as a dataset",
+                LabelImportConfig, run_import)
+    add_command(actions, "select", None, "the frames of sessions where the models are least "
+                                         "sure, as a pre-annotated labelling task",
+                LabelSelectConfig, run_select)
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from onionsort.stages.label import LabelExportConfig, export_labels
+    from onionsort.stages.label import export_labels
 
-    summary = export_labels(LabelExportConfig(data=args.data, out=args.out, format=args.format))
+    summary = export_labels(config_from_args(LabelExportConfig, args))
     for view, counts in summary["images"].items():
         boxes = ", ".join(f"{n} {c}" for c, n in summary["boxes"][view].items())
         print(f"{view}: " + ", ".join(f"{s} {n}" for s, n in counts.items())
@@ -123,11 +73,9 @@ def run_export(args: argparse.Namespace) -> int:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from onionsort.stages.label import LabelImportConfig, import_labels
+    from onionsort.stages.label import import_labels
 
-    summary = import_labels(LabelImportConfig(
-        source=args.source, out=args.out, format=args.format, states=args.states,
-        depth=args.depth, inspection=args.inspection, classes=args.classes))
+    summary = import_labels(config_from_args(LabelImportConfig, args))
     for view, counts in summary["images"].items():
         if any(counts.values()):
             print(f"{view}: " + ", ".join(f"{s} {n}" for s, n in counts.items())
@@ -137,11 +85,9 @@ def run_import(args: argparse.Namespace) -> int:
 
 
 def run_select(args: argparse.Namespace) -> int:
-    from onionsort.stages.label_select import LabelSelectConfig, select_frames
+    from onionsort.stages.label_select import select_frames
 
-    result = select_frames(LabelSelectConfig(
-        sessions=tuple(args.sessions), out=args.out, frames=args.frames, format=args.format,
-        models=args.models, device=args.device))
+    result = select_frames(config_from_args(LabelSelectConfig, args))
     chosen = result["frames"]
     steps = {(f["session"], f["step"]) for f in chosen}
     sessions = {f["session"] for f in chosen}

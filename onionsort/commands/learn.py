@@ -28,70 +28,47 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
+from typing import ClassVar
 
-from onionsort.commands._args import (
-    METHODS,
-    add_backend_argument,
-    add_connect_argument,
-    add_parallel_arguments,
-    add_posterior_method_argument,
-    add_session_swaps_argument,
-    methods_list,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.common import METHODS, methods_list
+from onionsort.configs.learn import SWAP_METHOD, LearnConfig
+from onionsort.configs.parallel import ParallelOptions
+
+
+@dataclass(frozen=True, kw_only=True)
+class LearnCommand(LearnConfig, ParallelOptions):
+    """The command's options: the stage's, with several learners at once and where they run."""
+
+    method: tuple[str, ...] = option(("mmap-birl",), type=methods_list(METHODS),
+                                     metavar="METHOD[,METHOD...]",
+                                     help=f"the learner ({', '.join(METHODS)}; default "
+                                          "mmap-birl); several, comma-separated, learn in "
+                                          "parallel, each into OUT/METHOD")
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "methods"}
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "learn", __doc__,
-                        "learn the sorter's reward from perceived sessions (offline run)")
-    parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
-    parser.add_argument("--method", type=methods_list(METHODS), default=("mmap-birl",),
-                        metavar="METHOD[,METHOD...]",
-                        help=f"the learner ({', '.join(METHODS)}; default mmap-birl); several, "
-                             "comma-separated, learn in parallel, each into OUT/METHOD")
-    parser.add_argument("--observation-model", type=Path, required=True, metavar="FILE",
-                        help="calibration.json written by `onionsort calibrate`")
-    parser.add_argument("--out", type=Path, required=True, help="run folder")
-    parser.add_argument("--seed", type=int, default=0, help="the learner's seed (0)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
-    parser.add_argument("--allow-model-mismatch", action="store_true",
-                        help="learn even if the sessions were perceived by other models (or "
-                             "in another sensor mode) than the calibration measured")
-    parser.add_argument("--posterior", action="store_true",
-                        help="also sample the posterior over reward weights (mmap-birl, "
-                             "map-birl): posterior.npz, policy_confidence.json and .png")
-    parser.add_argument("--samples", type=int, default=1000, metavar="N",
-                        help="posterior samples (1000)")
-    add_posterior_method_argument(parser)
-    add_session_swaps_argument(parser)
-    add_backend_argument(parser)
-    add_connect_argument(parser, what="the learning run (learn.rrd)")
-    add_parallel_arguments(parser, pieces="methods")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "learn", __doc__,
+                "learn the sorter's reward from perceived sessions (offline run)",
+                LearnCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import LearnConfig, learn
-    from onionsort.stages.learn import SWAP_METHOD, learn_methods
-    from onionsort.stages.parallel import ParallelOptions
+    from onionsort.stages import learn
+    from onionsort.stages.learn import learn_methods
 
     methods = args.method
     # the swaps concern MMAP-BIRL alone; learn_methods gives them to it and to no other
     first = SWAP_METHOD if args.session_swaps and SWAP_METHOD in methods else methods[0]
-    config = LearnConfig(sessions=tuple(args.sessions), calibration=args.observation_model,
-                         out=args.out, method=first, seed=args.seed,
-                         allow_model_mismatch=args.allow_model_mismatch,
-                         overwrite=args.overwrite, connect=args.connect,
-                         backend=args.backend, posterior=args.posterior,
-                         samples=args.samples, posterior_method=args.posterior_method,
-                         session_swaps=args.session_swaps)
+    config = config_from_args(LearnConfig, args, method=first)
     if len(methods) == 1:
         models = {methods[0]: learn(config)}
         folders = {methods[0]: args.out}
     else:  # learn_methods checks every method's config before any piece starts
-        models = learn_methods(config, methods, ParallelOptions(**parallel_options(args)))
+        models = learn_methods(config, methods, config_from_args(ParallelOptions, args))
         folders = {m: args.out / m for m in methods}
     for method, model in models.items():
         print(f"{method}: learned from {len(args.sessions)} session(s) ({model['n_steps']} "

@@ -12,35 +12,21 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from onionsort.commands._args import (
-    add_device_argument,
-    add_models_argument,
-    add_parallel_arguments,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
+from onionsort.configs.perceive import PerceiveConfig
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "perceive", __doc__,
-                        "add perception topics (detections, state estimates) to sessions")
-    parser.add_argument("sessions", type=Path, nargs="+", metavar="SESSION.mcap")
-    parser.add_argument("--replace", action="store_true",
-                        help="perceive sessions that already hold perception topics again")
-    add_models_argument(parser)
-    add_device_argument(parser)
-    add_parallel_arguments(parser, pieces="sessions")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "perceive", __doc__,
+                "add perception topics (detections, state estimates) to sessions",
+                PerceiveConfig, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import PerceiveConfig, perceive
+    from onionsort.stages import perceive
 
-    done = perceive(PerceiveConfig(sessions=tuple(args.sessions), models=args.models,
-                                   replace=args.replace, device=args.device,
-                                   **parallel_options(args)))
+    done = perceive(config_from_args(PerceiveConfig, args))
     for s in done:
         mode = "RGB-D" if s.depth else "colour only"
         print(f"{s.path}: {s.n_steps} steps, {s.n_occluded} called occluded ({mode})")

@@ -18,54 +18,31 @@ Examples
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
 
-from onionsort.commands._args import (
-    add_connect_argument,
-    add_parallel_arguments,
-    add_session_arguments,
-    parallel_options,
-    subcommand,
-)
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
+from onionsort.configs.record import RecordConfig
+
+
+@dataclass(frozen=True, kw_only=True)
+class RecordCommand(RecordConfig):
+    """The command's options: the stage's, and ``--spawn`` (a viewer instead of a file)."""
+
+    spawn: bool = option(False, exclusive="viewer", after="rerun",
+                         help="also log to a local Rerun viewer")
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "record", __doc__,
-                        "simulate sorting sessions and record them to MCAP")
-    parser.add_argument("--sessions", type=int, default=12, help="sessions to record (12)")
-    parser.add_argument("--out", type=Path, required=True, help="folder for the .mcap files")
-    add_session_arguments(parser, occlusion=0.2)
-    parser.add_argument("--width", type=int, default=320, help="camera width in pixels (320)")
-    parser.add_argument("--height", type=int, default=240, help="camera height in pixels (240)")
-    again = parser.add_mutually_exclusive_group()
-    again.add_argument("--overwrite", action="store_true",
-                       help="replace existing session files in --out")
-    again.add_argument("--resume", action="store_true",
-                       help="keep the complete sessions in --out and record the others "
-                            "(interrupted ones again, from their own seeds)")
-    viewer = parser.add_mutually_exclusive_group()
-    viewer.add_argument("--rerun", type=Path, metavar="FILE.rrd",
-                        help="also log every session to this Rerun file")
-    viewer.add_argument("--spawn", action="store_true", help="also log to a local Rerun viewer")
-    add_connect_argument(parser, what="every session")
-    from robot.difficulty import DIFFICULTY_LEVELS
-
-    parser.add_argument("--difficulty", choices=list(DIFFICULTY_LEVELS), default="clean",
-                        help="perception difficulty of the world (clean)")
-    add_parallel_arguments(parser, pieces="sessions")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "record", __doc__,
+                "simulate sorting sessions and record them to MCAP", RecordCommand, run)
 
 
 def run(args) -> int:
-    from onionsort.stages import RecordConfig, record
+    from onionsort.stages import record
 
     rerun = args.rerun or ("spawn" if args.spawn else None)
-    paths = record(RecordConfig(
-        out=args.out, sessions=args.sessions, seed=args.seed, occlusion=args.occlusion,
-        steps_per_session=args.steps_per_session, frames_per_step=args.frames_per_step,
-        width=args.width, height=args.height, overwrite=args.overwrite, rerun=rerun,
-        difficulty=args.difficulty, connect=args.connect, resume=args.resume,
-        **parallel_options(args)))
+    paths = record(config_from_args(RecordConfig, args, rerun=rerun))
     print(f"recorded {len(paths)} sessions to {args.out}" + (" (complete ones kept)"
                                                              if args.resume else ""))
     return 0

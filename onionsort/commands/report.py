@@ -20,16 +20,14 @@ Examples
 
 from __future__ import annotations
 
-from onionsort.commands._args import subcommand
-from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args
 from onionsort.configs.report import ReportConfig
 
 
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "report", __doc__,
-                        "write a run folder's settings and results as RUN_DIR/report.md")
-    add_config_arguments(parser, ReportConfig)
-    parser.set_defaults(func=run)
+    add_command(subparsers, "report", __doc__,
+                "write a run folder's settings and results as RUN_DIR/report.md", ReportConfig, run)
 
 
 def run(args) -> int:

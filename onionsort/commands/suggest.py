@@ -14,18 +14,24 @@ Examples
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 
-from onionsort.commands._args import subcommand
-from onionsort.configs import add_config_arguments, config_from_args
+from onionsort.commands import add_command
+from onionsort.configs import config_from_args, option
 from onionsort.configs.suggest import SuggestConfig
 
 
+@dataclass(frozen=True, kw_only=True)
+class SuggestCommand(SuggestConfig):
+    """The command's options: the stage's, and ``--json``."""
+
+    json: bool = option(False, help="print the list as JSON")
+
+
 def register(subparsers) -> None:
-    parser = subcommand(subparsers, "suggest", __doc__,
-                        "the states where another demonstration would help the robot most")
-    add_config_arguments(parser, SuggestConfig)
-    parser.add_argument("--json", action="store_true", help="print the list as JSON")
-    parser.set_defaults(func=run)
+    add_command(subparsers, "suggest", __doc__,
+                "the states where another demonstration would help the robot most",
+                SuggestCommand, run)
 
 
 def run(args) -> int:

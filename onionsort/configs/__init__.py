@@ -5,9 +5,12 @@ Each option is declared once, on a config field, with :func:`option`: its defaul
 and where the command line differs from the field (the flag's name, a positional argument, a
 metavar, choices). :func:`add_config_arguments` adds a config's options to an argparse parser
 and :func:`config_from_args` builds the config from the parsed arguments. The modules of this
-package import nothing but the standard library, so that building the parser (every command
-does, at start) loads neither torch, ``irl`` (and scipy) nor the stages; each stage module
-re-exports its config from here.
+package import nothing but the standard library (a config's checks import what they need when
+a config is made), so that building the parser (every command does, at start) loads neither
+torch, ``irl`` (and scipy), the robot's world nor the stages; each stage module re-exports its
+config from here. Options several stages share are field factories in
+:mod:`onionsort.configs.common`; where a stage's pieces run, the fields of
+:class:`onionsort.configs.parallel.ParallelOptions`.
 
 Example::
 
@@ -30,7 +33,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Option", "add_config_arguments", "config_from_args", "config_options", "option"]
+__all__ = ["Option", "add_config_arguments", "config_from_args", "config_options",
+           "config_values", "option"]
 
 #: the metadata key of a field's :class:`Option`
 _KEY = "onionsort.option"
@@ -40,13 +44,18 @@ _KEY = "onionsort.option"
 class Option:
     """How a config field appears on the command line (see :func:`option`)."""
 
-    help: str
+    help: str | None
     flag: str | None = None
     positional: bool = False
     choices: Sequence[str] | None = None
     metavar: str | None = None
     type: Callable[[str], Any] | None = None
     group: str | None = None
+    nargs: str | None = None
+    action: Any = None
+    exclusive: str | None = None
+    required: bool | None = None
+    after: str | None = None
 
     def flags(self, name: str, default) -> list[str]:
         """The option strings of the field ``name``: its positional name, or two dashes and
@@ -56,21 +65,24 @@ class Option:
             return [name]
         if self.flag is not None:
             return [self.flag]
-        negated = "no-" if default is True else ""
+        negated = "no-" if default is True and self.action is None else ""
         return ["--" + negated + name.replace("_", "-")]
 
 
-def option(default=dataclasses.MISSING, *, help: str, flag: str | None = None,
+def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = None,
            positional: bool = False, choices: Sequence[str] | None = None,
            metavar: str | None = None, type: Callable[[str], Any] | None = None,
-           group: str | None = None):
+           group: str | None = None, nargs: str | None = None, action: Any = None,
+           exclusive: str | None = None, required: bool | None = None,
+           after: str | None = None, default_factory=dataclasses.MISSING):
     """A config field that is also a command-line option.
 
     Parameters
     ----------
-    default
-        The field's default; none makes the field required (a positional argument when
-        ``positional``, else a required option).
+    default, default_factory
+        The field's default, or what makes it (as :func:`dataclasses.field`'s); neither makes
+        the field required (a positional argument when ``positional``, else a required
+        option).
     help
         The option's help (also the field's documentation).
     flag
@@ -83,63 +95,122 @@ def option(default=dataclasses.MISSING, *, help: str, flag: str | None = None,
         default to true (a true one, to false: its flag has ``no-`` before the name).
     group
         The title of the argument group the option is listed under in the command's help.
+        A ``{name}`` in ``help`` is replaced by the config class's ``cli_help[name]`` (a
+        class variable: words that differ between the commands that share the option).
+    nargs
+        As argparse's; a field of several values (``+``, ``*``) is a tuple.
+    action
+        argparse's ``append`` (the field is a tuple of every value given) or
+        ``argparse.BooleanOptionalAction`` (the flag, and the same with ``no-`` before the
+        name).
+    exclusive
+        The options of one name are mutually exclusive.
+    required
+        Whether the option must be given, where that is not what the default says (an
+        option whose absence the command itself answers).
+    after
+        The field this option is listed after (by default: the fields of a class first,
+        then those it inherits, each in the order they are declared).
     """
     meta = {_KEY: Option(help=help, flag=flag, positional=positional,
                          choices=tuple(choices) if choices is not None else None,
-                         metavar=metavar, type=type, group=group)}
-    return dataclasses.field(default=default, metadata=meta)
+                         metavar=metavar, type=type, group=group, nargs=nargs, action=action,
+                         exclusive=exclusive, required=required, after=after)}
+    return dataclasses.field(default=default, default_factory=default_factory, metadata=meta)
 
 
 def config_options(config_cls) -> list[tuple[dataclasses.Field, Option, Any]]:
-    """The fields of ``config_cls`` that are command-line options, in order: each with its
-    :class:`Option` and its resolved annotation."""
+    """The fields of ``config_cls`` that are command-line options, in the order they are
+    listed: each with its :class:`Option` and its resolved annotation.
+
+    The fields come in the dataclass's order (a base's first; a field a class declares again
+    stays where its base lists it), except that those of a base whose ``cli_last`` is true
+    (the shared options of where the pieces run) come last; then every option with ``after``
+    is moved to just after the field it names."""
     hints = typing.get_type_hints(config_cls)
-    return [(f, f.metadata[_KEY], hints[f.name]) for f in dataclasses.fields(config_cls)
-            if _KEY in f.metadata]
+    fields = {f.name: f for f in dataclasses.fields(config_cls) if _KEY in f.metadata}
+    last = {n for base in config_cls.__mro__ if vars(base).get("cli_last")
+            for n in vars(base).get("__annotations__", {})}
+    names = [n for n in fields if n not in last] + [n for n in fields if n in last]
+    for name in [n for n in names if fields[n].metadata[_KEY].after is not None]:
+        names.remove(name)
+        names.insert(names.index(fields[name].metadata[_KEY].after) + 1, name)
+    return [(fields[n], fields[n].metadata[_KEY], hints[n]) for n in names]
 
 
 def _text_type(annotation):
-    """What parses an option's text for a field annotated ``annotation`` (``X | None``: X)."""
+    """What parses an option's text for a field annotated ``annotation`` (``X | None``: X;
+    ``tuple[X, ...]``: X)."""
+    if typing.get_origin(annotation) is tuple:
+        return typing.get_args(annotation)[0]
     if isinstance(annotation, types.UnionType) or typing.get_origin(annotation) is typing.Union:
         args = [a for a in typing.get_args(annotation) if a is not type(None)]
         if len(args) == 1:
-            return args[0]
+            return _text_type(args[0])
         raise TypeError(f"an option's type must be one type or it | None; got {annotation}")
     return annotation
+
+
+def _default(f: dataclasses.Field):
+    """A field's default (its factory's value), or ``dataclasses.MISSING``."""
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return f.default
 
 
 def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
     """Add an argument to ``parser`` for every :func:`option` field of ``config_cls``; each
     is parsed into the attribute of the field's name."""
     groups: dict[str, Any] = {}
+    exclusive: dict[str, Any] = {}
+    words = getattr(config_cls, "cli_help", {})
     for f, opt, annotation in config_options(config_cls):
-        default = None if f.default is dataclasses.MISSING else f.default
-        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-        kwargs: dict[str, Any] = {"help": opt.help}
+        default = _default(f)
+        required = default is dataclasses.MISSING
+        default = None if required else default
+        help_ = opt.help.format(**words) if opt.help and "{" in opt.help else opt.help
+        kwargs: dict[str, Any] = {"help": help_}
         if not opt.positional:
             kwargs["dest"] = f.name
-        if _text_type(annotation) is bool:
+        if opt.action is None and opt.type is None and _text_type(annotation) is bool:
             kwargs["action"] = "store_false" if default is True else "store_true"
         else:
-            kwargs["type"] = opt.type or _text_type(annotation)
-            if opt.choices is not None:
-                kwargs["choices"] = opt.choices
-            if opt.metavar is not None:
-                kwargs["metavar"] = opt.metavar
+            if opt.action is not None:
+                kwargs["action"] = opt.action
+            if opt.type is not None or opt.action is not argparse.BooleanOptionalAction:
+                kwargs["type"] = opt.type or _text_type(annotation)
+            for key in ("choices", "metavar", "nargs"):
+                if getattr(opt, key) is not None:
+                    kwargs[key] = getattr(opt, key)
             if not required:
                 kwargs["default"] = default
-            elif not opt.positional:
+            if not opt.positional and (opt.required if opt.required is not None
+                                       else required):
                 kwargs["required"] = True
         target = parser
         if opt.group is not None:
             if opt.group not in groups:
                 groups[opt.group] = parser.add_argument_group(opt.group)
             target = groups[opt.group]
+        if opt.exclusive is not None:
+            if opt.exclusive not in exclusive:
+                exclusive[opt.exclusive] = target.add_mutually_exclusive_group()
+            target = exclusive[opt.exclusive]
         target.add_argument(*opt.flags(f.name, default), **kwargs)
 
 
+def config_values(config_cls, args: argparse.Namespace) -> dict[str, Any]:
+    """The parsed ``args`` of the :func:`option` fields of ``config_cls``, by field name (the
+    values of several, ``nargs`` and ``append``, as tuples)."""
+    values = {}
+    for f, opt, _ in config_options(config_cls):
+        value = getattr(args, f.name)
+        several = opt.nargs in ("+", "*") or opt.action == "append"
+        values[f.name] = tuple(value) if several and value is not None else value
+    return values
+
+
 def config_from_args(config_cls, args: argparse.Namespace, **overrides):
-    """``config_cls`` built from the parsed ``args`` of its :func:`option` fields (and
-    ``overrides``, for the fields that are not options)."""
-    values = {f.name: getattr(args, f.name) for f, _, _ in config_options(config_cls)}
-    return config_cls(**values, **overrides)
+    """``config_cls`` built from the parsed ``args`` of its :func:`option` fields, with
+    ``overrides`` (the fields that are not options, or whose value the command works out)."""
+    return config_cls(**{**config_values(config_cls, args), **overrides})

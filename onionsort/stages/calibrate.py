@@ -23,19 +23,18 @@ import functools
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import ClassVar
 
 import numpy as np
 
+from onionsort.configs.calibrate import CalibrateConfig, PerceptionEvalConfig
 from onionsort.stages.base import (
-    check_device,
     check_output_folder,
     log_config,
     output_folder,
     refuse_existing,
 )
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
-from onionsort.stages.parallel import TORCH_THREADS, ParallelOptions, run_pieces
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = [
     "CalibrateConfig",
@@ -47,83 +46,10 @@ __all__ = [
     "detector_map",
     "eval_perception",
     "measure_perception",
+    "perception_figures",
 ]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class CalibrateConfig(ParallelOptions):
-    """Where to measure perception and where to write the calibration.
-
-    Attributes
-    ----------
-    data : Path
-        A labelled dataset from ``onionsort dataset`` (held out: not trained on).
-    out : Path
-        Folder for ``calibration.json``, ``observation_model.npz`` and ``confusion.png``.
-    split : str
-        ``train``, ``val``, ``test`` or ``all``.
-    smoothing : float
-        Additive smoothing of the confusion counts.
-    models : Path or None
-        Perception models folder (None: the shipped models).
-    depth : bool
-        Measure with depth (RGB-D) or colour alone.
-    inspection : bool
-        Measure with the inspection view or without it.
-    overwrite : bool
-        Replace a ``calibration.json`` already in ``out``.
-    device : str
-        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
-    executor, workers, ray_address
-        Where the dataset's sessions are perceived
-        (:class:`~onionsort.stages.parallel.ParallelOptions`): each is a piece.
-    """
-
-    data: Path
-    out: Path
-    split: str = "test"
-    smoothing: float = 1.0
-    models: Path | None = None
-    depth: bool = True
-    inspection: bool = True
-    overwrite: bool = False
-    device: str = "auto"
-    #: Measuring a session is mostly the classifiers' work, on torch's threads.
-    piece_threads: ClassVar[int] = TORCH_THREADS
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_device(self.device)
-        if self.smoothing < 0:
-            raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
-
-
-@dataclass(frozen=True)
-class PerceptionEvalConfig:
-    """A dataset split to measure the perception models on: the detector, the state
-    classifier and the inspection. ``views`` fuses the robot's first ``views`` views of each
-    onion (all the dataset holds: None); ``plots`` is a folder for the inspection's
-    precision-recall curves (None: none drawn); ``camera_shift`` a seed (an int >= 0) of
-    other cameras to measure through as well (:class:`SessionCameras`; None: none)."""
-
-    data: Path
-    split: str = "test"
-    models: Path | None = None
-    depth: bool = True
-    inspection: bool = True
-    device: str = "auto"
-    views: int | None = None
-    plots: Path | None = None
-    camera_shift: int | None = None
-
-    def __post_init__(self) -> None:
-        check_device(self.device)
-        if self.camera_shift is not None:
-            SessionCameras(self.camera_shift)  # checks the seed
-        if self.views is not None and self.views < 1:
-            raise ValueError(f"views must be >= 1; got {self.views}")
 
 
 def measure_perception(models: PerceptionModels | tuple, root: Path | str,
@@ -416,6 +342,29 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
     if config.camera_shift is not None:
         out["camera_shift"] = {"seed": config.camera_shift, "shifted": _eval_figures(
             models, config, SessionCameras(config.camera_shift))}
+    return out
+
+
+def perception_figures(r: dict) -> dict[str, float | None]:
+    """The figures of one :func:`eval_perception` result by name, in the order ``onionsort
+    eval-perception`` prints them (beside those through other cameras)."""
+    out: dict[str, float | None] = {f"detector mAP@0.5, {view}": m["map50"]
+                                    for view, m in r["map_by_view"].items()}
+    out.update({f"state: {k}": v for k, v in r["accuracy"].items()})
+    out["state: prediction after the first inspection"] = r["prediction_after_first_inspection"]
+    out["occluded: recall"] = r["occlusion_recall"]
+    out["occluded: precision"] = r["occlusion_precision"]
+    for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
+        for source, m in sources.items():
+            who = f"inspection {level} {source}"
+            out[f"{who}: onion found"] = m["found"]
+            out[f"{who}: rot call per view"] = m["rot_accuracy"]
+            out[f"{who}: class call per view"] = m["view_accuracy"]
+            for rule, f in m["fused"].items():
+                out[f"{who}: fused by {rule}, accuracy"] = f["accuracy"]
+                out[f"{who}: fused by {rule}, precision"] = f["precision"]
+                out[f"{who}: fused by {rule}, recall"] = f["recall"]
+                out[f"{who}: fused by {rule}, ECE"] = f["ece"]
     return out
 
 

@@ -17,84 +17,14 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, check_output_folder, log_config
-from onionsort.stages.parallel import ParallelOptions, run_pieces
+from onionsort.configs.dataset import DatasetConfig
+from onionsort.stages.base import check_output_folder, log_config
+from onionsort.stages.parallel import run_pieces
 
 __all__ = ["DatasetConfig", "DatasetSummary", "make_dataset", "split_plan"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class DatasetConfig(ParallelOptions):
-    """What to render.
-
-    Attributes
-    ----------
-    out : Path
-        A new dataset folder (an existing dataset is never overwritten).
-    frames : int
-        Camera frames in all.
-    seed : int
-    occlusion : float
-        Probability that the passer-by occludes a step (0.3: the classifier must see many).
-    steps_per_session, frames_per_step : int
-    val, test : float
-        Shares of sessions for the val and test splits.
-    robot_onions : int
-        Onions the Sawyer holds up to its inspection camera, in line-ups of 10 split like the
-        sessions; 0 for none.
-    robot_views : int
-        Views of each of them (:func:`robot.station.inspection_poses`).
-    rot_labels : bool
-        Measure the rot each inspection view shows (the inspection classifier's labels; one
-        more render of each view). Calibration needs none.
-    difficulty : str
-        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
-        whose sessions and robot line-ups take the levels in turn.
-    randomize_look : bool
-        Each session and line-up draws its look from its seed (:mod:`robot.look`: light,
-        surface colours, the cameras' exposure and white balance): training data that spans
-        cameras. The levels stay as they are; the look is a knob beside them.
-    executor, workers, ray_address
-        Where the sessions and the line-ups are rendered
-        (:class:`~onionsort.stages.parallel.ParallelOptions`): each is a piece, rendered from
-        its own seed into images named after it (``s0003_0012.png``, ``l0001_0004.png``).
-    """
-
-    out: Path
-    frames: int = 3000
-    seed: int = 0
-    occlusion: float = 0.3
-    steps_per_session: int = 20
-    frames_per_step: int = 3
-    val: float = 0.15
-    test: float = 0.15
-    robot_onions: int = 120
-    difficulty: str = "clean"
-    robot_views: int = 8
-    rot_labels: bool = True
-    randomize_look: bool = False
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        object.__setattr__(self, "out", Path(self.out))
-        for level in self.levels:
-            check_difficulty(level)
-        if self.frames < 1:
-            raise ValueError(f"frames must be >= 1; got {self.frames}")
-        if self.robot_onions < 0:
-            raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
-        if self.robot_views < 1:
-            raise ValueError(f"robot_views must be >= 1; got {self.robot_views}")
-
-    @property
-    def levels(self) -> list[str]:
-        """The difficulty levels, in the order sessions and line-ups take them."""
-        return [level.strip() for level in self.difficulty.split(",")]
 
 
 @dataclass(frozen=True)

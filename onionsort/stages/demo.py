@@ -49,10 +49,10 @@ import logging
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, check_output_folder, log_config, write_json
+from onionsort.configs.demo import DemoConfig
+from onionsort.stages.base import check_output_folder, log_config, write_json
 from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
@@ -71,92 +71,6 @@ logger = logging.getLogger(__name__)
 #: The demo's line-up and recording sizes, full and quick.
 SIZES = {False: {"sessions": 12, "steps": 20, "heldout": 1500, "onions": 50, "blemished": 30},
          True: {"sessions": 4, "steps": 12, "heldout": 360, "onions": 10, "blemished": 6}}
-
-
-@dataclass(frozen=True)
-class DemoConfig(ParallelOptions):
-    """The demo's run folder, seed, size, repeats, perception difficulty and models.
-
-    ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
-    repeat gets its own folder ``repeat_K``. ``difficulty`` names a level of
-    :data:`robot.difficulty.DIFFICULTY_LEVELS`: the recorded sessions, the held-out frames the
-    calibration is measured on, and the robot's inspection at evaluation all face it.
-    ``connect`` is a Rerun viewer's gRPC URL (``rerun+http://HOST:9876/proxy``) that the
-    recordings also stream to; ``resume`` continues the interrupted demo in ``out``.
-    ``backend`` picks MMAP-BIRL's forward-backward kernels (``irl.inference.BACKENDS``: numpy,
-    or numba from the ``fast`` extra, equal to rounding); a demo may be resumed with the other
-    (each repeat's result names the backend its model was learned with, ``backends`` all).
-    ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
-    inspection (:class:`~onionsort.stages.evaluate.EvaluateConfig`); ``device`` where torch
-    runs the perception models. ``executor``, ``workers`` and ``ray_address``
-    (:class:`~onionsort.stages.parallel.ParallelOptions`) run the held-out frames' rendering,
-    the repeats' recordings, and then every (repeat, method)'s learning and sorting, as
-    pieces; with fewer repeats than workers the recording and perception of a repeat run their
-    sessions in parallel instead.
-    ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
-    the posterior (``posterior_method``) and sort the same line-up a second time deferring
-    where the robot is less sure than it that its next action is right
-    (:class:`EvaluateConfig`'s ``defer_below``); both results are reported.
-    ``session_swaps`` has MMAP-BIRL doubt how each whole session was read
-    (:class:`~onionsort.stages.learn.LearnConfig`'s ``session_swaps``).
-    ``methods`` are the learners whose policies the Sawyer sorts with (:data:`METHODS` by
-    default; any of :data:`irl.experiments.METHODS`).
-    """
-
-    out: Path = Path("runs/demo")
-    seed: int = 0
-    quick: bool = False
-    models: Path | None = None
-    sessions: int | None = None
-    repeats: int = 1
-    difficulty: str = "clean"
-    connect: str | None = None
-    resume: bool = False
-    backend: str = "numpy"
-    inspection_views: int | None = None
-    miss_cost: float | None = None
-    waste_cost: float | None = None
-    fusion: str | None = None
-    device: str = "auto"
-    defer_below: float | None = None
-    posterior_method: str = "mcmc"
-    session_swaps: bool = False
-    methods: tuple[str, ...] = METHODS
-
-    def __post_init__(self) -> None:
-        from irl.experiments import METHODS as LEARNERS
-        from irl.inference import check_backend
-        from irl.posterior import METHODS as POSTERIOR_METHODS
-
-        super().__post_init__()
-        methods = (self.methods,) if isinstance(self.methods, str) else tuple(self.methods)
-        if not methods:
-            raise ValueError("methods must name at least one learner; got none")
-        unknown = [m for m in methods if m not in LEARNERS]
-        if unknown:
-            raise ValueError(f"methods must be among {LEARNERS}; got {', '.join(unknown)}")
-        object.__setattr__(self, "methods", tuple(dict.fromkeys(methods)))
-        check_backend(self.backend)
-        # the robot's inspection, checked as evaluate checks it (before any work starts)
-        checked = EvaluateConfig(policy="expert", out=self.out,
-                                 inspection_views=self.inspection_views,
-                                 miss_cost=self.miss_cost, waste_cost=self.waste_cost,
-                                 fusion=self.fusion, device=self.device)
-        if self.defer_below is not None:
-            EvaluateConfig(run=self.out, defer_below=self.defer_below)  # checks the value
-        if self.posterior_method not in POSTERIOR_METHODS:
-            raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
-                             f"{self.posterior_method!r}")
-        object.__setattr__(self, "inspection_views", checked.inspection_views)
-        if self.repeats < 1:
-            raise ValueError(f"repeats must be >= 1; got {self.repeats}")
-        if self.sessions is not None and self.sessions < 1:
-            raise ValueError(f"sessions must be >= 1; got {self.sessions}")
-        check_difficulty(self.difficulty)
-        if self.connect is not None:
-            from recordings.rerun.common import check_viewer_url
-
-            check_viewer_url(self.connect)
 
 
 def demo(config: DemoConfig) -> dict:

@@ -34,15 +34,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
 from collections.abc import Iterable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from onionsort.configs.import_video import ImportConfig
 from onionsort.stages.base import check_output_folder, log_config
-from recordings.bags import is_bag, mcap_kind
+from recordings.bags import is_bag
 
 __all__ = ["ImportConfig", "import_video", "list_bag", "perceived_labels", "perceived_segmentation",
            "segmentation_scores"]
@@ -53,117 +52,10 @@ logger = logging.getLogger(__name__)
 _BATCH = 32
 
 
-@dataclass(frozen=True)
-class ImportConfig:
-    """Where the frames come from, how they are cut into steps, and where the session goes.
-
-    Attributes
-    ----------
-    out : Path
-        The session file to create (``.mcap``); an existing file is refused.
-    video : Path or None
-        A video file (any container and codec OpenCV reads), or a ROS 2 or ROS 1 bag (a rosbag2
-        folder, one of its files, a ``.bag``; :mod:`recordings.bags`): the stage tells them
-        apart by what the path is (:func:`recordings.bags.is_bag`).
-    camera : int or None
-        A camera index for ``cv2.VideoCapture``; exactly one of ``video`` and ``camera``.
-    step_seconds : float or None
-        Fixed clock: a step every so many seconds. None: segment by perceived changes.
-    debounce : int
-        Windows a new perceived reading must hold before it starts a step.
-    frames_per_step : int
-        Frames kept per step (the state classifier reads 3).
-    intrinsics : Path or None
-        JSON intrinsics (``{"K": 3x3}`` or ``{"fx", "fy", "cx", "cy"}``).
-    models : Path or None
-        Perception models for the perceived-change segmentation (None: the shipped ones).
-    max_seconds : float
-        How long to record from a camera.
-    inspection : Path or None
-        A video of the inspection spot, frame for frame with ``video``.
-    inspection_intrinsics : Path or None
-        Its intrinsics JSON (default: a 60-degree horizontal view).
-    color_topic : str or None
-        The bag's colour images (None: its one usable colour topic).
-    depth_topic : str or None
-        The bag's depth images (``16UC1`` millimetres or ``32FC1`` metres), optional.
-    camera_info_topic : str or None
-        The colour camera's ``CameraInfo`` (None: the one beside ``color_topic``, if any; then
-        ``intrinsics``; then the default).
-    inspection_topic : str or None
-        The bag's inspection view, optional.
-    step_topic : str or None
-        A topic whose messages mark step starts (instead of ``step_seconds`` or perceived
-        changes).
-    sync_tolerance : float
-        Seconds within which depth and the inspection view are matched to a colour frame.
-    """
-
-    out: Path
-    video: Path | None = None
-    camera: int | None = None
-    step_seconds: float | None = None
-    debounce: int = 2
-    frames_per_step: int = 3
-    intrinsics: Path | None = None
-    models: Path | None = None
-    max_seconds: float = 60.0
-    inspection: Path | None = None
-    inspection_intrinsics: Path | None = None
-    color_topic: str | None = None
-    depth_topic: str | None = None
-    camera_info_topic: str | None = None
-    inspection_topic: str | None = None
-    step_topic: str | None = None
-    sync_tolerance: float = 0.05
-
-    @property
-    def is_bag(self) -> bool:
-        """Whether the source is a ROS bag rather than a video file or a camera."""
-        return self.video is not None and is_bag(self.video)
-
-    def __post_init__(self) -> None:
-        if (self.video is None) == (self.camera is None):
-            raise ValueError("give exactly one source: a video file, a bag or --camera INDEX; "
-                             f"got video={self.video}, camera={self.camera}")
-        bag_options = {"--color-topic": self.color_topic, "--depth-topic": self.depth_topic,
-                       "--camera-info-topic": self.camera_info_topic,
-                       "--inspection-topic": self.inspection_topic,
-                       "--step-topic": self.step_topic}
-        if self.video is not None and mcap_kind(self.video) == "session":
-            raise ValueError(f"{self.video} is an onionsort session already; perceive it, or "
-                             "learn from it, as it is")
-        given = [name for name, value in bag_options.items() if value is not None]
-        if given and not self.is_bag:
-            raise ValueError(f"{', '.join(given)} go with a ROS bag; {self.video or 'a camera'}"
-                             " is not one (a rosbag2 folder, its .mcap or .db3 file, a .bag)")
-        if self.camera_info_topic is not None and self.intrinsics is not None:
-            raise ValueError("give --camera-info-topic or --intrinsics, not both: the "
-                             "colour camera's intrinsics come from one of them")
-        if self.step_topic is not None and self.step_seconds is not None:
-            raise ValueError("give --step-topic or --step-seconds, not both")
-        if not (math.isfinite(self.sync_tolerance) and self.sync_tolerance >= 0):
-            raise ValueError(f"sync_tolerance must be a number of seconds >= 0; got "
-                             f"{self.sync_tolerance}")
-        if self.step_seconds is not None and not self.step_seconds > 0:
-            raise ValueError(f"step_seconds must be > 0; got {self.step_seconds}")
-        if self.debounce < 1:
-            raise ValueError(f"debounce must be >= 1; got {self.debounce}")
-        if self.frames_per_step < 1:
-            raise ValueError(f"frames_per_step must be >= 1; got {self.frames_per_step}")
-        if not self.max_seconds > 0:
-            raise ValueError(f"max_seconds must be > 0; got {self.max_seconds}")
-        if self.inspection is not None and (self.video is None or self.is_bag):
-            raise ValueError("--inspection VIDEO goes with a video file, not a camera or a bag "
-                             "(a bag's: --inspection-topic)")
-        if Path(self.out).exists():
-            raise FileExistsError(f"{self.out} exists; choose another --out")
-
-
 def list_bag(path: Path) -> list:
     """The topics of the bag at ``path`` (:class:`recordings.bags.BagTopic`): type, count, rate
     and what the import can use each for."""
-    from recordings.bags import Bag, is_bag
+    from recordings.bags import Bag
 
     if not is_bag(path):
         raise ValueError(f"--list lists a bag's topics; {path} is not a ROS bag (a rosbag2 "

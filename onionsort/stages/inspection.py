@@ -27,13 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import (
-    check_device,
-    check_output_folder,
-    log_config,
-    pool_datasets,
-    write_json,
+from onionsort.configs.inspection import (
+    INSPECTION_CAMERAS,
+    FusionCalibrationConfig,
+    InspectionTrainStageConfig,
 )
+from onionsort.stages.base import check_output_folder, log_config, write_json
 
 __all__ = [
     "INSPECTION_CAMERAS",
@@ -54,8 +53,6 @@ logger = logging.getLogger(__name__)
 MIN_CROP_PIXELS = 300
 """A view is read only if the onion shows at least this many pixels (a rim at the edge of the
 sorter's view is no inspection)."""
-INSPECTION_CAMERAS = ("both", "robot")
-"""Whose inspection views a classifier learns from (:class:`InspectionTrainStageConfig`)."""
 
 
 @dataclass
@@ -208,63 +205,6 @@ def _dataset_level(meta: dict) -> str:
     if isinstance(difficulty, dict):
         return difficulty.get("name", "custom")
     return "mix" if isinstance(difficulty, list) else str(difficulty)
-
-
-@dataclass(frozen=True)
-class InspectionTrainStageConfig:
-    """``onionsort train inspection``: dataset folders (one or several: their splits are
-    pooled), run folder, hyperparameters.
-
-    ``detector`` is the folder of the detector that finds the onion in the validation views
-    (None: the shipped one); ``level_weights`` weighs difficulty levels (``{"clean": 2.0}``
-    counts clean views twice); ``device`` where torch trains (``auto``, ``cpu``, ``cuda``);
-    ``fusion`` fixes the classifier's fusion rule (None: the rule of lower log-loss on the
-    validation onions); ``visibility`` fixes the chance that a view of a blemished onion shows
-    its rot, as ``noisy-or`` fusion assumes it (None: the share measured on the training
-    views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
-    robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
-    the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
-    Sawyer's inspection then reads instead). ``augment``: each training crop also seen through
-    a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
-    validation. ``data_weights``: how many times each dataset's training views count
-    (positive integers, 1 each by default), times the level weights; ``init``: an inspection
-    classifier to fine-tune instead of training from scratch.
-    """
-
-    data: Path | tuple[Path, ...]
-    out: Path
-    epochs: int = 30
-    batch_size: int = 128
-    seed: int = 0
-    detector: Path | None = None
-    level_weights: dict = field(default_factory=dict)
-    device: str = "auto"
-    fusion: str | None = None
-    visibility: float | None = None
-    camera: str = "both"
-    augment: bool = True
-    init: Path | None = None
-    data_weights: tuple[int, ...] = ()
-
-    def __post_init__(self) -> None:
-        from perception.fusion import FUSION_RULES
-
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        if self.fusion is not None and self.fusion not in FUSION_RULES:
-            raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
-        if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
-            raise ValueError(f"visibility must be in (0, 1]; got {self.visibility}")
-        if self.camera not in INSPECTION_CAMERAS:
-            raise ValueError(f"camera must be one of {INSPECTION_CAMERAS}; got "
-                             f"{self.camera!r}")
-        for name in ("epochs", "batch_size"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
-        for level, weight in self.level_weights.items():
-            if not weight > 0:
-                raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")
 
 
 def _load_detector(folder: Path | None, device):
@@ -463,35 +403,6 @@ def _write_fused_calibration(folder: Path, fitted: dict, provenance: dict) -> di
     doc = {"format": 1, "rules": fitted, **provenance}
     write_json(Path(folder) / ROBOT_FUSION_FILE, doc)
     return doc
-
-
-@dataclass(frozen=True)
-class FusionCalibrationConfig:
-    """``onionsort train robot-fusion``: held-out dataset folders whose robot onions fit the
-    calibration (pooled), their ``split``, the ``models`` folder whose robot inspection
-    classifier fuses them (None: the shipped one), the first ``views`` of each onion (None:
-    the robot's :data:`~robot.inspection_poses.INSPECTION_VIEWS`), the ``out`` folder, the
-    torch ``device``."""
-
-    data: Path | tuple[Path, ...]
-    out: Path
-    split: str = "all"
-    models: Path | None = None
-    views: int | None = None
-    device: str = "auto"
-
-    def __post_init__(self) -> None:
-        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
-        if not data:
-            raise ValueError("data must name at least one dataset folder; got none")
-        object.__setattr__(self, "data", tuple(Path(d) for d in data))
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        if self.split not in ("train", "val", "test", "all"):
-            raise ValueError(f"split must be train, val, test or all; got {self.split!r}")
-        if self.views is not None and (isinstance(self.views, bool)
-                                       or not isinstance(self.views, int) or self.views < 1):
-            raise ValueError(f"views must be an int >= 1; got {self.views!r}")
 
 
 def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:

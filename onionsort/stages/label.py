@@ -29,9 +29,10 @@ import shutil
 import struct
 import tempfile
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
+from onionsort.configs.label import LABEL_FORMATS, LabelExportConfig, LabelImportConfig
 from onionsort.stages.base import log_config
 
 __all__ = ["FIT", "LABEL_FORMATS", "LabelExportConfig", "LabelImportConfig", "export_labels",
@@ -39,17 +40,11 @@ __all__ = ["FIT", "LABEL_FORMATS", "LabelExportConfig", "LabelImportConfig", "ex
 
 logger = logging.getLogger(__name__)
 
-LABEL_FORMATS = ("coco", "yolo")
 #: The detector's canvas (``perception.model.DetectorConfig``'s width and height, repeated so
 #: that this stage loads no torch; a test checks they agree): larger images are shrunk to fit
 #: it, keeping their aspect, by area averaging, as the detector's letterbox shrinks them.
 FIT = (320, 256)
 STATES_FILE = "states.csv"
-
-
-def _check_format(fmt: str) -> None:
-    if fmt not in LABEL_FORMATS:
-        raise ValueError(f"format must be one of {LABEL_FORMATS}; got {fmt!r}")
 
 
 def _check_new_folder(out: Path) -> None:
@@ -76,21 +71,6 @@ def _staging(out: Path):
 
 
 # -- export ----------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LabelExportConfig:
-    """``onionsort label export``: the dataset folder, the output folder (new) and the
-    layout (``coco`` or ``yolo``)."""
-
-    data: Path
-    out: Path
-    format: str = "coco"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "data", Path(self.data))
-        object.__setattr__(self, "out", Path(self.out))
-        _check_format(self.format)
 
 
 def _png_size(data: bytes, path: Path) -> tuple[int, int]:
@@ -161,61 +141,6 @@ def export_labels(config: LabelExportConfig) -> dict:
 
 
 # -- import ----------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LabelImportConfig:
-    """``onionsort label import``: what to read and where to write it.
-
-    Attributes
-    ----------
-    source : Path
-        The labelled image set (COCO or YOLO layout, see :mod:`recordings.coco`,
-        :mod:`recordings.yolo`).
-    out : Path
-        A new dataset folder.
-    format : str
-        ``coco`` or ``yolo``.
-    states : Path or None
-        The state labels (:mod:`recordings.states_csv`); None: ``source/states.csv`` where
-        there is one. Frames without a row are box-only.
-    depth : Path or None
-        16-bit PNG depth images in millimetres, matched by file name (``depth/<split>/NAME.png``
-        or ``depth/NAME.png`` for the image ``NAME.*``); None: ``source/depth`` where there
-        is one. Frames without depth are read by the colour-only models.
-    inspection : Path or None
-        The inspection views, a second set in the same format (its own ``states.csv``);
-        None: ``source/inspection`` where there is one.
-    classes : dict
-        The dataset's class (``good``, ``blemished``) -> the set's name for it; a class not
-        named keeps its own name.
-    val, test : float
-        Shares of sessions for val and test when the set has no splits (as ``onionsort
-        dataset`` splits its sessions).
-    """
-
-    source: Path
-    out: Path
-    format: str = "coco"
-    states: Path | None = None
-    depth: Path | None = None
-    inspection: Path | None = None
-    classes: dict = field(default_factory=dict)
-    val: float = 0.15
-    test: float = 0.15
-
-    def __post_init__(self) -> None:
-        from recordings.dataset import CLASSES
-
-        for name in ("source", "out", "states", "depth", "inspection"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, Path(getattr(self, name)))
-        _check_format(self.format)
-        unknown = [k for k in self.classes if k not in CLASSES]
-        if unknown:
-            raise ValueError(f"classes maps {unknown[0]!r}, which is not a class of the "
-                             f"dataset ({', '.join(CLASSES)})")
-        object.__setattr__(self, "classes", dict(self.classes))
 
 
 def _default(given: Path | None, path: Path, *, folder: bool) -> Path | None:

@@ -27,48 +27,17 @@ The frames are written as a labelling task pre-annotated with the models' output
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import check_device, log_config
+from onionsort.configs.label import SELECT_FORMATS, LabelSelectConfig
+from onionsort.stages.base import log_config
 from onionsort.stages.label import STATES_FILE, _staging
 
 __all__ = ["SELECT_FORMATS", "LabelSelectConfig", "select_frames", "step_uncertainties"]
 
 logger = logging.getLogger(__name__)
-
-SELECT_FORMATS = ("coco", "labelstudio")
-
-
-@dataclass(frozen=True)
-class LabelSelectConfig:
-    """``onionsort label select``: the sessions, how many frames, the output folder (new),
-    its format (``coco`` or ``labelstudio``), the models (None: the shipped ones) and where
-    torch runs them."""
-
-    sessions: tuple[Path, ...]
-    out: Path
-    frames: int = 200
-    format: str = "coco"
-    models: Path | None = None
-    device: str = "auto"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "sessions", tuple(Path(p) for p in self.sessions))
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        if self.frames < 1:
-            raise ValueError(f"frames must be >= 1; got {self.frames}")
-        if self.format not in SELECT_FORMATS:
-            raise ValueError(f"format must be one of {SELECT_FORMATS}; got {self.format!r}")
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not p.is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
-
 
 def step_uncertainties(seen: list) -> list[float]:
     """The chance, by the models' own probabilities, that each perceived step of one session

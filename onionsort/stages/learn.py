@@ -28,12 +28,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from onionsort.configs.learn import BAYESIAN_METHODS as BAYESIAN_METHODS
+from onionsort.configs.learn import SWAP_METHOD as SWAP_METHOD
+from onionsort.configs.learn import LearnConfig
 from onionsort.stages.base import log_config, output_folder, refuse_existing, write_json
 from onionsort.stages.models import model_mismatch
 from onionsort.stages.parallel import ParallelOptions
@@ -51,102 +53,6 @@ MODEL_FORMAT = "onionsort.learned-model/1"
 POSTERIOR_FILE = "posterior.npz"
 CONFIDENCE_FILE = "policy_confidence.json"
 CONFIDENCE_FORMAT = "onionsort.policy-confidence/1"
-#: The learners with an exact posterior to sample.
-BAYESIAN_METHODS = ("mmap-birl", "map-birl")
-#: The learner that can doubt how a whole session was read (``session_swaps``).
-SWAP_METHOD = "mmap-birl"
-
-
-@dataclass(frozen=True)
-class LearnConfig:
-    """What to learn from, with which learner, into which run folder.
-
-    Attributes
-    ----------
-    sessions : tuple of Path
-        Perceived session files.
-    calibration : Path
-        ``calibration.json`` from ``onionsort calibrate``.
-    out : Path
-        Run folder.
-    method : str
-        A learner of :data:`irl.experiments.METHODS`.
-    seed : int
-    allow_model_mismatch : bool
-        Learn even when the sessions were perceived by other models, or in another sensor
-        mode, than the calibration was measured with (logged, and noted in ``model.json``).
-    rerun : bool
-        Write ``learn.rrd``.
-    overwrite : bool
-        Replace an earlier run's ``model.json`` in ``out``.
-    connect : str or None
-        Also stream the Rerun recording to the viewer at this gRPC URL
-        (``rerun+http://HOST:9876/proxy``), in addition to ``learn.rrd``.
-    backend : str
-        Forward-backward kernels (``irl.inference.BACKENDS``): ``numpy`` or ``numba`` (the
-        ``fast`` extra), equal to rounding; used by the methods that run forward-backward
-        (``mmap-birl``, ``bc-em``), recorded in ``model.json`` for every method.
-    posterior : bool
-        Also sample the posterior over reward weights (``mmap-birl`` and ``map-birl`` only).
-    samples : int
-        Posterior samples (1000).
-    posterior_method : str
-        ``mcmc`` (HMC chains, the default) or ``laplace`` (a Gaussian at the MAP, fast); see
-        :mod:`irl.posterior`.
-    session_swaps : bool
-        ``mmap-birl`` only: let each session's reads of the onion's class have been backwards
-        as a whole, at the rate the calibration measured on its held-out sessions
-        (:meth:`state_abstraction.calibration.Calibration.session_swap`; the learner's
-        ``session_swap``). Each session's posterior probability of having been swapped is
-        written to ``model.json``.
-    """
-
-    sessions: tuple[Path, ...]
-    calibration: Path
-    out: Path
-    method: str = "mmap-birl"
-    seed: int = 0
-    allow_model_mismatch: bool = False
-    rerun: bool = True
-    overwrite: bool = False
-    connect: str | None = None
-    backend: str = "numpy"
-    posterior: bool = False
-    samples: int = 1000
-    posterior_method: str = "mcmc"
-    session_swaps: bool = False
-
-    def __post_init__(self) -> None:
-        from irl.experiments import METHODS
-        from irl.inference import check_backend
-        from irl.posterior import METHODS as POSTERIOR_METHODS
-
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
-        if self.session_swaps and self.method != SWAP_METHOD:
-            raise ValueError(f"session_swaps needs {SWAP_METHOD}, which marginalizes how each "
-                             f"session was read; {self.method} does not")
-        if self.posterior and self.method not in BAYESIAN_METHODS:
-            raise ValueError(f"a posterior needs a Bayesian method ({', '.join(BAYESIAN_METHODS)}"
-                             f"); {self.method} gives a point estimate only")
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) \
-                or self.samples < 10:
-            raise ValueError(f"samples must be an int >= 10; got {self.samples!r}")
-        if self.posterior_method not in POSTERIOR_METHODS:
-            raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
-                             f"{self.posterior_method!r}")
-        check_backend(self.backend)
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
-        if self.connect is not None:
-            from recordings.rerun.common import check_viewer_url
-
-            check_viewer_url(self.connect)
-
-
 def _check_provenance(session, calibration, calibration_path: Path) -> None:
     """Refuse a session perceived by other models, or in another mode, than the calibration."""
     record = session.perception_models or {}

@@ -42,8 +42,9 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
-from typing import ClassVar, TypeVar
+from typing import TypeVar
+
+from onionsort.configs.parallel import EXECUTORS, TORCH_THREADS, ParallelOptions
 
 __all__ = [
     "EXECUTORS",
@@ -58,8 +59,6 @@ __all__ = [
     "worker_threads",
 ]
 
-#: Where the pieces of a stage can run.
-EXECUTORS = ("local", "ray")
 #: How to install Ray (an optional extra).
 RAY_EXTRA = 'pip install -e ".[ray]"'
 #: Threads of torch, OpenMP and BLAS in this process: 1 in a worker, else the library default.
@@ -70,58 +69,6 @@ logger = logging.getLogger(__name__)
 
 P = TypeVar("P")
 R = TypeVar("R")
-
-
-@dataclass(frozen=True, kw_only=True)
-class ParallelOptions:
-    """Where a stage's independent pieces run; every parallel stage's config has these fields.
-
-    Attributes
-    ----------
-    executor : str
-        ``local`` (worker processes on this machine) or ``ray`` (a Ray cluster, or a local
-        Ray instance).
-    workers : int or None
-        Local worker processes, or the CPUs of a new local Ray instance (None: as many as the
-        machine's cores take pieces of this stage, :func:`default_workers`). 1 runs the pieces
-        in this process, one after another.
-    ray_address : str or None
-        The Ray cluster to join with ``executor="ray"`` (None: ``RAY_ADDRESS``, else a new local
-        instance).
-    """
-
-    executor: str = "local"
-    workers: int | None = None
-    ray_address: str | None = None
-    #: Cores one piece of this stage keeps busy when it runs in the command: 1 for most, the
-    #: torch threads it would get there (:func:`torch_threads`) for a stage whose pieces are
-    #: mostly a network's work (perceive, calibrate). The default ``workers`` follows from it.
-    piece_threads: ClassVar[int] = 1
-
-    def __post_init__(self) -> None:
-        if self.executor not in EXECUTORS:
-            raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; got "
-                             f"{self.executor!r}")
-        if self.workers is not None and (isinstance(self.workers, bool)
-                                         or not isinstance(self.workers, int)
-                                         or self.workers < 1):
-            raise ValueError(f"workers must be >= 1; got {self.workers!r}")
-        if self.ray_address is not None and self.executor != "ray":
-            raise ValueError(f"ray_address is for executor 'ray'; got executor "
-                             f"{self.executor!r} with ray_address {self.ray_address!r}")
-
-    @property
-    def n_workers(self) -> int:
-        """``workers``, or :func:`default_workers` for this stage's ``piece_threads``."""
-        return self.workers if self.workers is not None else default_workers(self.piece_threads)
-
-    def parallel_options(self) -> ParallelOptions:
-        """These fields alone (to hand on to another stage, or to :func:`run_pieces`), with a
-        local pool's default worker count resolved for this stage: a stage run inside another
-        (the demo's calibration and perceiving) runs on the workers its caller chose."""
-        workers = self.n_workers if self.executor == "local" else self.workers
-        return ParallelOptions(executor=self.executor, workers=workers,
-                               ray_address=self.ray_address)
 
 
 def machine_cores() -> int:
@@ -152,10 +99,6 @@ def worker_threads() -> int | None:
     """Threads a library may use in this process: 1 in a worker of :func:`run_pieces`, else
     None (its own default)."""
     return _WORKER_THREADS
-
-
-#: Threads a stage runs torch on in the command (outside a worker), by default.
-TORCH_THREADS = 2
 
 
 def torch_threads(default: int = TORCH_THREADS) -> int:

@@ -17,59 +17,17 @@ import functools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
 
 import numpy as np
 
-from onionsort.stages.base import check_device, check_output_folder, log_config
+from onionsort.configs.perceive import PerceiveConfig
+from onionsort.stages.base import check_output_folder, log_config
 from onionsort.stages.models import PerceptionModels
-from onionsort.stages.parallel import TORCH_THREADS, ParallelOptions, run_pieces
+from onionsort.stages.parallel import ParallelOptions, run_pieces
 
 __all__ = ["PerceiveConfig", "PerceivedSession", "perceive", "perceive_session"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class PerceiveConfig(ParallelOptions):
-    """Which sessions to perceive, with which models.
-
-    Attributes
-    ----------
-    sessions : tuple of Path
-        Session files (``.mcap``); each gets the perception topics in place.
-    models : Path or None
-        Folder with ``state_classifier.pt``, ``detector.pt`` and
-        ``inspection_classifier.pt`` (None: the shipped models).
-    replace : bool
-        Perceive sessions that already hold perception topics again.
-    batch_size : int
-        Frames per detector batch.
-    device : str
-        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
-    executor, workers, ray_address
-        Where the sessions are perceived (:class:`~onionsort.stages.parallel.ParallelOptions`):
-        each is a piece.
-    """
-
-    sessions: tuple[Path, ...]
-    models: Path | None = None
-    replace: bool = False
-    batch_size: int = 32
-    device: str = "auto"
-    #: Perceiving a session is mostly the networks' work, on torch's threads.
-    piece_threads: ClassVar[int] = TORCH_THREADS
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_device(self.device)
-        if not self.sessions:
-            raise ValueError("sessions must name at least one session file; got none")
-        missing = [str(p) for p in self.sessions if not Path(p).is_file()]
-        if missing:
-            raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
-        if self.batch_size < 1:
-            raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")
 
 
 @dataclass(frozen=True)

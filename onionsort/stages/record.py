@@ -21,84 +21,15 @@ Example::
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.stages.base import check_difficulty, log_config, output_folder
-from onionsort.stages.parallel import ParallelOptions, run_pieces
+from onionsort.configs.record import RecordConfig
+from onionsort.stages.base import log_config, output_folder
+from onionsort.stages.parallel import run_pieces
 
 __all__ = ["RecordConfig", "record"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class RecordConfig(ParallelOptions):
-    """How many sessions to simulate, how, and where to write them.
-
-    Attributes
-    ----------
-    out : Path
-        Folder for the ``.mcap`` files.
-    sessions : int
-    seed : int
-        Root seed; sessions are reproducible from it.
-    occlusion : float
-        Probability that the passer-by occludes a step.
-    steps_per_session, frames_per_step : int
-    width, height : int
-        Main camera resolution.
-    overwrite : bool
-        Replace existing session files in ``out``.
-    rerun : Path, str or None
-        Also log every session to Rerun: an ``.rrd`` path, ``"spawn"``, or a viewer URL.
-    difficulty : str
-        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's world).
-    connect : str or None
-        Also stream the Rerun recording to the viewer at this gRPC URL
-        (``rerun+http://HOST:9876/proxy``), in addition to the ``rerun`` file.
-    resume : bool
-        Keep the complete sessions already in ``out`` and record the others (see above).
-    executor, workers, ray_address
-        Where the sessions are recorded (:class:`~onionsort.stages.parallel.ParallelOptions`):
-        each is a piece, simulated from its own seed.
-    """
-
-    out: Path
-    sessions: int = 12
-    seed: int = 0
-    occlusion: float = 0.2
-    steps_per_session: int = 20
-    frames_per_step: int = 3
-    width: int = 320
-    height: int = 240
-    overwrite: bool = False
-    rerun: Path | str | None = None
-    difficulty: str = "clean"
-    connect: str | None = None
-    resume: bool = False
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_difficulty(self.difficulty)
-        if self.resume and self.overwrite:
-            raise ValueError("resume keeps the complete sessions in --out and overwrite "
-                             "replaces them all; give --resume or --overwrite, not both")
-        for name in ("sessions", "steps_per_session", "frames_per_step"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
-        if not 0.0 <= self.occlusion <= 1.0:
-            raise ValueError(f"occlusion must be in [0, 1]; got {self.occlusion}")
-        if min(self.width, self.height) < 8:
-            raise ValueError(f"width and height must be >= 8; got {self.width}x{self.height}")
-        if self.connect is not None:
-            from recordings.rerun.common import check_viewer_url
-
-            check_viewer_url(self.connect)
-            if str(self.rerun) == "spawn":
-                raise ValueError("spawn starts a local viewer and connect streams to another; "
-                                 "give --spawn or --connect, not both")
 
 
 def record(config: RecordConfig) -> list[Path]:

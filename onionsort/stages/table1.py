@@ -6,6 +6,9 @@ report used to import it from the demo, which imports the report).
 
 from __future__ import annotations
 
+#: The methods of the demo, in the order its table and the report list them.
+from onionsort.configs.demo import METHODS as METHODS
+
 __all__ = ["METHODS", "PAPER_TABLE_1", "table"]
 
 #: The paper's Table 1 (50 physical onions): TP, FP, TN, FN, precision, recall.
@@ -14,8 +17,6 @@ PAPER_TABLE_1 = {
     "hidden-data-em": {"tp": 16, "fp": 10, "tn": 15, "fn": 9, "precision": 0.615,
                        "recall": 0.64},
 }
-#: The methods of the demo, in the order its table and the report list them.
-METHODS = ("mmap-birl", "map-birl", "hidden-data-em")
 
 
 def table(results: dict) -> str:

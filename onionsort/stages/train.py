@@ -16,18 +16,12 @@ Examples
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from onionsort.stages.base import (
-    check_device,
-    check_output_folder,
-    log_config,
-    pool_datasets,
-    resolve_device,
-)
+from onionsort.configs.train import ClassifierTrainConfig, DetectorTrainConfig
+from onionsort.stages.base import check_output_folder, log_config, resolve_device
 from onionsort.stages.parallel import torch_threads
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
@@ -41,74 +35,6 @@ EMPTY_INSPECTION_SHARE = 0.15
 #: Inspection views with an onion are few next to the camera frames: repeated this many times
 #: in the training split.
 INSPECTION_REPEAT = 3
-
-
-def _check_positive(config, *names: str) -> None:
-    for name in names:
-        if getattr(config, name) < 1:
-            raise ValueError(f"{name} must be >= 1; got {getattr(config, name)}")
-
-
-@dataclass(frozen=True)
-class ClassifierTrainConfig:
-    """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters.
-
-    ``data`` is one dataset folder or several, whose splits are pooled, each dataset's
-    training steps counted ``data_weights`` times (1 each by default); ``depth_dropout``:
-    probability that a training step's depth is zeroed
-    (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
-    checkpoint to fine-tune instead of training from scratch; ``augment``: each training
-    step's frames seen through a camera of their own
-    (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
-    """
-
-    data: Path | tuple[Path, ...]
-    out: Path
-    epochs: int = 12
-    batch_size: int = 32
-    seed: int = 0
-    depth_dropout: float = 0.5
-    device: str = "auto"
-    augment: bool = True
-    init: Path | None = None
-    data_weights: tuple[int, ...] = ()
-
-    def __post_init__(self) -> None:
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        _check_positive(self, "epochs", "batch_size")
-        if not 0.0 <= self.depth_dropout <= 1.0:
-            raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
-
-
-@dataclass(frozen=True)
-class DetectorTrainConfig:
-    """``onionsort train detector``: dataset folders (as :class:`ClassifierTrainConfig`'s
-    ``data`` and ``data_weights``), run folder, hyperparameters, ``resume`` (continue the run
-    in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to fine-tune instead
-    of training from scratch), the peak learning rate ``lr`` and ``augment`` (each training
-    image seen through a camera of its own, :class:`perception.photometric.PhotometricAugment`;
-    never at evaluation)."""
-
-    data: Path | tuple[Path, ...]
-    out: Path
-    epochs: int = 24
-    images_per_epoch: int = 1600
-    batch_size: int = 16
-    seed: int = 0
-    resume: bool = False
-    device: str = "auto"
-    init: Path | None = None
-    lr: float = 2e-3
-    augment: bool = True
-    data_weights: tuple[int, ...] = ()
-
-    def __post_init__(self) -> None:
-        pool_datasets(self)
-        object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
-        _check_positive(self, "epochs", "images_per_epoch", "batch_size")
 
 
 class _EpochBar:

@@ -182,7 +182,7 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     assert "through other cameras (seed 11)" in text and "unchanged  changed" in text
     assert "sessions read backwards" in text
     # the fused calls' figures include the fused probability's calibration (ECE)
-    from onionsort.commands.eval_perception import figures
+    from onionsort.stages.calibrate import perception_figures as figures
 
     fused = {"accuracy": 0.9, "precision": 1.0, "recall": 0.8, "ece": 0.07}
     level = {"found": 1.0, "rot_accuracy": 0.9, "view_accuracy": 0.8,

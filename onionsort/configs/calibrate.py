@@ -1,0 +1,102 @@
+"""The configs of stages ``calibrate`` and ``eval-perception``
+(:mod:`onionsort.stages.calibrate`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from onionsort.configs import common, option
+from onionsort.configs.parallel import TORCH_THREADS, ParallelOptions
+
+__all__ = ["CalibrateConfig", "PerceptionEvalConfig"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CalibrateConfig(ParallelOptions):
+    """Where to measure perception and where to write the calibration.
+
+    Attributes
+    ----------
+    data : Path
+        A labelled dataset from ``onionsort dataset`` (held out: not trained on).
+    split : str
+        ``train``, ``val``, ``test`` or ``all``.
+    out : Path
+        Folder for ``calibration.json``, ``observation_model.npz`` and ``confusion.png``.
+    smoothing : float
+        Additive smoothing of the confusion counts.
+    depth : bool
+        Measure with depth (RGB-D) or colour alone.
+    inspection : bool
+        Measure with the inspection view or without it.
+    overwrite : bool
+        Replace a ``calibration.json`` already in ``out``.
+    models : Path or None
+        Perception models folder (None: the shipped models).
+    device : str
+        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    executor, workers, ray_address
+        Where the dataset's sessions are perceived
+        (:class:`~onionsort.configs.parallel.ParallelOptions`): each is a piece.
+    """
+
+    data: Path = option(help="labelled dataset folder")
+    split: str = option("test", help="the held-out split to use: train, val, test or all "
+                                     "(test)")
+    out: Path = option(help="folder for the calibration")
+    smoothing: float = option(1.0, help="additive smoothing of the confusion counts (1.0)")
+    depth: bool = option(True, help="measure the classifier on colour alone (for sessions "
+                                    "without depth)")
+    inspection: bool = option(True, help="measure without the inspection view (imported "
+                                         "videos have none)")
+    overwrite: bool = option(False, help="replace a calibration.json already in --out")
+    models: Path | None = common.models()
+    device: str = common.device()
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "dataset's sessions"}
+    #: Measuring a session is mostly the classifiers' work, on torch's threads.
+    piece_threads: ClassVar[int] = TORCH_THREADS
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device
+
+        super().__post_init__()
+        check_device(self.device)
+        if self.smoothing < 0:
+            raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
+
+
+@dataclass(frozen=True)
+class PerceptionEvalConfig:
+    """A dataset split to measure the perception models on: the detector, the state
+    classifier and the inspection. ``views`` fuses the robot's first ``views`` views of each
+    onion (all the dataset holds: None); ``plots`` is a folder for the inspection's
+    precision-recall curves (None: none drawn); ``camera_shift`` a seed (an int >= 0) of
+    other cameras to measure through as well
+    (:class:`~onionsort.stages.calibrate.SessionCameras`; None: none)."""
+
+    data: Path = option(help="labelled dataset folder")
+    split: str = option("test", help="split to evaluate on: train, val, test or all (test)")
+    depth: bool = option(True, help="classifier on colour alone")
+    inspection: bool = option(True, help="without the inspection view")
+    views: int | None = option(None, help="fuse the Sawyer's first VIEWS views of each onion "
+                                          "(default: all the dataset holds)")
+    plots: Path | None = option(None, metavar="DIR",
+                                help="draw the inspection's precision-recall curves into DIR")
+    camera_shift: int | None = option(None, metavar="SEED",
+                                      help="measure through other cameras too, drawn from SEED "
+                                           "(an int >= 0; default: none), and print each "
+                                           "figure unchanged and changed")
+    models: Path | None = common.models()
+    device: str = common.device()
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device
+        from onionsort.stages.calibrate import SessionCameras
+
+        check_device(self.device)
+        if self.camera_shift is not None:
+            SessionCameras(self.camera_shift)  # checks the seed
+        if self.views is not None and self.views < 1:
+            raise ValueError(f"views must be >= 1; got {self.views}")

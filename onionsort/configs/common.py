@@ -1,0 +1,172 @@
+"""Options that several stages' configs share, declared once each: a field factory per option
+(``models: Path | None = models()``), the choices the parser offers, and the parsers of
+list-valued options.
+
+The choices are repeated here so that building the parser (every command does, at start)
+imports neither ``irl`` (and scipy), torch, the robot's world nor the stages; tests check that
+each tuple is the library's: :data:`onionsort.stages.base.DEVICES`,
+:data:`irl.inference.BACKENDS`, :data:`irl.experiments.METHODS`,
+:data:`robot.difficulty.DIFFICULTY_LEVELS`, :data:`robot.inspection_poses.INSPECTION_VIEWS`,
+:data:`perception.fusion.FUSION_RULES`, :data:`onionsort.stages.inspection.INSPECTION_CAMERAS`,
+:data:`onionsort.stages.label.LABEL_FORMATS` and
+:data:`onionsort.stages.label_select.SELECT_FORMATS`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from pathlib import Path
+
+from onionsort.configs import option
+from onionsort.configs.export import EXPORT_FORMATS as EXPORT_FORMATS
+from onionsort.configs.export import ROS2_STORAGES as ROS2_STORAGES
+
+DEVICES = ("auto", "cpu", "cuda")
+BACKENDS = ("numpy", "numba")
+METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
+#: The four reward learners of the paper: what ``experiment`` runs by default
+IRL_METHODS = METHODS[:4]
+DIFFICULTY_LEVELS = ("clean", "realistic", "paper", "hard")
+INSPECTION_VIEWS = 5
+FUSION_RULES = ("noisy-or", "log-odds")
+INSPECTION_CAMERAS = ("both", "robot")
+LABEL_FORMATS = ("coco", "yolo")
+SELECT_FORMATS = ("coco", "labelstudio")
+POSTERIOR_METHODS = ("mcmc", "laplace")
+
+
+def seed(help: str = "root seed (0)"):
+    """``--seed``: the root seed, 0 by default."""
+    return option(0, help=help)
+
+
+def occlusion(default: float):
+    """``--occlusion``: the chance that the passer-by occludes a step."""
+    return option(default, help="probability that a step is occluded by the passer-by "
+                                f"({default})")
+
+
+def steps_per_session():
+    """``--steps-per-session``."""
+    return option(20, help="abstract sorting steps per session (20)")
+
+
+def frames_per_step(help: str = "frames rendered per step (3)"):
+    """``--frames-per-step``."""
+    return option(3, help=help)
+
+
+def difficulty(help: str = "perception difficulty of the world (clean)"):
+    """``--difficulty``: one of the world's levels."""
+    return option("clean", choices=DIFFICULTY_LEVELS, help=help)
+
+
+def models():
+    """``--models``: the perception models folder."""
+    return option(None, help="folder with detector.pt, state_classifier.pt and "
+                             "inspection_classifier.pt, and optionally "
+                             "robot_inspection_classifier.pt for the Sawyer's inspection "
+                             "(default: the models shipped with onionsort)")
+
+
+def device():
+    """``--device {auto,cpu,cuda}``: where torch runs the perception models."""
+    return option("auto", choices=DEVICES,
+                  help="where torch runs: auto (CUDA when present, else the CPU; default), cpu "
+                       "or cuda")
+
+
+def connect(what: str = "its Rerun recordings"):
+    """``--connect URL``: also stream the command's Rerun recordings to a viewer over gRPC."""
+    return option(None, metavar="URL",
+                  help=f"also stream {what} to the Rerun viewer at URL, e.g. on another "
+                       "machine (rerun+http://HOST:9876/proxy; start it there with `rerun`)")
+
+
+def inspection_views():
+    """``--inspection-views``: views the Sawyer takes of every onion."""
+    return option(INSPECTION_VIEWS, help="views the Sawyer takes of every onion, turning and "
+                                         f"tilting it ({INSPECTION_VIEWS})")
+
+
+def miss_cost():
+    """``--miss-cost``."""
+    return option(None, help="cost of a blemished onion left on the line (default: from the "
+                             "task's reward, 8)")
+
+
+def waste_cost():
+    """``--waste-cost``."""
+    return option(None, help="cost of a good onion in the bin (default: from the task's "
+                             "reward, 8); the robot bins an onion when P(blemished) >= "
+                             "waste / (waste + miss)")
+
+
+def fusion(help: str = "how the views are fused (default: the inspection classifier's own "
+                       "rule)"):
+    """``--fusion``: how the inspection's views are fused."""
+    return option(None, choices=FUSION_RULES, help=help)
+
+
+def backend():
+    """``--backend {numpy,numba}``: the forward-backward kernels."""
+    return option("numpy", choices=BACKENDS,
+                  help="forward-backward kernels: numpy (default) or numba, compiled and equal "
+                       "to rounding (pip install -e \".[fast]\"); used by mmap-birl and bc-em; "
+                       "the other learners ignore it")
+
+
+def posterior_method():
+    """``--posterior-method {mcmc,laplace}``: how the posterior over rewards is sampled."""
+    return option("mcmc", choices=POSTERIOR_METHODS,
+                  help="HMC chains on the exact gradient (mcmc), or a Gaussian at the MAP "
+                       "(laplace, fast)")
+
+
+def session_swaps():
+    """``--session-swaps``: MMAP-BIRL doubts how each whole session was read."""
+    return option(False, help="mmap-birl: let a whole session's reads of the onion's class "
+                              "have been backwards, at the rate the calibration measured on "
+                              "its held-out sessions; its posterior weighs the reading of the "
+                              "sessions the MAP implies, its complement, and every reading "
+                              "one session from either")
+
+
+def defer_below(needs: str):
+    """``--defer-below P``: the robot defers where it is less sure than P of its action."""
+    return option(None, metavar="P",
+                  help="defer to a person where the robot is less sure than P that its next "
+                       f"action is right: the learned policy's confidence in it ({needs}), "
+                       "weighed over what an inspected onion may be by the inspection's "
+                       "P(blemished); the onion goes to a check tray, counted apart")
+
+
+def check_session_files(sessions) -> None:
+    """Refuse an empty list of session files, or one that names a file that is not there."""
+    if not sessions:
+        raise ValueError("sessions must name at least one session file; got none")
+    missing = [str(p) for p in sessions if not Path(p).is_file()]
+    if missing:
+        raise FileNotFoundError(f"no such session file(s): {', '.join(missing)}")
+
+
+def methods_list(choices) -> Callable[[str], tuple[str, ...]]:
+    """An option's type: one learner or several, comma-separated, each of ``choices``."""
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(t.strip() for t in text.split(","))
+        for name in names:
+            if name not in choices:
+                raise argparse.ArgumentTypeError(
+                    f"invalid choice: {name!r} (choose from {', '.join(choices)})")
+        return names
+    return parse
+
+
+def floats(text: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers, for argparse ``type=``."""
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        msg = f"expected comma-separated numbers; got {text!r}"
+        raise argparse.ArgumentTypeError(msg) from None

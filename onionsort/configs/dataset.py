@@ -1,0 +1,105 @@
+"""The config of stage ``dataset`` (:mod:`onionsort.stages.dataset`)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from onionsort.configs import common, option
+from onionsort.configs.parallel import ParallelOptions
+
+__all__ = ["DatasetConfig", "levels"]
+
+
+def levels(text: str) -> str:
+    """One difficulty level or several joined by commas, for argparse ``type=``."""
+    unknown = [x for x in text.split(",") if x.strip() not in common.DIFFICULTY_LEVELS]
+    if unknown:
+        raise argparse.ArgumentTypeError(
+            f"unknown level {unknown[0].strip()!r}; the levels are "
+            f"{', '.join(common.DIFFICULTY_LEVELS)}")
+    return ",".join(x.strip() for x in text.split(","))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetConfig(ParallelOptions):
+    """What to render.
+
+    Attributes
+    ----------
+    frames : int
+        Camera frames in all.
+    out : Path
+        A new dataset folder (an existing dataset is never overwritten).
+    seed : int
+    occlusion : float
+        Probability that the passer-by occludes a step (0.3: the classifier must see many).
+    steps_per_session, frames_per_step : int
+    val, test : float
+        Shares of sessions for the val and test splits.
+    robot_onions : int
+        Onions the Sawyer holds up to its inspection camera, in line-ups of 10 split like the
+        sessions; 0 for none.
+    robot_views : int
+        Views of each of them (:func:`robot.station.inspection_poses`).
+    rot_labels : bool
+        Measure the rot each inspection view shows (the inspection classifier's labels; one
+        more render of each view). Calibration needs none.
+    difficulty : str
+        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
+        today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
+        whose sessions and robot line-ups take the levels in turn.
+    randomize_look : bool
+        Each session and line-up draws its look from its seed (:mod:`robot.look`: light,
+        surface colours, the cameras' exposure and white balance): training data that spans
+        cameras. The levels stay as they are; the look is a knob beside them.
+    executor, workers, ray_address
+        Where the sessions and the line-ups are rendered
+        (:class:`~onionsort.configs.parallel.ParallelOptions`): each is a piece, rendered from
+        its own seed into images named after it (``s0003_0012.png``, ``l0001_0004.png``).
+    """
+
+    frames: int = option(3000, help="frames in all (3000)")
+    out: Path = option(help="new dataset folder")
+    seed: int = common.seed()
+    occlusion: float = common.occlusion(0.3)
+    steps_per_session: int = common.steps_per_session()
+    frames_per_step: int = common.frames_per_step()
+    val: float = option(0.15, help="share of sessions for val")
+    test: float = option(0.15, help="share of sessions for test")
+    robot_onions: int = option(120, help="onions the Sawyer holds up to its inspection camera, "
+                                         "in line-ups of 10 split like the sessions (120; 0 "
+                                         "for none)")
+    robot_views: int = option(8, help="views the Sawyer takes of each of them (8)")
+    difficulty: str = option("clean", type=levels,
+                             help="perception difficulty of the world: one of "
+                                  f"{', '.join(common.DIFFICULTY_LEVELS)} (clean), or several "
+                                  "joined by commas for a mix whose sessions take the levels "
+                                  "in turn")
+    randomize_look: bool = option(False, help="draw each session's and line-up's light, "
+                                              "surface colours and camera exposure and white "
+                                              "balance from its seed (training data across "
+                                              "cameras; default: today's look)")
+    rot_labels: bool = True
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "sessions and line-ups"}
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_difficulty
+
+        super().__post_init__()
+        object.__setattr__(self, "out", Path(self.out))
+        for level in self.levels:
+            check_difficulty(level)
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1; got {self.frames}")
+        if self.robot_onions < 0:
+            raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
+        if self.robot_views < 1:
+            raise ValueError(f"robot_views must be >= 1; got {self.robot_views}")
+
+    @property
+    def levels(self) -> list[str]:
+        """The difficulty levels, in the order sessions and line-ups take them."""
+        return [level.strip() for level in self.difficulty.split(",")]

@@ -1,0 +1,113 @@
+"""The config of stage ``demo`` (:mod:`onionsort.stages.demo`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from onionsort.configs import common, option
+from onionsort.configs.evaluate import EvaluateConfig
+from onionsort.configs.parallel import ParallelOptions
+
+__all__ = ["METHODS", "DemoConfig"]
+
+#: The methods of the demo, in the order its table and the report list them.
+METHODS = ("mmap-birl", "map-birl", "hidden-data-em")
+
+
+@dataclass(frozen=True)
+class DemoConfig(ParallelOptions):
+    """The demo's run folder, seed, size, repeats, perception difficulty and models.
+
+    ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
+    repeat gets its own folder ``repeat_K``. ``difficulty`` names a level of
+    :data:`robot.difficulty.DIFFICULTY_LEVELS`: the recorded sessions, the held-out frames the
+    calibration is measured on, and the robot's inspection at evaluation all face it.
+    ``connect`` is a Rerun viewer's gRPC URL (``rerun+http://HOST:9876/proxy``) that the
+    recordings also stream to; ``resume`` continues the interrupted demo in ``out``.
+    ``backend`` picks MMAP-BIRL's forward-backward kernels (``irl.inference.BACKENDS``: numpy,
+    or numba from the ``fast`` extra, equal to rounding); a demo may be resumed with the other
+    (each repeat's result names the backend its model was learned with, ``backends`` all).
+    ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
+    inspection (:class:`~onionsort.configs.evaluate.EvaluateConfig`); ``device`` where torch
+    runs the perception models. ``executor``, ``workers`` and ``ray_address``
+    (:class:`~onionsort.configs.parallel.ParallelOptions`) run the held-out frames' rendering,
+    the repeats' recordings, and then every (repeat, method)'s learning and sorting, as
+    pieces; with fewer repeats than workers the recording and perception of a repeat run their
+    sessions in parallel instead.
+    ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
+    the posterior (``posterior_method``) and sort the same line-up a second time deferring
+    where the robot is less sure than it that its next action is right
+    (:class:`~onionsort.configs.evaluate.EvaluateConfig`'s ``defer_below``); both results are
+    reported.
+    ``session_swaps`` has MMAP-BIRL doubt how each whole session was read
+    (:class:`~onionsort.configs.learn.LearnConfig`'s ``session_swaps``).
+    ``methods`` are the learners whose policies the Sawyer sorts with (:data:`METHODS` by
+    default; any of :data:`irl.experiments.METHODS`).
+    """
+
+    seed: int = common.seed()
+    out: Path = option(Path("runs/demo"), help="run folder (runs/demo)")
+    quick: bool = option(False, help="a small, fast run (smoke test)")
+    sessions: int | None = option(None, help="sessions recorded per repeat (12; quick 4)")
+    difficulty: str = common.difficulty("how hard the world makes perception (clean)")
+    methods: tuple[str, ...] = option(METHODS, type=common.methods_list(common.METHODS),
+                                      metavar="METHOD[,METHOD...]",
+                                      help="the learners whose policies the Sawyer sorts with ("
+                                           + ", ".join(common.METHODS) + "; default "
+                                           "mmap-birl,map-birl,hidden-data-em)")
+    repeats: int = option(1, help="repeat with seeds SEED..SEED+K-1 and report 95%% "
+                                  "intervals (1)")
+    models: Path | None = common.models()
+    resume: bool = option(False, help="continue the interrupted demo in --out: skip its "
+                                      "finished stages")
+    connect: str | None = common.connect("the recordings of record, learn and evaluate")
+    backend: str = common.backend()
+    inspection_views: int | None = common.inspection_views()
+    miss_cost: float | None = common.miss_cost()
+    waste_cost: float | None = common.waste_cost()
+    fusion: str | None = common.fusion()
+    device: str = common.device()
+    defer_below: float | None = common.defer_below(
+        "MMAP-BIRL and MAP-BIRL then also learn the posterior, and sort the same line-up once "
+        "more deferring")
+    posterior_method: str = common.posterior_method()
+    session_swaps: bool = common.session_swaps()
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "repeats' recordings and methods"}
+
+    def __post_init__(self) -> None:
+        from irl.experiments import METHODS as LEARNERS
+        from irl.inference import check_backend
+        from irl.posterior import METHODS as POSTERIOR_METHODS
+        from onionsort.stages.base import check_difficulty
+
+        super().__post_init__()
+        methods = (self.methods,) if isinstance(self.methods, str) else tuple(self.methods)
+        if not methods:
+            raise ValueError("methods must name at least one learner; got none")
+        unknown = [m for m in methods if m not in LEARNERS]
+        if unknown:
+            raise ValueError(f"methods must be among {LEARNERS}; got {', '.join(unknown)}")
+        object.__setattr__(self, "methods", tuple(dict.fromkeys(methods)))
+        check_backend(self.backend)
+        # the robot's inspection, checked as evaluate checks it (before any work starts)
+        checked = EvaluateConfig(policy="expert", out=self.out,
+                                 inspection_views=self.inspection_views,
+                                 miss_cost=self.miss_cost, waste_cost=self.waste_cost,
+                                 fusion=self.fusion, device=self.device)
+        if self.defer_below is not None:
+            EvaluateConfig(run=self.out, defer_below=self.defer_below)  # checks the value
+        if self.posterior_method not in POSTERIOR_METHODS:
+            raise ValueError(f"posterior_method must be one of {POSTERIOR_METHODS}; got "
+                             f"{self.posterior_method!r}")
+        object.__setattr__(self, "inspection_views", checked.inspection_views)
+        if self.repeats < 1:
+            raise ValueError(f"repeats must be >= 1; got {self.repeats}")
+        if self.sessions is not None and self.sessions < 1:
+            raise ValueError(f"sessions must be >= 1; got {self.sessions}")
+        check_difficulty(self.difficulty)
+        if self.connect is not None:
+            from recordings.rerun.common import check_viewer_url
+
+            check_viewer_url(self.connect)

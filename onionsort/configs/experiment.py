@@ -1,0 +1,105 @@
+"""The config of stage ``experiment`` (:mod:`onionsort.stages.experiment`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from onionsort.configs import common, option
+from onionsort.configs.parallel import ParallelOptions
+
+__all__ = ["DOMAINS", "ExperimentConfig"]
+
+#: The sweeps' domains (:data:`onionsort.stages.experiment.PAPER_POINTS`)
+DOMAINS = ("forestworld", "sorting")
+
+
+@dataclass(frozen=True)
+class ExperimentConfig(ParallelOptions):
+    """A sweep as asked for; None fields take the paper's (or the quick) defaults.
+
+    Attributes
+    ----------
+    domain : str
+        ``forestworld`` or ``sorting``.
+    occlusion, noise : tuple of float or None
+        The grid; both None: the paper's points for the domain.
+    batches : int or None
+        Batches per point.
+    trajectories, length : int, tuple of int, or None
+        Demonstrations per batch, steps per demonstration; several values sweep them.
+    learner_beta : tuple of str or None
+        Learner settings (``irl.experiments.parse_learner_setting``): betas, factors of the
+        domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
+    methods : tuple of str
+        Learners of :data:`irl.learners.LEARNERS`; by default the four reward learners (the
+        behaviour-cloning baselines ``bc`` and ``bc-em`` are asked for by name; a cloned
+        policy is scored by its own actions).
+    seed : int
+    quick : bool
+        A small sweep that takes seconds.
+    out : Path or None
+        Run folder (default ``runs/experiment-DOMAIN``).
+    resume : bool
+        Keep the rows of ``results.csv.partial`` (an interrupted run of this same sweep in
+        this folder) and run only the missing trials.
+    backend : str
+        Forward-backward kernels of the learners that run it (``irl.inference.BACKENDS``):
+        ``numpy`` or ``numba`` (the ``fast`` extra). Not part of the sweep's identity: a sweep
+        may be resumed with the other backend.
+    """
+
+    domain: str = option(positional=True, choices=DOMAINS, help=None)
+    occlusion: tuple[float, ...] | None = option(None, type=common.floats,
+                                                 help="occlusion rates, e.g. 0.1,0.2,0.3")
+    noise: tuple[float, ...] | None = option(None, type=common.floats,
+                                             help="observation-noise levels, e.g. 0,0.3")
+    batches: int | None = option(None, help="batches per point (default 10; quick 3)")
+    trajectories: int | tuple[int, ...] | None = None
+    length: int | tuple[int, ...] | None = None
+    learner_beta: tuple[str, ...] | None = None
+    methods: tuple[str, ...] = common.IRL_METHODS
+    seed: int = common.seed(help=None)
+    quick: bool = option(False, help="a small sweep that takes seconds")
+    backend: str = common.backend()
+    out: Path | None = option(None, help="run folder (default runs/experiment-DOMAIN)")
+    resume: bool = option(False, help="continue an interrupted sweep in --out: keep the trials "
+                                      "in its results.csv.partial and run the rest (same "
+                                      "options; --backend may differ)")
+    cli_help: ClassVar[dict[str, str]] = {"pieces": "trials"}
+
+    def __post_init__(self) -> None:
+        from irl.inference import check_backend
+
+        check_backend(self.backend)
+        if self.executor == "process":  # the former name of the local executor
+            object.__setattr__(self, "executor", "local")
+        super().__post_init__()
+        if self.batches is not None and self.batches < 1:
+            raise ValueError(f"batches must be >= 1; got {self.batches}")
+
+    def sweep(self):
+        """The :class:`irl.experiments.SweepConfig` this resolves to."""
+        from irl.experiments import SweepConfig
+        from onionsort.stages.experiment import PAPER_POINTS, QUICK_POINTS
+
+        if self.occlusion is not None or self.noise is not None:
+            occ = self.occlusion if self.occlusion is not None else (0.0,)
+            noise = self.noise if self.noise is not None else (0.3,)
+            points = [(o, n) for n in noise for o in occ]
+        else:
+            points = (QUICK_POINTS if self.quick else PAPER_POINTS)[self.domain]
+        defaults = {"batches": 3 if self.quick else 10, "trajectories": 10,
+                    "length": 15 if self.domain == "forestworld" else 20}
+        return SweepConfig(
+            domain=self.domain, points=tuple(points), methods=tuple(self.methods),
+            batches=self.batches if self.batches is not None else defaults["batches"],
+            trajectories=self.trajectories or defaults["trajectories"],
+            length=self.length or defaults["length"],
+            learners=tuple(self.learner_beta or ("x1",)), seed=self.seed,
+            backend=self.backend)
+
+    @property
+    def folder(self) -> Path:
+        return self.out or Path("runs") / f"experiment-{self.domain}"

@@ -1,0 +1,127 @@
+"""The configs of the inspection's training stages, ``train inspection`` and ``train
+robot-fusion`` (:mod:`onionsort.stages.inspection`)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+from onionsort.configs import common, option, train
+from onionsort.configs.common import INSPECTION_CAMERAS
+
+__all__ = ["INSPECTION_CAMERAS", "FusionCalibrationConfig", "InspectionTrainStageConfig",
+           "level_weights"]
+
+
+def level_weights(text: str) -> dict[str, float]:
+    """``level=weight`` pairs joined by commas, for argparse ``type=``."""
+    out = {}
+    for part in filter(None, (x.strip() for x in text.split(","))):
+        level, _, weight = part.partition("=")
+        if level not in common.DIFFICULTY_LEVELS:
+            raise argparse.ArgumentTypeError(
+                f"unknown level {level!r} in {text!r}; the levels are "
+                f"{', '.join(common.DIFFICULTY_LEVELS)}")
+        try:
+            out[level] = float(weight)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected level=weight pairs, e.g. clean=2; got {part!r}") from None
+        if not out[level] > 0:
+            raise argparse.ArgumentTypeError(f"a level's weight must be > 0; got {part!r}")
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class InspectionTrainStageConfig(train.TrainOptions):
+    """``onionsort train inspection``: dataset folders (one or several: their splits are
+    pooled), run folder, hyperparameters.
+
+    ``detector`` is the folder of the detector that finds the onion in the validation views
+    (None: the shipped one); ``level_weights`` weighs difficulty levels (``{"clean": 2.0}``
+    counts clean views twice); ``device`` where torch trains (``auto``, ``cpu``, ``cuda``);
+    ``fusion`` fixes the classifier's fusion rule (None: the rule of lower log-loss on the
+    validation onions); ``visibility`` fixes the chance that a view of a blemished onion shows
+    its rot, as ``noisy-or`` fusion assumes it (None: the share measured on the training
+    views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
+    robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
+    the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
+    Sawyer's inspection then reads instead). ``augment``: each training crop also seen through
+    a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
+    validation. ``data_weights``: how many times each dataset's training views count
+    (positive integers, 1 each by default), times the level weights; ``init``: an inspection
+    classifier to fine-tune instead of training from scratch.
+    """
+
+    epochs: int = option(30, help=None)
+    batch_size: int = option(128, help=None)
+    detector: Path | None = option(None, help="folder of the detector.pt that finds the onion "
+                                              "in the validation views (default: the shipped "
+                                              "one)")
+    level_weights: dict = option(default_factory=dict, type=level_weights,
+                                 help="weights of difficulty levels, e.g. clean=2,hard=1 (each "
+                                      "1 by default)")
+    fusion: str | None = common.fusion("the classifier's fusion rule (default: the one of "
+                                       "lower log-loss on the validation onions)")
+    camera: str = option("both", choices=INSPECTION_CAMERAS,
+                         help="whose views to learn from: both (the sorter's and the robot's; "
+                              "writes inspection_classifier.pt, which both read) or robot (the "
+                              "Sawyer's only; writes robot_inspection_classifier.pt, which its "
+                              "inspection then reads instead)")
+    visibility: float | None = option(None, help="the chance that a view of a blemished onion "
+                                                 "shows its rot, as noisy-or fusion assumes it "
+                                                 "(default: the share measured on the "
+                                                 "training views)")
+    init: Path | None = train.init("an inspection_classifier.pt")
+
+    def __post_init__(self) -> None:
+        from perception.fusion import FUSION_RULES
+
+        super().__post_init__()
+        if self.fusion is not None and self.fusion not in FUSION_RULES:
+            raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
+        if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
+            raise ValueError(f"visibility must be in (0, 1]; got {self.visibility}")
+        if self.camera not in INSPECTION_CAMERAS:
+            raise ValueError(f"camera must be one of {INSPECTION_CAMERAS}; got "
+                             f"{self.camera!r}")
+        for level, weight in self.level_weights.items():
+            if not weight > 0:
+                raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FusionCalibrationConfig:
+    """``onionsort train robot-fusion``: held-out dataset folders whose robot onions fit the
+    calibration (pooled), their ``split``, the ``models`` folder whose robot inspection
+    classifier fuses them (None: the shipped one), the first ``views`` of each onion (None:
+    the robot's :data:`~robot.inspection_poses.INSPECTION_VIEWS`), the ``out`` folder, the
+    torch ``device``."""
+
+    data: Path | tuple[Path, ...] = train.data("held-out dataset folder with robot onions "
+                                               "(repeat it to pool several); never the data "
+                                               "the calibration is then measured on")
+    split: str = option("all", choices=("train", "val", "test", "all"),
+                        help="the split whose robot onions fit it (all)")
+    views: int | None = option(None, help="the first VIEWS views of each onion (default: as "
+                                          "many as the robot takes)")
+    out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
+                            "folder, for the robot to apply it)")
+    models: Path | None = common.models()
+    device: str = common.device()
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device
+
+        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
+        if not data:
+            raise ValueError("data must name at least one dataset folder; got none")
+        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        if self.split not in ("train", "val", "test", "all"):
+            raise ValueError(f"split must be train, val, test or all; got {self.split!r}")
+        if self.views is not None and (isinstance(self.views, bool)
+                                       or not isinstance(self.views, int) or self.views < 1):
+            raise ValueError(f"views must be an int >= 1; got {self.views!r}")

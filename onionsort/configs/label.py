@@ -1,0 +1,147 @@
+"""The configs of stages ``label export``, ``label import`` (:mod:`onionsort.stages.label`)
+and ``label select`` (:mod:`onionsort.stages.label_select`)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+from onionsort.configs import common, option
+from onionsort.configs.common import LABEL_FORMATS, SELECT_FORMATS
+
+__all__ = ["LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig", "LabelImportConfig",
+           "LabelSelectConfig", "check_format", "classes"]
+
+
+def check_format(fmt: str) -> None:
+    """Refuse a labelled-set format that is not one of :data:`LABEL_FORMATS`."""
+    if fmt not in LABEL_FORMATS:
+        raise ValueError(f"format must be one of {LABEL_FORMATS}; got {fmt!r}")
+
+
+def classes(text: str) -> dict[str, str]:
+    """``class=NAME`` pairs joined by commas, for argparse ``type=``."""
+    out = {}
+    for part in filter(None, (x.strip() for x in text.split(","))):
+        cls, sep, name = part.partition("=")
+        if not sep or cls.strip() not in ("good", "blemished") or not name.strip():
+            raise argparse.ArgumentTypeError(
+                f"expected good=NAME,blemished=NAME; got {part!r}")
+        out[cls.strip()] = name.strip()
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class LabelExportConfig:
+    """``onionsort label export``: the dataset folder, the output folder (new) and the
+    layout (``coco`` or ``yolo``)."""
+
+    data: Path = option(positional=True, metavar="DATASET", help="a dataset folder")
+    format: str = option("coco", choices=LABEL_FORMATS, required=True,
+                         help="coco (COCO 2017 layout) or yolo (Ultralytics layout)")
+    out: Path = option(help="a new folder")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "data", Path(self.data))
+        object.__setattr__(self, "out", Path(self.out))
+        check_format(self.format)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LabelImportConfig:
+    """``onionsort label import``: what to read and where to write it.
+
+    Attributes
+    ----------
+    source : Path
+        The labelled image set (COCO or YOLO layout, see :mod:`recordings.coco`,
+        :mod:`recordings.yolo`).
+    out : Path
+        A new dataset folder.
+    format : str
+        ``coco`` or ``yolo``.
+    states : Path or None
+        The state labels (:mod:`recordings.states_csv`); None: ``source/states.csv`` where
+        there is one. Frames without a row are box-only.
+    depth : Path or None
+        16-bit PNG depth images in millimetres, matched by file name (``depth/<split>/NAME.png``
+        or ``depth/NAME.png`` for the image ``NAME.*``); None: ``source/depth`` where there
+        is one. Frames without depth are read by the colour-only models.
+    inspection : Path or None
+        The inspection views, a second set in the same format (its own ``states.csv``);
+        None: ``source/inspection`` where there is one.
+    classes : dict
+        The dataset's class (``good``, ``blemished``) -> the set's name for it; a class not
+        named keeps its own name.
+    val, test : float
+        Shares of sessions for val and test when the set has no splits (as ``onionsort
+        dataset`` splits its sessions).
+    """
+
+    source: Path = option(positional=True, metavar="DIR", help="the labelled image set")
+    format: str = option("coco", choices=LABEL_FORMATS, required=True,
+                         help="coco (COCO 2017, Roboflow, CVAT, Label Studio) or yolo "
+                              "(Ultralytics, Roboflow)")
+    states: Path | None = option(None, metavar="FILE.csv",
+                                 help="the state labels (default: DIR/states.csv where there "
+                                      "is one); frames without a row are box-only")
+    depth: Path | None = option(None, metavar="DIR",
+                                help="16-bit PNG depth in millimetres, matched by file name "
+                                     "(default: DIR/depth where there is one)")
+    inspection: Path | None = option(None, metavar="DIR",
+                                     help="the inspection views, in the same format with their "
+                                          "own states.csv (default: DIR/inspection where there "
+                                          "is one)")
+    classes: dict = option(default_factory=dict, type=classes,
+                           metavar="good=NAME,blemished=NAME",
+                           help="the set's names of the dataset's classes (default: good, "
+                                "blemished)")
+    out: Path = option(help="a new dataset folder")
+    val: float = 0.15
+    test: float = 0.15
+
+    def __post_init__(self) -> None:
+        from recordings.dataset import CLASSES
+
+        for name in ("source", "out", "states", "depth", "inspection"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, Path(getattr(self, name)))
+        check_format(self.format)
+        unknown = [k for k in self.classes if k not in CLASSES]
+        if unknown:
+            raise ValueError(f"classes maps {unknown[0]!r}, which is not a class of the "
+                             f"dataset ({', '.join(CLASSES)})")
+        object.__setattr__(self, "classes", dict(self.classes))
+
+
+@dataclass(frozen=True, kw_only=True)
+class LabelSelectConfig:
+    """``onionsort label select``: the sessions, how many frames, the output folder (new),
+    its format (``coco`` or ``labelstudio``), the models (None: the shipped ones) and where
+    torch runs them."""
+
+    sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION",
+                                        help="recorded sessions (.mcap)")
+    frames: int = option(200, required=True, metavar="N",
+                         help="how many frames to choose (whole steps, in rounds over the "
+                              "sessions)")
+    format: str = option("coco", choices=SELECT_FORMATS,
+                         help="coco (images, annotations with scores, states.csv; what label "
+                              "import reads back) or labelstudio (tasks.json with predictions "
+                              "and labeling_config.xml)")
+    out: Path = option(help="a new folder")
+    models: Path | None = common.models()
+    device: str = common.device()
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device
+
+        object.__setattr__(self, "sessions", tuple(Path(p) for p in self.sessions))
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1; got {self.frames}")
+        if self.format not in SELECT_FORMATS:
+            raise ValueError(f"format must be one of {SELECT_FORMATS}; got {self.format!r}")
+        common.check_session_files(self.sessions)

@@ -1,0 +1,134 @@
+"""The configs of stage ``train`` (:mod:`onionsort.stages.train`), and the options every
+training command shares (its datasets, its run folder, augmentation, a checkpoint to start
+from)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+from onionsort.configs import common, option
+
+__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment", "data",
+           "data_weights", "init", "weights"]
+
+
+def weights(text: str) -> tuple[int, ...]:
+    """Positive integers joined by commas, for argparse ``type=``."""
+    try:
+        parsed = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected positive integers joined by commas, e.g. 3,1; got {text!r}") from None
+    if not parsed or min(parsed) < 1:
+        raise argparse.ArgumentTypeError(
+            f"expected positive integers joined by commas, e.g. 3,1; got {text!r}")
+    return parsed
+
+
+def data(help: str = "dataset folder (repeat it to pool several, e.g. a lab's frames from "
+                     "`onionsort label import` and rendered ones)"):
+    """``--data``, repeated: the dataset folders a model trains on, pooled."""
+    return option(type=Path, action="append", help=help)
+
+
+def data_weights():
+    """``--data-weights W,W,...``: how many times each ``--data``'s training frames count."""
+    return option((), type=weights, metavar="W,W,...",
+                  help="how many times each --data's training frames count, in their order, "
+                       "e.g. 3,1 (1 each)")
+
+
+def augment():
+    """``--augment`` / ``--no-augment``: photometric augmentation at training (on)."""
+    return option(True, action=argparse.BooleanOptionalAction,
+                  help="see each training sample through a camera of its own (white balance, "
+                       "exposure, tone curve, defocus, noise, JPEG), never at evaluation "
+                       "(default: on)")
+
+
+def init(what: str):
+    """``--init CHECKPOINT``: ``what`` to fine-tune instead of training from scratch."""
+    return option(None, metavar="CHECKPOINT",
+                  help=f"{what} to fine-tune instead of training from scratch")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainOptions:
+    """What training any model takes: ``data``, one dataset folder or several, whose splits
+    are pooled, each dataset's training samples counted ``data_weights`` times (1 each by
+    default); the run folder ``out``; ``epochs`` and ``batch_size`` (each model's config
+    gives its defaults); ``seed``; ``augment``: each training sample seen through a camera of
+    its own (:class:`perception.photometric.PhotometricAugment`), never at evaluation; and
+    where torch trains, ``device``."""
+
+    data: Path | tuple[Path, ...] = data()
+    data_weights: tuple[int, ...] = data_weights()
+    out: Path = option(help="run folder for the checkpoints")
+    epochs: int = option(help=None)
+    batch_size: int = option(help=None)
+    seed: int = common.seed(help=None)
+    augment: bool = augment()
+    device: str = common.device()
+
+    def __post_init__(self) -> None:
+        from onionsort.stages.base import check_device, pool_datasets
+
+        pool_datasets(self)
+        object.__setattr__(self, "out", Path(self.out))
+        check_device(self.device)
+        _check_positive(self, "epochs", "batch_size")
+
+
+def _check_positive(config, *names: str) -> None:
+    for name in names:
+        if getattr(config, name) < 1:
+            raise ValueError(f"{name} must be >= 1; got {getattr(config, name)}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClassifierTrainConfig(TrainOptions):
+    """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters.
+
+    ``data`` is one dataset folder or several, whose splits are pooled, each dataset's
+    training steps counted ``data_weights`` times (1 each by default); ``depth_dropout``:
+    probability that a training step's depth is zeroed
+    (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
+    checkpoint to fine-tune instead of training from scratch; ``augment``: each training
+    step's frames seen through a camera of their own
+    (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
+    """
+
+    epochs: int = option(12, help=None)
+    batch_size: int = option(32, help=None)
+    depth_dropout: float = option(0.5, help="probability that a training step's depth is "
+                                            "zeroed, so the model also reads steps without "
+                                            "depth (0.5)")
+    init: Path | None = init("a state_classifier.pt")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not 0.0 <= self.depth_dropout <= 1.0:
+            raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorTrainConfig(TrainOptions):
+    """``onionsort train detector``: dataset folders (as :class:`ClassifierTrainConfig`'s
+    ``data`` and ``data_weights``), run folder, hyperparameters, ``resume`` (continue the run
+    in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to fine-tune instead
+    of training from scratch), the peak learning rate ``lr`` and ``augment`` (each training
+    image seen through a camera of its own, :class:`perception.photometric.PhotometricAugment`;
+    never at evaluation)."""
+
+    epochs: int = option(24, help=None)
+    batch_size: int = option(16, help=None)
+    images_per_epoch: int = option(1600, help=None)
+    init: Path | None = init("a detector.pt")
+    lr: float = option(2e-3, help="peak learning rate (0.002)")
+    resume: bool = option(False, help="continue the run in --out from its last checkpoint")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_positive(self, "images_per_epoch")
