@@ -52,6 +52,7 @@ from irl.solvers import OptimalQSolver, solve_policy_derivatives
 from irl.stats import effective_sample_size, split_rhat
 
 __all__ = [
+    "IMPORTANCE_PROPOSALS",
     "LAPLACE_SHARE",
     "METHODS",
     "Diagnostics",
@@ -414,7 +415,9 @@ def sample_posterior(
     (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
     samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
     together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
-    approximation. Readings outside that set are not weighed.
+    approximation, and the others but the heaviest by importance resampling from it where
+    that is cheaper than chains and its effective sample size suffices
+    (:data:`IMPORTANCE_PROPOSALS`). Readings outside that set are not weighed.
 
     Returns
     -------
@@ -578,8 +581,13 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     holds every sample is drawn exactly as without a swap. The readings of least
     weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
     approximation (the Gaussian whose evidence gave their weight) instead of by chains of
-    their own, each of which would cost a warm-up as long as the main reading's. The chains
-    run first, in the readings' order, then the Gaussian draws."""
+    their own, each of which would cost a warm-up as long as the main reading's. The heaviest
+    reading's chains run first; every other reading that would get chains is first drawn by
+    importance resampling from its Laplace approximation (:func:`_importance_draws`,
+    :data:`IMPORTANCE_PROPOSALS` proposals a sample), tried where those proposals number fewer
+    than the heaviest reading's chain gradients and kept where the importance weights'
+    effective sample size reaches the reading's samples; else it gets chains, in the readings'
+    order. Then the Gaussian draws."""
     swap = estimator.session_swap
     plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
