@@ -4,10 +4,11 @@ OpenBLAS hands a dot product of more than 10,000 numbers, and a matrix-vector pr
 similar size, to its thread pool (one thread per core by default). The products irl makes on
 large MDPs are bound by memory, so more threads gain little even on idle cores, and on a
 machine whose cores are busy the pool's threads spin waiting for each other: on our 2-core
-machine beside other jobs, one cold MMAP-BIRL gradient at 102,400 states took 11.3 s of CPU
-time with the default pool against 4.2 s on one thread (numba backend: 3.0-7.0 s against 1.4
-s), while at 10,000 states, under OpenBLAS's threshold, the two were the same. That threshold
-made the cost grow faster than the state count (x38 for x10 the states).
+machine beside other jobs, one cold MMAP-BIRL gradient at 102,400 states took 8.98 s of CPU
+time with the default pool against 4.35 s on one thread (numba backend: 2.93 s against 1.42
+s), while at 10,000 states, under OpenBLAS's threshold, the two were the same
+(``bench/bench_irl_blas.py``). That threshold made the cost grow faster than the state count
+(x29 for x10.24 the states, against x14 on one thread).
 
 :func:`one_blas_thread` limits BLAS to one thread for the length of a block whose arrays are
 large enough for OpenBLAS to thread them; below, it does nothing, since setting the limit
