@@ -183,6 +183,12 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     gauss = sample_posterior(est, demos, n_samples=400, seed=0, method="laplace")
     weights = np.array([c.weight for c in post.components])
     np.testing.assert_array_equal(weights, [c.weight for c in gauss.components])
+    # the weights the code before importance resampling gave here (commit bf4ded1; the issue
+    # allows 0.02)
+    before = {(0,): 0.668595, (): 0.231381, (0, 1): 0.019856, (1,): 0.080168}
+    assert {c.swapped for c in post.components} == set(before)
+    for c in post.components:
+        assert abs(c.weight - before[c.swapped]) < 0.02
     order = np.argsort(weights, kind="stable")
     light = order[np.cumsum(weights[order]) <= 0.2]
     assert light.size and weights[light].sum() <= 0.2
