@@ -63,6 +63,7 @@ from functools import cached_property
 
 import numpy as np
 
+from irl._blas import one_blas_thread
 from irl._validation import describe
 from irl.demonstrations import Demonstration, check_demonstrations
 from irl.mdp import TabularMDP
@@ -479,6 +480,15 @@ def forward_backward(
     log_p0 = mdp.log_initial if log_initial is None else log_initial
     ids = np.arange(obs.shape[0]) if demo_ids is None else np.asarray(demo_ids)
     emissions = _Emissions(observation_model, obs, factors)
+    # one BLAS thread on large MDPs (irl._blas): the pass's dot products and matrix products
+    with one_blas_thread(mdp.n_states * mdp.n_actions):
+        return _passes(mdp, log_policy, emissions, obs, lengths, log_p0, ids, method, backend)
+
+
+def _passes(mdp, log_policy, emissions: _Emissions, obs, lengths, log_p0, ids, method,
+            backend) -> PosteriorStats:
+    """The passes of :func:`forward_backward` on checked arguments: the numba or the scaled
+    pass, handing over to the log-space one where they cannot take the batch."""
     if method == "auto":
         if check_backend(backend) == "numba":
             stats = _numba_pass(mdp, log_policy, emissions, obs.shape, lengths, log_p0)

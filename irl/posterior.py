@@ -52,6 +52,7 @@ from irl.solvers import OptimalQSolver, solve_policy_derivatives
 from irl.stats import effective_sample_size, split_rhat
 
 __all__ = [
+    "IMPORTANCE_PROPOSALS",
     "LAPLACE_SHARE",
     "METHODS",
     "Diagnostics",
@@ -414,7 +415,9 @@ def sample_posterior(
     (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
     samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
     together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
-    approximation. Readings outside that set are not weighed.
+    approximation, and the others but the heaviest by importance resampling from it where
+    that is cheaper than chains and its effective sample size suffices
+    (:data:`IMPORTANCE_PROPOSALS`). Readings outside that set are not weighed.
 
     Returns
     -------
@@ -510,6 +513,61 @@ def swap_readings(p_swapped: np.ndarray) -> list[tuple[int, ...]]:
 #: weight (with ``method="mcmc"``; see :func:`_draw_swap_readings`).
 LAPLACE_SHARE = 0.05
 
+#: Proposals per sample of a reading drawn by importance resampling (see
+#: :func:`_importance_draws`).
+IMPORTANCE_PROPOSALS = 20
+
+#: Degrees of freedom of the Student-t proposal round a reading's mode: heavier tails than the
+#: Laplace Gaussian, so that the importance weights stay bounded where the posterior's tails
+#: are heavier than a Gaussian's.
+_PROPOSAL_DOF = 5.0
+
+
+def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
+    """``n`` draws from the density ``exp(value_and_grad(theta)[0])`` by importance
+    resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom round ``mode`` with
+    scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
+    density over proposal and resampled systematically. Returns ``(theta[n, K], ess,
+    n_weighed)`` (the proposals whose density was evaluated), or ``(None, ess, n_weighed)``
+    where the weights' effective sample size (Kish's, ``1 / sum w^2``) is
+    below ``n``, or is projected to be from the first quarter of the proposals (whose ESS,
+    times 4, falls short of ``n``; the rest are then not weighed, and the ESS returned is
+    that projection): the proposal then misses too much of the posterior to stand for
+    chains. The generator's draws are the same either way."""
+    K = mode.size
+    chol = np.linalg.cholesky(cov)
+    nu = _PROPOSAL_DOF
+    z = rng.standard_normal((n_proposals, K))
+    scale = np.sqrt(nu / rng.chisquare(nu, n_proposals))
+    offset = rng.random()  # of the systematic resampling, drawn whether or not it is used
+    theta = mode + (z * scale[:, None]) @ chol.T
+    # log q up to a constant: -(nu + K) / 2 log(1 + |L^-1 (theta - mode)|^2 / nu)
+    log_q = -0.5 * (nu + K) * np.log1p(np.sum((z * scale[:, None]) ** 2, axis=1) / nu)
+    # a pilot of a quarter of the proposals first: the ESS grows about in proportion to the
+    # proposals, so where the pilot's falls short of a quarter of n, the rest are not weighed
+    pilot = max(1, n_proposals // 4)
+    log_w = np.full(n_proposals, -np.inf)
+    for lo, hi in ((0, pilot), (pilot, n_proposals)):
+        log_w[lo:hi] = [value_and_grad(t)[0] for t in theta[lo:hi]]
+        log_w[lo:hi] -= log_q[lo:hi]
+        w, ess = _normalized(log_w[:hi])
+        if ess * n_proposals / hi < n:
+            return None, ess * n_proposals / hi, hi
+    picks = np.searchsorted(np.cumsum(w), (offset + np.arange(n)) / n)
+    return theta[np.minimum(picks, n_proposals - 1)], ess, n_proposals
+
+
+def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:
+    """Importance weights summing to 1 from their logs (``-inf`` or NaN: weight 0), and their
+    effective sample size ``1 / sum w^2`` (0 where every weight is 0)."""
+    log_w = np.where(np.isnan(log_w), -np.inf, log_w)
+    top = log_w.max()
+    if not np.isfinite(top):
+        return np.zeros(log_w.size), 0.0
+    w = np.exp(log_w - top)
+    w /= w.sum()
+    return w, float(1.0 / np.sum(w * w))
+
 
 def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples, draw):
     """The posterior of a learner with a ``session_swap``: a mixture over readings of the
@@ -523,8 +581,13 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     holds every sample is drawn exactly as without a swap. The readings of least
     weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
     approximation (the Gaussian whose evidence gave their weight) instead of by chains of
-    their own, each of which would cost a warm-up as long as the main reading's. The chains
-    run first, in the readings' order, then the Gaussian draws."""
+    their own, each of which would cost a warm-up as long as the main reading's. The heaviest
+    reading's chains run first; every other reading that would get chains is first drawn by
+    importance resampling from its Laplace approximation (:func:`_importance_draws`,
+    :data:`IMPORTANCE_PROPOSALS` proposals a sample), tried where those proposals number fewer
+    than the heaviest reading's chain gradients and kept where the importance weights'
+    effective sample size reaches the reading's samples; else it gets chains, in the readings'
+    order. Then the Gaussian draws."""
     swap = estimator.session_swap
     plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
@@ -551,11 +614,31 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     thetas: list[np.ndarray | None] = [None] * len(readings)
     chains: list[Diagnostics] = []
     gaussian: list[Diagnostics] = []
-    for i in [*np.flatnonzero(~by_laplace), *np.flatnonzero(by_laplace)]:
+    heaviest = int(np.argmax(weights))  # first: its chains' cost decides for the others
+    chain_cost = None  # the gradients of the heaviest reading's chains
+    for i in [*sorted(np.flatnonzero(~by_laplace), key=lambda j: j != heaviest),
+              *np.flatnonzero(by_laplace)]:
         n = int(counts[i])
         if not n:
             continue
         _, theta_z, value_and_grad, laplace, _ = fitted[i]
+        resampled, weighed = None, 0
+        if draw["method"] == "mcmc" and not by_laplace[i] and i != heaviest \
+                and chain_cost is not None and IMPORTANCE_PROPOSALS * n < chain_cost:
+            # cheaper than chains of its own: importance resampling from its Laplace
+            # approximation, where the weights' ESS reaches its samples
+            resampled, ess, weighed = _importance_draws(
+                value_and_grad, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"])
+            logger.info("reading swapped %s: importance weights' ESS %.0f (%d proposals "
+                        "weighed) for %d samples%s", list(fitted[i][0]), ess, weighed, n,
+                        "" if resampled is not None else ": chains instead")
+        if resampled is not None:  # counted as the Gaussian draws are: sizes and costs
+            thetas[i] = resampled
+            gaussian.append(Diagnostics(
+                r_hat=np.full(K, np.nan), ess=np.full(K, min(ess, n)), acceptance=1.0,
+                n_chains=1, n_warmup=0, n_draws=n, n_divergent=0,
+                n_gradients=laplace[2] + weighed, hessian_clipped=laplace[1]))
+            continue
         if by_laplace[i]:
             opts = {**draw, "method": "laplace"}
         else:  # the first draws per chain scaled by the reading's share, extended by as
@@ -564,6 +647,13 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
             opts = {**draw, "n_draws": scaled, "max_draws": max(scaled, draw["max_draws"])}
         thetas[i], diag, _ = _draw(value_and_grad, theta_z, prior_precision, n,
                                    laplace=laplace, **opts)
+        diag = replace(diag, n_gradients=diag.n_gradients + weighed)  # a proposal that failed
+        if i == heaviest and not by_laplace[i]:
+            chain_cost = diag.n_gradients - laplace[2]
+        logger.info("reading swapped %s (weight %.3f, %d samples): %s, %d gradients, %d "
+                    "draws a chain, max R-hat %.3f", list(fitted[i][0]), weights[i], n,
+                    "Laplace" if by_laplace[i] else "chains", diag.n_gradients, diag.n_draws,
+                    diag.max_r_hat())
         diag = replace(diag, ess=np.minimum(diag.ess, n))  # what it gave, at most
         (gaussian if by_laplace[i] and draw["method"] == "mcmc" else chains).append(diag)
     components = tuple(SwapComponent(swapped=z, weight=float(w), log_weight=f[-1],

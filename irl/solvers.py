@@ -59,6 +59,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.special import log_softmax
 
+from irl._blas import one_blas_thread
 from irl._validation import check_int, check_real, describe
 from irl.exceptions import ConvergenceWarning
 from irl.mdp import TabularMDP
@@ -359,7 +360,8 @@ class OptimalQSolver:
                 self.n_reuses_ += 1
                 return sol
         start = next(reversed(self._cache.values())) if self._cache else None
-        sol = self._policy_iteration(theta, start)
+        with one_blas_thread(self.mdp.n_states * self.mdp.n_actions):
+            sol = self._policy_iteration(theta, start)
         self.n_solves_ += 1
         self._cache[sol.policy.tobytes()] = sol
         if len(self._cache) > self.cache_size:

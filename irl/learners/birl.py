@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from irl._blas import one_blas_thread
 from irl._random import check_random_state
 from irl._validation import check_int, check_real, describe
 from irl.demonstrations import Demonstration
@@ -123,12 +124,14 @@ class _BayesianIRL(LearnerBase):
         raise NotImplementedError
 
     def _likelihood_and_gradient(self, model: _Model, theta, data) -> tuple[float, np.ndarray]:
-        sol, log_pi = self._log_policy(model, theta)
-        ll, G = self._pair_stats(model, log_pi, data)
-        # sum_{s,a} (G(s, a) - pi(a | s) sum_a' G(s, a')) dQ(s, a): one product
-        weights = G - np.exp(log_pi) * G.sum(axis=1, keepdims=True)
-        S, A, K = sol.dQ.shape
-        grad = model.beta * (weights.reshape(S * A) @ sol.dQ.reshape(S * A, K))
+        # one BLAS thread on large MDPs (irl._blas): the solve, the pass and the product below
+        with one_blas_thread(model.mdp.n_states * model.mdp.n_actions):
+            sol, log_pi = self._log_policy(model, theta)
+            ll, G = self._pair_stats(model, log_pi, data)
+            # sum_{s,a} (G(s, a) - pi(a | s) sum_a' G(s, a')) dQ(s, a): one product
+            weights = G - np.exp(log_pi) * G.sum(axis=1, keepdims=True)
+            S, A, K = sol.dQ.shape
+            grad = model.beta * (weights.reshape(S * A) @ sol.dQ.reshape(S * A, K))
         return ll, grad
 
     def log_likelihood(self, theta: np.ndarray, demos: Sequence[Demonstration]) -> float:

@@ -151,39 +151,84 @@ def test_a_posterior_file_keeps_its_readings(tmp_path):
 
 
 def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
-    """The readings' weights are those of the Laplace draws (the same numbers); chains run for
-    every reading with samples but the lightest, which together hold at most LAPLACE_SHARE of
-    the weight and are drawn from their Laplace approximation; each reading's chains start
-    with n_draws scaled by its share of the samples, and may extend to max_draws."""
+    """The readings' weights are those of the Laplace draws (the same numbers); the lightest,
+    which together hold at most LAPLACE_SHARE of the weight, are drawn from their Laplace
+    approximation; the heaviest runs chains first, with n_draws scaled by its share of the
+    samples (extending up to max_draws); every other reading is drawn by importance
+    resampling from its Laplace approximation where that costs fewer evaluations than the
+    heaviest's chains took gradients and its weights' ESS reaches its samples, else by chains
+    as the heaviest."""
     from irl import posterior
 
     _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
     est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
     demos = [est.session_swap.apply(demos[0]), demos[1]]
-    runs = []
-    real = posterior._run_chains
+    runs, tries = [], []
+    real_chains, real_importance = posterior._run_chains, posterior._importance_draws
 
-    def spy(value_and_grad, mean, chol, **kw):
+    def spy_chains(value_and_grad, mean, chol, **kw):
         runs.append((mean.copy(), kw["n_draws"], kw["max_draws"]))
-        return real(value_and_grad, mean, chol, **kw)
+        return real_chains(value_and_grad, mean, chol, **kw)
 
-    monkeypatch.setattr(posterior, "_run_chains", spy)
+    def spy_importance(value_and_grad, mode, cov, n, n_proposals, rng):
+        got = real_importance(value_and_grad, mode, cov, n, n_proposals, rng)
+        tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2]))
+        return got
+
+    monkeypatch.setattr(posterior, "_run_chains", spy_chains)
+    monkeypatch.setattr(posterior, "_importance_draws", spy_importance)
     monkeypatch.setattr(posterior, "LAPLACE_SHARE", 0.2)  # so that a reading is left out here
     post = sample_posterior(est, demos, n_samples=400, seed=0, method="mcmc", n_draws=100,
                             n_warmup=50)
     gauss = sample_posterior(est, demos, n_samples=400, seed=0, method="laplace")
     weights = np.array([c.weight for c in post.components])
     np.testing.assert_array_equal(weights, [c.weight for c in gauss.components])
+    # the weights the code before importance resampling gave here (commit bf4ded1; the issue
+    # allows 0.02)
+    before = {(0,): 0.668595, (): 0.231381, (0, 1): 0.019856, (1,): 0.080168}
+    assert {c.swapped for c in post.components} == set(before)
+    for c in post.components:
+        assert abs(c.weight - before[c.swapped]) < 0.02
     order = np.argsort(weights, kind="stable")
     light = order[np.cumsum(weights[order]) <= 0.2]
     assert light.size and weights[light].sum() <= 0.2
-    chained = [c for i, c in enumerate(post.components) if c.n_samples and i not in light]
-    assert len(chained) >= 2 and len(runs) == len(chained)
-    for c, (_, n_draws, max_draws) in zip(chained, runs, strict=True):
-        assert n_draws == max(-(-100 * c.n_samples // 400), 4)
-        assert max_draws == 300  # as long as without a swap, while the chains disagree
+    heaviest = post.components[int(np.argmax(weights))]
+    others = [c for i, c in enumerate(post.components)
+              if c.n_samples and i not in light and c is not heaviest]
+    assert others and len(tries) == len(others)  # each other reading tried resampling
+    assert runs[0][1] == max(-(-100 * heaviest.n_samples // 400), 4) and runs[0][2] == 300
+    resampled = sum(t[3] for t in tries)
+    assert len(runs) == 1 + len(tries) - resampled  # chains where resampling was refused
+    for c, (_, n, n_proposals, ok, ess, weighed) in zip(others, tries, strict=True):
+        assert n == c.n_samples and n_proposals == posterior.IMPORTANCE_PROPOSALS * n
+        assert ok == (ess >= n) and (weighed == n_proposals if ok else weighed >= n_proposals // 4)
     assert post.n_samples == 400 and post.theta.shape == (400, 1)
     assert np.all(np.isfinite(post.diagnostics.r_hat))  # the chains' R-hat, not the Gaussian's
+
+
+def test_importance_resampling_draws_the_density_or_refuses():
+    """From a Student-t round the mode, resampling by density over proposal: on a Gaussian
+    that the proposal covers, draws with its mean and spread; on one whose scale the proposal
+    misses by far, a refusal (ESS below the samples asked for), the generator's draws the same
+    either way."""
+    from irl.posterior import _importance_draws
+
+    mean, cov = np.array([1.0, -2.0]), np.array([[1.0, 0.3], [0.3, 0.5]])
+    prec = np.linalg.inv(cov)
+
+    def gaussian(scale):
+        return lambda t: (-0.5 * (t - mean) @ prec @ (t - mean) / scale**2, None)
+
+    rng = np.random.default_rng(0)
+    theta, ess, weighed = _importance_draws(gaussian(1.0), mean, cov, 2000, 40_000, rng)
+    assert theta.shape == (2000, 2) and weighed == 40_000 and ess > 2000
+    np.testing.assert_allclose(theta.mean(axis=0), mean, atol=0.06)
+    np.testing.assert_allclose(np.cov(theta.T), cov, atol=0.08)
+    a, b = np.random.default_rng(1), np.random.default_rng(1)
+    refused = _importance_draws(gaussian(0.02), mean, cov, 200, 4000, a)
+    assert refused[0] is None and refused[1] < 200 and refused[2] == 1000  # the pilot only
+    _importance_draws(gaussian(1.0), mean, cov, 200, 4000, b)
+    assert a.random() == b.random()
 
 
 def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():

@@ -1,0 +1,57 @@
+"""One BLAS thread for irl's large array passes.
+
+OpenBLAS hands a dot product of more than 10,000 numbers, and a matrix-vector product above a
+similar size, to its thread pool (one thread per core by default). The products irl makes on
+large MDPs are bound by memory, so more threads gain little even on idle cores, and on a
+machine whose cores are busy the pool's threads spin waiting for each other: on our 2-core
+machine beside other jobs, one cold MMAP-BIRL gradient at 102,400 states took 8.98 s of CPU
+time with the default pool against 4.35 s on one thread (numba backend: 2.93 s against 1.42
+s), while at 10,000 states, under OpenBLAS's threshold, the two were the same
+(``bench/bench_irl_blas.py``). That threshold made the cost grow faster than the state count
+(x29 for x10.24 the states, against x14 on one thread).
+
+:func:`one_blas_thread` limits BLAS to one thread for the length of a block whose arrays are
+large enough for OpenBLAS to thread them; below, it does nothing, since setting the limit
+costs about 50 microseconds, a sixth of a small gradient. Layout: none (a context manager).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+
+#: Arrays of at least this many numbers get one BLAS thread: OpenBLAS threads a dot product
+#: above 10,000 numbers.
+MIN_ELEMENTS = 10_000
+
+_lock = threading.Lock()
+_controller = None
+#: Whether this thread is inside a limiting block already (a nested block sets nothing).
+_inside = threading.local()
+
+
+def _blas_controller():
+    """The process's BLAS libraries (found once: irl has loaded numpy's and scipy's)."""
+    global _controller
+    with _lock:
+        if _controller is None:
+            from threadpoolctl import ThreadpoolController
+
+            _controller = ThreadpoolController().select(user_api="blas")
+        return _controller
+
+
+@contextlib.contextmanager
+def one_blas_thread(n_elements: int) -> Iterator[None]:
+    """BLAS on one thread within the block, where its arrays hold ``n_elements`` numbers or
+    more (for example ``S * A`` for an MDP's Q-function); a limit already lower is kept."""
+    if n_elements < MIN_ELEMENTS or getattr(_inside, "active", False):
+        yield
+        return
+    with _blas_controller().limit(limits=1):
+        _inside.active = True
+        try:
+            yield
+        finally:
+            _inside.active = False
