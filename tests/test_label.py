@@ -12,9 +12,10 @@ import pytest
 from onionsort.cli import main
 from recordings.dataset import CLASSES, SPLITS, VIEWS, read_records, read_steps, split_sessions
 
-#: The record fields export then import keeps: boxes, classes and the state labels.
+#: The record fields export then import keeps: boxes, classes, the state labels and the
+#: robot's line-up fields.
 KEPT = ("boxes", "classes", "state", "onion", "end_effector", "prediction", "action",
-        "occluded", "phase", "step", "session", "frame")
+        "occluded", "phase", "step", "session", "frame", "source", "lineup", "index", "view")
 
 
 @pytest.fixture(scope="module")

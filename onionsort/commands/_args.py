@@ -54,6 +54,8 @@ METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
 IRL_METHODS = METHODS[:4]
 #: :data:`onionsort.stages.label.LABEL_FORMATS`, repeated for the same reason
 LABEL_FORMATS = ("coco", "yolo")
+#: :data:`onionsort.stages.label.IMPORT_FORMATS`, repeated for the same reason
+IMPORT_FORMATS = ("coco", "yolo", "labelstudio")
 #: :data:`onionsort.stages.label_select.SELECT_FORMATS`, repeated for the same reason
 SELECT_FORMATS = ("coco", "labelstudio")
 

@@ -40,6 +40,7 @@ import argparse
 from pathlib import Path
 
 from onionsort.commands._args import (
+    IMPORT_FORMATS,
     LABEL_FORMATS,
     SELECT_FORMATS,
     add_device_argument,
@@ -63,9 +64,10 @@ def register(subparsers) -> None:
     exp.set_defaults(func=run_export)
     imp = actions.add_parser("import", help="read COCO or YOLO (and a states CSV) as a dataset")
     imp.add_argument("source", type=Path, metavar="DIR", help="the labelled image set")
-    imp.add_argument("--format", choices=LABEL_FORMATS, required=True,
-                     help="coco (COCO 2017, Roboflow, CVAT, Label Studio) or yolo "
-                          "(Ultralytics, Roboflow)")
+    imp.add_argument("--format", choices=IMPORT_FORMATS, required=True,
+                     help="coco (COCO 2017, Roboflow, CVAT, Label Studio), yolo "
+                          "(Ultralytics, Roboflow) or labelstudio (Label Studio's JSON "
+                          "export: boxes and state choices)")
     imp.add_argument("--states", type=Path, default=None, metavar="FILE.csv",
                      help="the state labels (default: DIR/states.csv where there is one); "
                           "frames without a row are box-only")

@@ -93,6 +93,8 @@ def register(subparsers) -> None:
         p.add_argument("--init", type=Path, default=None, metavar="CHECKPOINT",
                        help=f"{what} to fine-tune instead of training from scratch")
     det.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (0.002)")
+    for p in (sc, ins):
+        p.add_argument("--lr", type=float, default=3e-3, help="peak learning rate (0.003)")
     det.add_argument("--resume", action="store_true",
                      help="continue the run in --out from its last checkpoint")
     det.set_defaults(func=run_detector)
@@ -120,7 +122,7 @@ def run_state_classifier(args: argparse.Namespace) -> int:
     metrics = train_state_classifier(ClassifierTrainConfig(
         data=args.data, out=args.out, epochs=args.epochs, batch_size=args.batch_size,
         seed=args.seed, depth_dropout=args.depth_dropout, device=args.device,
-        augment=args.augment, init=args.init, data_weights=args.data_weights))
+        augment=args.augment, init=args.init, data_weights=args.data_weights, lr=args.lr))
     for key, label in (("test", ""), ("test_without_depth", " without depth")):
         if metrics.get(key):
             print(f"state classifier, test split{label}: "
@@ -185,7 +187,7 @@ def run_inspection(args: argparse.Namespace) -> int:
         seed=args.seed, detector=args.detector, level_weights=args.level_weights,
         device=args.device, fusion=args.fusion,
         visibility=args.visibility, camera=args.camera, augment=args.augment, init=args.init,
-        data_weights=args.data_weights))
+        data_weights=args.data_weights, lr=args.lr))
     val = metrics["val"]
     print(f"inspection classifier, val split: rot call accuracy {val['accuracy']:.3f} on "
           f"{val['n']} views, temperature {metrics['temperature']:.3f}")

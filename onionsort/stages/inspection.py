@@ -228,7 +228,8 @@ class InspectionTrainStageConfig:
     a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
     validation. ``data_weights``: how many times each dataset's training views count
     (positive integers, 1 each by default), times the level weights; ``init``: an inspection
-    classifier to fine-tune instead of training from scratch.
+    classifier to fine-tune instead of training from scratch; ``lr``: the peak learning rate (a
+    smaller one suits fine-tuning from ``init``).
     """
 
     data: Path | tuple[Path, ...]
@@ -245,6 +246,7 @@ class InspectionTrainStageConfig:
     augment: bool = True
     init: Path | None = None
     data_weights: tuple[int, ...] = ()
+    lr: float = 3e-3
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
@@ -262,6 +264,8 @@ class InspectionTrainStageConfig:
         for name in ("epochs", "batch_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0; got {self.lr}")
         for level, weight in self.level_weights.items():
             if not weight > 0:
                 raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")
@@ -335,7 +339,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     classifier, metrics = train_inspection(
         train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
                                                   batch_size=config.batch_size,
-                                                  seed=config.seed,
+                                                  seed=config.seed, lr=config.lr,
                                                   photometric=config.augment),
         device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:

@@ -59,7 +59,8 @@ class ClassifierTrainConfig:
     (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
     checkpoint to fine-tune instead of training from scratch; ``augment``: each training
     step's frames seen through a camera of their own
-    (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
+    (:class:`perception.photometric.PhotometricAugment`), never at evaluation; ``lr``: the
+    peak learning rate (a smaller one suits fine-tuning from ``init``).
     """
 
     data: Path | tuple[Path, ...]
@@ -72,12 +73,15 @@ class ClassifierTrainConfig:
     augment: bool = True
     init: Path | None = None
     data_weights: tuple[int, ...] = ()
+    lr: float = 3e-3
 
     def __post_init__(self) -> None:
         pool_datasets(self)
         object.__setattr__(self, "out", Path(self.out))
         check_device(self.device)
         _check_positive(self, "epochs", "batch_size")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0; got {self.lr}")
         if not 0.0 <= self.depth_dropout <= 1.0:
             raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
 
@@ -165,7 +169,8 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     torch.set_num_threads(torch_threads())
     model = ClassifierConfig(frames=frames[config.data[0]],
                              epochs=config.epochs, batch_size=config.batch_size,
-                             seed=config.seed, depth_dropout=config.depth_dropout)
+                             seed=config.seed, depth_dropout=config.depth_dropout,
+                             lr=config.lr)
     splits = {}
     for split in ("train", "val", "test"):
         splits[split] = [step for data, weight in zip(config.data, config.data_weights,
