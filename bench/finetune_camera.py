@@ -106,6 +106,31 @@ def _sessions_for_views(data: Path, views: int) -> int:
                      f"fewer than --views {views}")
 
 
+def _first_test_sessions(src: Path, out: Path, n: int | None) -> Path:
+    """``src`` with its test split cut to its first ``n`` sessions (None: ``src`` itself), as
+    a new dataset folder ``out`` whose image folders link to ``src``'s."""
+    from recordings.dataset import SPLITS, read_metadata, read_records
+
+    if n is None:
+        return src
+    meta = read_metadata(src)
+    sessions = sorted({int(r["session"]) for r in read_records(src, "test")})[:n]
+    for split in SPLITS:
+        (out / split).mkdir(parents=True)
+        for entry in (src / split).iterdir():
+            if entry.is_dir():
+                (out / split / entry.name).symlink_to(entry.resolve())
+        for view, name in (("camera", "labels.json"), ("inspection", "inspection.json")):
+            if (src / split / name).is_file():
+                records = read_records(src, split, view)
+                if split == "test":
+                    records = [r for r in records if r.get("session") in sessions]
+                (out / split / name).write_text(json.dumps(records))
+    meta["test_sessions_kept"] = sessions
+    (out / "dataset.json").write_text(json.dumps(meta))
+    return out
+
+
 def _recovered(unchanged: float, through: float, tuned: float) -> float | None:
     drop = unchanged - through
     return None if drop <= 0 else (tuned - through) / drop
@@ -145,6 +170,7 @@ def run(args: argparse.Namespace) -> dict:
 
     out, models, dev = args.out, args.models, args.device
     out.mkdir(parents=True)
+    args.data = _first_test_sessions(args.data, out / "data", args.test_sessions)
     with ProcessPoolExecutor(args.workers) as pool:
         # 1. the camera: the candidate the models lose most under, on the VAL sessions (the
         # unchanged test sessions are measured meanwhile: no camera is in them)
@@ -221,6 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--epochs", type=int, default=6)
     p.add_argument("--data-weights", default="3,1")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--test-sessions", type=int, default=None,
+                   help="measure on the first N test sessions only (default: all)")
     p.add_argument("--workers", type=int, default=4,
                    help="evaluations and trainings run at once (4)")
     p.add_argument("--out", type=Path, required=True, help="new folder")
