@@ -90,10 +90,12 @@ def _score(f: dict) -> float:
 
 
 def _sessions_for_views(data: Path, views: int) -> int:
-    """The fewest first train sessions whose sorter's inspection views show ``views`` onions."""
+    """The fewest first train sessions (``bench/through_camera.py --train-sessions K``'s
+    order) whose sorter's inspection views show ``views`` onions."""
     from recordings.dataset import read_records
 
-    per = {}
+    per = dict.fromkeys(sorted({int(r["session"]) for r in read_records(data, "train")
+                                if "session" in r}), 0)
     for r in read_records(data, "train", "inspection"):
         if r.get("source", "human") == "human" and r.get("boxes"):
             per[int(r["session"])] = per.get(int(r["session"]), 0) + 1
