@@ -201,6 +201,8 @@ CASES = [
      ["cannot resume", "detector_last.pt"]),
     (["train", "state-classifier", "--data", "{d}/data_none", "--out", "{d}/x", "--epochs", "0"],
      ["epochs must be >= 1", "got 0"]),
+    (["train", "state-classifier", "--data", "{d}/data_none", "--out", "{d}/x", "--lr", "0"],
+     ["lr must be > 0", "got 0.0"]),
     # perceive
     (["perceive", "{d}/nofile.mcap"], ["no such session file", "nofile.mcap"]),
     (["perceive", "{d}/garbage.mcap"], ["garbage.mcap", "not an MCAP file"]),
@@ -296,6 +298,8 @@ CASES = [
      ["--fusion", "invalid choice", "'mean'"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--visibility", "1.5"],
      ["visibility must be in (0, 1]", "got 1.5"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--lr=-1e-3"],
+     ["lr must be > 0", "got -0.001"]),
     (["perceive", "{d}/unperceived.mcap", "--device", "gpu"],
      ["--device", "invalid choice", "'gpu'"]),
     (["eval-perception", "--data", "{d}/data_bad", "--views", "0"], ["views must be >= 1"]),

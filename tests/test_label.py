@@ -12,9 +12,10 @@ import pytest
 from onionsort.cli import main
 from recordings.dataset import CLASSES, SPLITS, VIEWS, read_records, read_steps, split_sessions
 
-#: The record fields export then import keeps: boxes, classes and the state labels.
+#: The record fields export then import keeps: boxes, classes, the state labels and the
+#: robot's line-up fields.
 KEPT = ("boxes", "classes", "state", "onion", "end_effector", "prediction", "action",
-        "occluded", "phase", "step", "session", "frame")
+        "occluded", "phase", "step", "session", "frame", "source", "lineup", "index", "view")
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +56,9 @@ def _same_dataset(a: Path, b: Path) -> None:
 
 @pytest.mark.parametrize("fmt", ["coco", "yolo"])
 def test_export_then_import_gives_the_same_dataset(rendered, exported, tmp_path, fmt):
+    robot = [r for s in SPLITS for r in read_records(rendered, s, "inspection")
+             if r.get("source") == "robot"]
+    assert robot and all({"lineup", "index", "view"} <= set(r) for r in robot)
     assert main(["label", "import", str(exported[fmt]), "--format", fmt,
                  "--out", str(tmp_path / "back")]) == 0
     _same_dataset(rendered, tmp_path / "back")
@@ -225,14 +229,30 @@ def _yolo_four_numbers(d: Path) -> str:
     return "s0002_0000.txt line"
 
 
+def _lineup_without_image(d: Path) -> str:
+    path = d / "inspection" / "lineups.csv"
+    path.write_text(path.read_text() + "train,nowhere.png,0,1,0\n")
+    return "lineups.csv line 22: image 'nowhere.png' of split train is not among"
+
+
+def _lineup_negative(d: Path) -> str:
+    path = d / "inspection" / "lineups.csv"
+    lines = path.read_text().splitlines()
+    lines[2] = lines[2].rsplit(",", 1)[0] + ",-1"
+    path.write_text("\n".join(lines) + "\n")
+    return "lineups.csv line 3: view must be an integer >= 0; got '-1'"
+
+
 BAD = [("coco", _drop_image, []), ("coco", _box_outside, []), ("coco", _not_coco, []),
        ("coco", None, ["--classes", "good=sound"]), ("coco", _csv_value, []),
-       ("coco", _csv_row_without_image, []), ("yolo", _yolo_four_numbers, [])]
+       ("coco", _csv_row_without_image, []), ("yolo", _yolo_four_numbers, []),
+       ("yolo", _lineup_without_image, []), ("coco", _lineup_negative, [])]
 
 
 @pytest.mark.parametrize("fmt, spoil, extra", BAD,
                          ids=["missing image", "box outside", "not COCO", "class not mapped",
-                              "CSV value", "CSV row without image", "YOLO 4 numbers"])
+                              "CSV value", "CSV row without image", "YOLO 4 numbers",
+                              "line-up row without image", "line-up view negative"])
 def test_bad_input_is_one_line_exit_2_and_nothing_written(exported, tmp_path, capsys, fmt,
                                                           spoil, extra):
     src = tmp_path / "in"

@@ -19,15 +19,53 @@ def sessions(tmp_path_factory):
     return sorted(out.glob("*.mcap"))
 
 
-def test_the_choice_takes_the_least_sure_in_rounds_over_sessions():
-    scores = [[0.1, 5.0, 4.0, 0.2], [3.0, 0.0, 0.0, 0.0]]
-    # round 1: session 0's step 1 (5.0), session 1's step 0 (3.0); round 2: session 0's
-    # step 2 (4.0), then session 1's least sure left (step 1, the first of equals)
-    assert _choose(scores, 1, 4) == [(0, 1), (1, 0), (0, 2), (1, 1)]
-    assert _choose(scores, 1, 8) == [(0, 1), (1, 0), (0, 2), (1, 1), (0, 3), (1, 2), (0, 0),
+def test_the_choice_takes_the_likely_wrong_first_then_rounds_over_sessions():
+    scores = [[0.1, 0.9, 0.8, 0.2], [0.3, 0.0, 0.0, 0.0]]
+    # rounds: session 0's step 1 (0.4), session 1's step 0 (0.35); session 0's step 2 (0.3),
+    # then session 1's least sure left (step 1, the first of equals)...
+    assert _choose([[0.1, 0.4, 0.3, 0.2], [0.35, 0.0, 0.0, 0.0]], 1, 4) == [
+        (0, 1), (1, 0), (0, 2), (1, 1)]
+    # ...but steps more likely wrong than right (>= 1/2) come first, wherever they are
+    assert _choose(scores, 1, 4) == [(0, 1), (0, 2), (1, 0), (0, 3)]
+    assert _choose(scores, 1, 8) == [(0, 1), (0, 2), (1, 0), (0, 3), (0, 0), (1, 1), (1, 2),
                                      (1, 3)]
-    assert _choose(scores, 3, 7) == [(0, 1), (1, 0), (0, 2)]  # whole steps up to 7 frames
-    assert _choose([[1.0], [2.0, 3.0]], 1, 9) == [(1, 1), (0, 0), (1, 0)]  # then none left
+    assert _choose(scores, 3, 7) == [(0, 1), (0, 2), (1, 0)]  # whole steps up to 7 frames
+    assert _choose([[0.1], [0.2, 0.3]], 1, 9) == [(1, 1), (0, 0), (1, 0)]  # then none left
+    assert _choose([[0.6, 0.7], [0.9]], 3, 6) == [(1, 0), (0, 1)]  # the budget binds first
+
+
+def _step(onion, p_blemished=None, prediction=2, occluded=False, waiting=False):
+    from state_abstraction.perceive import PerceivedStep
+
+    probs = {"occluded": np.array([0.0, 1.0]) if occluded else np.array([1.0, 0.0]),
+             "onion": np.eye(4)[onion], "end_effector": np.eye(4)[onion],
+             "waiting": np.array([0.0, 1.0]) if waiting else np.array([1.0, 0.0])}
+    return PerceivedStep(step=0, occluded=occluded, p_occluded=float(occluded), probs=probs,
+                         onion=onion, end_effector=onion, action=0, prediction=prediction,
+                         p_blemished=p_blemished)
+
+
+def test_what_the_sorter_did_with_the_onion_weighs_on_the_prediction():
+    from onionsort.stages.label_select import sorter_calls, step_uncertainties
+
+    # picked (hover), held up (face) and called good at p 0.3, then occluded, then binned;
+    # then a new onion claimed (waiting) and put back after a view at p 0.3
+    seen = [_step(1), _step(2, 0.3, 0), _step(2, 0.3, 0, occluded=True), _step(3, 0.3, 0),
+            _step(0, waiting=True), _step(2, 0.3, 0), _step(0, 0.3, 0)]
+    assert sorter_calls(seen) == [0, 1, 1, 1, 0, -1, -1]
+    u = step_uncertainties(seen, consistency=0.9)
+    odds_bad = 0.3 / 0.7 * 9  # the bin: p(blemished) 0.3 becomes 27/34
+    assert u[1] == pytest.approx(odds_bad / (1 + odds_bad))  # the call 'good' likely wrong
+    assert u[2] == pytest.approx(0.0)  # occluded, and called so
+    odds_bad = 0.3 / 0.7 / 9  # back on the conveyor: 'good' is likely right
+    assert u[5] == pytest.approx(odds_bad / (1 + odds_bad))
+    assert u[0] == pytest.approx(0.0)  # an onion just picked: 'unknown' is right
+    # on the conveyor before anything was seen: the sorter may hold an onion inspected before
+    # the recording began, one of three values
+    assert step_uncertainties([_step(0)]) == [pytest.approx(2 / 3)]
+    assert step_uncertainties(seen, consistency=0.5)[1] == pytest.approx(0.3)
+    with pytest.raises(ValueError, match="consistency"):
+        step_uncertainties(seen, consistency=1.0)
 
 
 def test_coco_selection_is_pre_annotated_and_comes_back_through_label_import(sessions,
@@ -74,6 +112,89 @@ def test_label_studio_tasks_carry_predictions_and_where_each_frame_is(sessions, 
                 assert f'value="{r["value"]["choices"][0]}"' in config
 
 
+def _label_studio_export(tasks: list, fix) -> list:
+    """What Label Studio's JSON export gives once a person has labelled ``tasks`` (its import
+    format): each task with an ``annotations`` entry whose result is the prediction's,
+    changed by ``fix(k, result)`` (None: the person skipped the task), and the image served
+    through local file storage."""
+    out = []
+    for k, task in enumerate(tasks):
+        result = fix(k, json.loads(json.dumps(task["predictions"][0]["result"])))
+        annotations = [{"id": 100 + k, "result": result or [], "was_cancelled": result is None,
+                        "lead_time": 3.2}]
+        data = {**task["data"], "image": "/data/local-files/?d=" + task["data"]["image"]}
+        out.append({"id": k + 1, "data": data, "annotations": annotations,
+                    "predictions": task["predictions"], "project": 1})
+    return out
+
+
+def test_a_label_studio_export_comes_back_through_label_import(sessions, tmp_path, capsys):
+    from irl.domains.onion_sorting import SORTING_TASK as task
+
+    out = tmp_path / "ls"
+    assert main(["label", "select", *map(str, sessions), "--frames", "12", "--format",
+                 "labelstudio", "--device", "cpu", "--out", str(out)]) == 0
+    tasks = json.loads((out / "tasks.json").read_text())
+
+    def fix(k, result):
+        if k == 0:
+            return None  # skipped: not labelled
+        for r in result:
+            if r["type"] == "choices" and r["from_name"] == "prediction":
+                r["value"]["choices"] = ["bad" if k % 2 else "good"]
+            if r["type"] == "choices" and r["from_name"] == "occluded":
+                r["value"]["choices"] = ["no"]
+            if r["type"] == "rectanglelabels":
+                r["value"]["x"] = min(r["value"]["x"] + 1.0, 100 - r["value"]["width"])
+                r["value"]["rectanglelabels"] = ["blemished"]
+        if k == 1:  # a box the model missed
+            result.append({"id": "new", "type": "rectanglelabels", "from_name": "label",
+                           "to_name": "image", "value": {"x": 10, "y": 20, "width": 5,
+                                                         "height": 4, "rotation": 0,
+                                                         "rectanglelabels": ["good"]}})
+        return result
+
+    exported = _label_studio_export(tasks, fix)
+    (out / "project-1-at-2026-11-26.json").write_text(json.dumps(exported))
+    back = tmp_path / "back"
+    assert main(["label", "import", str(out), "--format", "labelstudio",
+                 "--out", str(back)]) == 0
+    records = {r["image"]: r for split in ("train", "val", "test")
+               for r in read_records(back, split)}
+    assert len(records) == len(tasks) - 1  # the skipped task is not in it
+    for t in exported[1:]:
+        name = t["data"]["image"].rsplit("/", 1)[1]
+        rec = records[name]
+        assert (rec["session"], rec["step"], rec["frame"]) == (
+            t["data"]["session"], t["data"]["step"], t["data"]["frame"])
+        answers = {r["from_name"]: r["value"]["choices"][0]
+                   for r in t["annotations"][0]["result"] if r["type"] == "choices"}
+        assert task.value_name("prediction", rec["prediction"]) == answers["prediction"]
+        assert task.value_name("onion", rec["onion"]) == answers["onion"]
+        assert task.action_names[rec["action"]] == answers["action"]
+        assert rec["occluded"] is False
+        boxes = [r["value"] for r in t["annotations"][0]["result"]
+                 if r["type"] == "rectanglelabels"]
+        assert len(rec["boxes"]) == len(boxes)
+        for (x0, y0, x1, y1), v, c in zip(rec["boxes"], boxes, rec["classes"], strict=True):
+            assert x1 - x0 == pytest.approx(v["width"] * 320 / 100, abs=2e-3)
+            assert x0 == pytest.approx(v["x"] * 320 / 100, abs=1e-3)
+            assert y1 - y0 == pytest.approx(v["height"] * 240 / 100, abs=2e-3)
+            assert c == (0 if v["rectanglelabels"] == ["good"] else 1)
+
+    # a choice that is not a value of the task: one line, exit 2, nothing written
+    exported[2]["annotations"][0]["result"] = [
+        r if r["from_name"] != "onion" else {**r, "value": {"choices": ["table"]}}
+        for r in exported[2]["annotations"][0]["result"]]
+    (out / "project-1-at-2026-11-26.json").write_text(json.dumps(exported))
+    capsys.readouterr()
+    assert main(["label", "import", str(out), "--format", "labelstudio",
+                 "--out", str(tmp_path / "bad")]) == 2
+    (err,) = capsys.readouterr().err.splitlines()
+    assert "onion 'table' is not a value of the task" in err and "task 3" in err
+    assert not (tmp_path / "bad").exists()
+
+
 def test_zero_frames_is_one_line(sessions, tmp_path, capsys):
     assert main(["label", "select", str(sessions[0]), "--frames", "0",
                  "--out", str(tmp_path / "x")]) == 2
@@ -102,16 +223,17 @@ def _wrong_steps(paths, models) -> dict:
 
 
 @pytest.mark.slow
-def test_the_frames_chosen_are_wrong_three_times_as_often(tmp_path, capsys):
-    """Acceptance on 6 fresh `paper` sessions of 20 steps (seed 902): the 60 frames chosen
-    have a wrong state guess at least 3x as often as the sessions' steps on average. (Not
-    met: where fewer than 20 steps are wrong, that all are among the 20 chosen; docs/lab.md
-    gives the count.)"""
+def test_the_frames_chosen_are_wrong_three_times_as_often_and_hold_every_wrong_one(tmp_path,
+                                                                                 capsys):
+    """Acceptance on 6 fresh `paper` sessions of 20 steps (seed 6121; the measure was set on
+    seeds 900, 902 and 6111): the 60 frames chosen have a wrong state guess at least 3x as
+    often as the sessions' steps on average, and where fewer than their 20 steps are wrong,
+    every wrong step is among them."""
     from onionsort.stages.label_select import LabelSelectConfig, select_frames
     from onionsort.stages.models import PerceptionModels
 
     assert main(["record", "--sessions", "6", "--steps-per-session", "20", "--difficulty",
-                 "paper", "--seed", "902", "--out", str(tmp_path / "rec")]) == 0
+                 "paper", "--seed", "6121", "--out", str(tmp_path / "rec")]) == 0
     paths = sorted((tmp_path / "rec").glob("*.mcap"))
     models = PerceptionModels.load(None, "cpu")
     wrong = _wrong_steps(paths, models)
@@ -123,4 +245,7 @@ def test_the_frames_chosen_are_wrong_three_times_as_often(tmp_path, capsys):
     with capsys.disabled():
         print(f"\n{sum(wrong.values())} of {len(wrong)} steps wrong ({rate:.3f}); "
               f"{sum(wrong[s] for s in picked)} of the {len(picked)} chosen ({rate_picked:.3f})")
+    assert len(picked) == 20
     assert rate_picked >= 3 * rate
+    if sum(wrong.values()) < len(picked):
+        assert {s for s, w in wrong.items() if w} <= picked

@@ -6,17 +6,21 @@ instances_<split>.json`` beside ``<split>/`` images) or Ultralytics' YOLO layout
 state labels in ``states.csv`` (split, image, session, step, frame, occluded, one column per
 factor of the task and action, in the task's words) and depth as 16-bit PNG in millimetres in
 ``depth/<split>/``: the main camera's frames at the top, the inspection views in
-``inspection/`` in the same layout. CVAT, Label Studio, FiftyOne and Ultralytics open it.
+``inspection/`` in the same layout (the robot's line-up, onion and view numbers in
+``inspection/lineups.csv``). CVAT, Label Studio, FiftyOne and Ultralytics open it.
 
 ``label select`` chooses the frames of recorded sessions where the models are least sure (the
-chance, by their own probabilities, that a step's state guess is wrong), in rounds over the
-sessions, and writes them as a labelling task
+chance, by their own probabilities and what the sorter later did with the onion, that a step's
+state guess is wrong): the steps more likely wrong than right first, then in rounds over the
+sessions; it writes them as a labelling task
 pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
 (what ``label import`` reads back once corrected), or Label Studio's import format with
 predictions.
 
 ``label import`` reads such a folder, or what CVAT, Label Studio or Roboflow export
-(``<split>/_annotations.coco.json``; one file without splits), into a dataset folder that
+(``<split>/_annotations.coco.json``; one file without splits; ``--format labelstudio``: Label
+Studio's JSON export beside the images, its state choices as the state labels), into a
+dataset folder that
 ``train``, ``calibrate`` and ``eval-perception`` read. Frames without a row in the states CSV
 are box-only: the detector and the inspection classifier learn from them, the state
 classifier and calibration do not. A set without splits is split by session, as ``onionsort
@@ -32,6 +36,7 @@ Examples
     onionsort label import yolo-set --format yolo --depth yolo-set/depth --out runs/lab-yolo
     onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
     onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
+    onionsort label import runs/ls --format labelstudio --out runs/lab
 """
 
 from __future__ import annotations

@@ -32,6 +32,8 @@ INSPECTION_VIEWS = 5
 FUSION_RULES = ("noisy-or", "log-odds")
 INSPECTION_CAMERAS = ("both", "robot")
 LABEL_FORMATS = ("coco", "yolo")
+#: What ``label import`` reads: the export's layouts and Label Studio's JSON export.
+IMPORT_FORMATS = (*LABEL_FORMATS, "labelstudio")
 SELECT_FORMATS = ("coco", "labelstudio")
 POSTERIOR_METHODS = ("mcmc", "laplace")
 

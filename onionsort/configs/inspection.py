@@ -51,7 +51,8 @@ class InspectionTrainStageConfig(train.TrainOptions):
     a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
     validation. ``data_weights``: how many times each dataset's training views count
     (positive integers, 1 each by default), times the level weights; ``init``: an inspection
-    classifier to fine-tune instead of training from scratch.
+    classifier to fine-tune instead of training from scratch; ``lr``: the peak learning rate (a
+    smaller one suits fine-tuning from ``init``).
     """
 
     epochs: int = option(30, help=None)
@@ -74,11 +75,13 @@ class InspectionTrainStageConfig(train.TrainOptions):
                                                  "(default: the share measured on the "
                                                  "training views)")
     init: Path | None = train.init("an inspection_classifier.pt")
+    lr: float = train.lr(3e-3)
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
 
         super().__post_init__()
+        train.check_lr(self.lr)
         if self.fusion is not None and self.fusion not in FUSION_RULES:
             raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
         if self.visibility is not None and not 0.0 < self.visibility <= 1.0:

@@ -8,16 +8,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs import common, option
-from onionsort.configs.common import LABEL_FORMATS, SELECT_FORMATS
+from onionsort.configs.common import IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS
 
-__all__ = ["LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig", "LabelImportConfig",
-           "LabelSelectConfig", "check_format", "classes"]
+__all__ = ["IMPORT_FORMATS", "LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig",
+           "LabelImportConfig", "LabelSelectConfig", "check_format", "classes"]
 
 
-def check_format(fmt: str) -> None:
-    """Refuse a labelled-set format that is not one of :data:`LABEL_FORMATS`."""
-    if fmt not in LABEL_FORMATS:
-        raise ValueError(f"format must be one of {LABEL_FORMATS}; got {fmt!r}")
+def check_format(fmt: str, formats: tuple[str, ...] = LABEL_FORMATS) -> None:
+    """Refuse a labelled-set format that is not one of ``formats``."""
+    if fmt not in formats:
+        raise ValueError(f"format must be one of {formats}; got {fmt!r}")
 
 
 def classes(text: str) -> dict[str, str]:
@@ -56,11 +56,12 @@ class LabelImportConfig:
     ----------
     source : Path
         The labelled image set (COCO or YOLO layout, see :mod:`recordings.coco`,
-        :mod:`recordings.yolo`).
+        :mod:`recordings.yolo`; or Label Studio's JSON export beside the images, its state
+        choices as the state labels, :func:`recordings.labelstudio.read_export`).
     out : Path
         A new dataset folder.
     format : str
-        ``coco`` or ``yolo``.
+        ``coco``, ``yolo`` or ``labelstudio``.
     states : Path or None
         The state labels (:mod:`recordings.states_csv`); None: ``source/states.csv`` where
         there is one. Frames without a row are box-only.
@@ -80,9 +81,10 @@ class LabelImportConfig:
     """
 
     source: Path = option(positional=True, metavar="DIR", help="the labelled image set")
-    format: str = option("coco", choices=LABEL_FORMATS, required=True,
-                         help="coco (COCO 2017, Roboflow, CVAT, Label Studio) or yolo "
-                              "(Ultralytics, Roboflow)")
+    format: str = option("coco", choices=IMPORT_FORMATS, required=True,
+                         help="coco (COCO 2017, Roboflow, CVAT, Label Studio), yolo "
+                              "(Ultralytics, Roboflow) or labelstudio (Label Studio's JSON "
+                              "export: boxes and state choices)")
     states: Path | None = option(None, metavar="FILE.csv",
                                  help="the state labels (default: DIR/states.csv where there "
                                       "is one); frames without a row are box-only")
@@ -107,7 +109,7 @@ class LabelImportConfig:
         for name in ("source", "out", "states", "depth", "inspection"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, Path(getattr(self, name)))
-        check_format(self.format)
+        check_format(self.format, IMPORT_FORMATS)
         unknown = [k for k in self.classes if k not in CLASSES]
         if unknown:
             raise ValueError(f"classes maps {unknown[0]!r}, which is not a class of the "

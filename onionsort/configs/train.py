@@ -81,6 +81,17 @@ class TrainOptions:
         _check_positive(self, "epochs", "batch_size")
 
 
+def lr(default: float):
+    """``--lr``: the peak learning rate (a smaller one suits fine-tuning from ``--init``)."""
+    return option(default, help=f"peak learning rate ({default:g})")
+
+
+def check_lr(value: float) -> None:
+    """Refuse a learning rate that is not > 0."""
+    if not value > 0:
+        raise ValueError(f"lr must be > 0; got {value}")
+
+
 def _check_positive(config, *names: str) -> None:
     for name in names:
         if getattr(config, name) < 1:
@@ -97,7 +108,8 @@ class ClassifierTrainConfig(TrainOptions):
     (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
     checkpoint to fine-tune instead of training from scratch; ``augment``: each training
     step's frames seen through a camera of their own
-    (:class:`perception.photometric.PhotometricAugment`), never at evaluation.
+    (:class:`perception.photometric.PhotometricAugment`), never at evaluation; ``lr``: the
+    peak learning rate (a smaller one suits fine-tuning from ``init``).
     """
 
     epochs: int = option(12, help=None)
@@ -106,9 +118,11 @@ class ClassifierTrainConfig(TrainOptions):
                                             "zeroed, so the model also reads steps without "
                                             "depth (0.5)")
     init: Path | None = init("a state_classifier.pt")
+    lr: float = lr(3e-3)
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        check_lr(self.lr)
         if not 0.0 <= self.depth_dropout <= 1.0:
             raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
 
@@ -126,7 +140,7 @@ class DetectorTrainConfig(TrainOptions):
     batch_size: int = option(16, help=None)
     images_per_epoch: int = option(1600, help=None)
     init: Path | None = init("a detector.pt")
-    lr: float = option(2e-3, help="peak learning rate (0.002)")
+    lr: float = lr(2e-3)
     resume: bool = option(False, help="continue the run in --out from its last checkpoint")
 
     def __post_init__(self) -> None:

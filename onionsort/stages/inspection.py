@@ -275,7 +275,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     classifier, metrics = train_inspection(
         train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
                                                   batch_size=config.batch_size,
-                                                  seed=config.seed,
+                                                  seed=config.seed, lr=config.lr,
                                                   photometric=config.augment),
         device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:

@@ -3,8 +3,9 @@
 :func:`export_labels` writes a dataset folder (``onionsort dataset``'s, or an imported one) in
 the COCO 2017 or the Ultralytics YOLO layout, with its state labels in ``states.csv``
 (:mod:`recordings.states_csv`): the main camera's frames at the top of the folder, the
-inspection views in ``inspection/`` in the same layout, depth as 16-bit PNG in millimetres in
-``depth/<split>/``. :func:`import_labels` reads such a folder, or what CVAT, Label Studio,
+inspection views in ``inspection/`` in the same layout (the robot's line-up fields in
+``inspection/lineups.csv``, :mod:`recordings.lineups_csv`), depth as 16-bit PNG in millimetres
+in ``depth/<split>/``. :func:`import_labels` reads such a folder, or what CVAT, Label Studio,
 Roboflow or Ultralytics write, into a dataset folder that ``train``, ``calibrate`` and
 ``eval-perception`` read as they read a rendered one.
 
@@ -32,11 +33,16 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs.label import LABEL_FORMATS, LabelExportConfig, LabelImportConfig
+from onionsort.configs.label import (
+    IMPORT_FORMATS,
+    LABEL_FORMATS,
+    LabelExportConfig,
+    LabelImportConfig,
+)
 from onionsort.stages.base import log_config
 
-__all__ = ["FIT", "LABEL_FORMATS", "LabelExportConfig", "LabelImportConfig", "export_labels",
-           "import_labels"]
+__all__ = ["FIT", "IMPORT_FORMATS", "LABEL_FORMATS", "LabelExportConfig", "LabelImportConfig",
+           "export_labels", "import_labels"]
 
 logger = logging.getLogger(__name__)
 
@@ -87,6 +93,7 @@ def export_labels(config: LabelExportConfig) -> dict:
     """
     from recordings.coco import CocoImage, write_coco
     from recordings.dataset import CLASSES, SPLITS, dataset_task, read_metadata, read_records
+    from recordings.lineups_csv import LINEUPS_FILE, LineupRow, write_lineups
     from recordings.states_csv import StatesRow, write_states
     from recordings.yolo import write_data_yaml, yolo_lines
 
@@ -98,7 +105,7 @@ def export_labels(config: LabelExportConfig) -> dict:
     with _staging(config.out) as tmp:
         for view in meta.get("views", ["camera"]):
             base = tmp if view == "camera" else tmp / "inspection"
-            rows, counts, boxes = [], {}, dict.fromkeys(classes, 0)
+            rows, lineups, counts, boxes = [], [], {}, dict.fromkeys(classes, 0)
             for split in SPLITS:
                 records = read_records(config.data, split, view)
                 coco = []
@@ -129,6 +136,9 @@ def export_labels(config: LabelExportConfig) -> dict:
                                               rec["frame"], bool(rec["occluded"]),
                                               {f: int(rec[f]) for f in task.factor_names},
                                               int(rec["action"])))
+                    if rec.get("source") == "robot":
+                        lineups.append(LineupRow(split, name, int(rec["lineup"]),
+                                                 int(rec["index"]), int(rec.get("view", 0))))
                 if config.format == "coco":
                     write_coco(base / "annotations" / f"instances_{split}.json", coco, classes)
                 counts[split] = len(records)
@@ -136,6 +146,8 @@ def export_labels(config: LabelExportConfig) -> dict:
                 write_data_yaml(base, SPLITS, classes)
             if rows:
                 write_states(base / STATES_FILE, rows, task)
+            if lineups:
+                write_lineups(base / LINEUPS_FILE, lineups)
             summary["images"][view], summary["boxes"][view] = counts, boxes
     return summary
 
@@ -160,6 +172,7 @@ class _Item:
     split: str | None
     row: object = None  # recordings.states_csv.StatesRow
     phase: int = 0
+    lineup: object = None  # recordings.lineups_csv.LineupRow: a robot's view
 
 
 def import_labels(config: LabelImportConfig) -> dict:
@@ -170,14 +183,12 @@ def import_labels(config: LabelImportConfig) -> dict:
     """
     from irl.domains.onion_sorting import SORTING_TASK
     from recordings.annotated import BadAnnotations
-    from recordings.coco import read_coco
     from recordings.dataset import CLASSES
+    from recordings.lineups_csv import LINEUPS_FILE, read_lineups
     from recordings.states_csv import read_states
-    from recordings.yolo import read_yolo
 
     log_config("label import", config)
     task = SORTING_TASK
-    read = read_coco if config.format == "coco" else read_yolo
     if not config.source.is_dir():
         raise FileNotFoundError(f"{config.source}: no such folder")
     _check_new_folder(config.out)
@@ -192,7 +203,7 @@ def import_labels(config: LabelImportConfig) -> dict:
     known = ", ".join(f"{CLASSES[k]}={n}" for n, k in names.items())
     items: list[_Item] = []
     for view, (folder, states) in sets.items():
-        images = read(folder)
+        images, rows = _read_set(folder, config.format, task)
         for image in images:
             for label in image.labels:
                 if label not in names:
@@ -200,9 +211,13 @@ def import_labels(config: LabelImportConfig) -> dict:
                         f"{image.source}: class {label!r} of {image.name} is not mapped to a "
                         f"class of the dataset ({known}); map it with --classes "
                         "good=NAME,blemished=NAME")
-        mine = [_Item(image, view, image.split) for image in images]
+        mine = [_Item(image, view, image.split, row)
+                for image, row in zip(images, rows, strict=True)]
         if states is not None:
             _match_rows(mine, read_states(states, task), states)
+        lineups = folder / LINEUPS_FILE
+        if view == "inspection" and lineups.is_file():
+            _match_rows(mine, read_lineups(lineups), lineups, "lineup")
         items.extend(mine)
     _assign_splits(items, config.val, config.test)
     steps: dict = defaultdict(list)
@@ -217,9 +232,57 @@ def import_labels(config: LabelImportConfig) -> dict:
     return _write(config, items, task, depth, frames_per_step, names)
 
 
-def _match_rows(items: list[_Item], rows: list, path: Path) -> None:
-    """Give each item its state row: by ``(split, image)``, or by the image alone where the
-    row names no split (or the set has none). A row for no image is an error."""
+def _read_set(folder: Path, fmt: str, task) -> tuple[list, list]:
+    """The annotated images of ``folder`` in ``fmt``, and the state row each carries (None
+    each, but for Label Studio's choices: :func:`_choices_row`)."""
+    from recordings.coco import read_coco
+    from recordings.labelstudio import read_export
+    from recordings.yolo import read_yolo
+
+    if fmt != "labelstudio":
+        images = (read_coco if fmt == "coco" else read_yolo)(folder)
+        return images, [None] * len(images)
+    tasks = read_export(folder)
+    return [t.image for t in tasks], [_choices_row(t, task) for t in tasks]
+
+
+def _choices_row(labelled, task):
+    """The state row of a Label Studio task (:class:`recordings.labelstudio.LabelledTask`)
+    from its choices (``occluded`` yes or no, each factor and ``action`` in the task's
+    words) and its data's ``session``, ``step`` and ``frame``; None where it has no state
+    choice (box-only)."""
+    from recordings.annotated import BadAnnotations
+    from recordings.states_csv import StatesRow
+
+    names = {**{f: task.factors[f] for f in task.factor_names}, "action": task.action_names,
+             "occluded": ("no", "yes")}
+    where = labelled.image.source
+    given = {k: v for k, v in labelled.choices.items() if k in names}
+    if not given:
+        return None
+    missing = [k for k in names if k not in given]
+    if missing:
+        raise BadAnnotations(f"{where}: the state choices {missing} are not answered; answer "
+                             f"all of {', '.join(names)} or none")
+    for k, v in given.items():
+        if v not in names[k]:
+            raise BadAnnotations(f"{where}: {k} {v!r} is not a value of the task "
+                                 f"{task.name!r} ({', '.join(names[k])})")
+    try:
+        session, step, frame = (int(labelled.data[k]) for k in ("session", "step", "frame"))
+    except (KeyError, TypeError, ValueError):
+        raise BadAnnotations(f"{where}: a task with state choices needs data.session, "
+                             "data.step and data.frame (integers)") from None
+    return StatesRow(None, labelled.image.name, session, step, frame,
+                     given["occluded"] == "yes",
+                     {f: names[f].index(given[f]) for f in task.factor_names},
+                     names["action"].index(given["action"]))
+
+
+def _match_rows(items: list[_Item], rows: list, path: Path, attr: str = "row") -> None:
+    """Give each item its state row (``attr`` "row") or its robot's line-up row ("lineup"):
+    by ``(split, image)``, or by the image alone where the row names no split (or the set has
+    none). A row for no image, and a robot's view with a state, are errors."""
     from recordings.annotated import BadAnnotations
 
     by_key = {(i.split, i.image.name): i for i in items}
@@ -236,10 +299,13 @@ def _match_rows(items: list[_Item], rows: list, path: Path) -> None:
             where = f" of split {row.split}" if row.split else ""
             raise BadAnnotations(f"{path} line {row.line}: image {row.image!r}{where} is not "
                                  "among the annotated images")
-        if item.row is not None:
+        if getattr(item, attr) is not None:
             raise BadAnnotations(f"{path} line {row.line}: image {row.image!r} already has a "
-                                 f"row (line {item.row.line})")
-        item.row = row
+                                 f"row (line {getattr(item, attr).line})")
+        if item.row is not None and attr == "lineup":
+            raise BadAnnotations(f"{path} line {row.line}: image {row.image!r} has a state "
+                                 "row; a robot's view has none")
+        setattr(item, attr, row)
 
 
 def _assign_splits(items: list[_Item], val: float, test: float) -> None:
@@ -322,6 +388,9 @@ def _write(config: LabelImportConfig, items: list[_Item], task, depth: Path | No
                                        "phase": item.phase, "step": row.step,
                                        "session": row.session, "frame": row.frame})
                         with_states[view] += 1
+                    if item.lineup is not None:
+                        record.update({"source": "robot", "lineup": item.lineup.lineup,
+                                       "index": item.lineup.index, "view": item.lineup.view})
                     writer.add_image(split, view, record, loaded.color,
                                      depth_mm=loaded.depth_mm, png=loaded.png)
                     counts[view][split] += 1

@@ -3,13 +3,13 @@
 Perception runs on every complete step of the sessions (their sensor side only; ground truth,
 where a file has it, is never read). A step's *uncertainty* is the chance, by the models' own
 probabilities, that its state guess is wrong (:func:`step_uncertainties`): the occluded call
-and, on a step not called occluded, each factor's guess (the prediction's from the
-inspection's fused probability, or unknown before the session's first inspection). The
-least-sure steps are taken, spread over the sessions by rounds that take each session's
-least-sure step left (the least sure first), until ``frames`` frames; every frame of a taken
-step is labelled, so the state classifier gets whole steps. Steps next to each other are
-taken when they are the least sure: a session's first steps, before perception can know what
-the sorter holds, are often wrong together.
+and, on a step not called occluded, each factor's guess; the prediction's from the
+inspection's fused probability, weighed against what the sorter later did with the onion
+(:func:`sorter_calls`: the bin or back on the conveyor), or unknown before the session's first
+inspection. Every step more likely wrong than right is taken, the least sure first; the rest
+of the budget is spread over the sessions by rounds that take each session's least-sure step
+left (the least sure first), until ``frames`` frames; every frame of a taken step is
+labelled, so the state classifier gets whole steps.
 
 The frames are written as a labelling task pre-annotated with the models' output:
 
@@ -35,25 +35,72 @@ from onionsort.configs.label import SELECT_FORMATS, LabelSelectConfig
 from onionsort.stages.base import log_config
 from onionsort.stages.label import STATES_FILE, _staging
 
-__all__ = ["SELECT_FORMATS", "LabelSelectConfig", "select_frames", "step_uncertainties"]
+__all__ = ["SELECT_FORMATS", "SORTER_CONSISTENCY", "LabelSelectConfig", "select_frames",
+           "sorter_calls", "step_uncertainties"]
 
 logger = logging.getLogger(__name__)
 
-def step_uncertainties(seen: list) -> list[float]:
+SORTER_CONSISTENCY = 0.9
+"""The chance that the sorter's own later move (the bin, the conveyor) matches what it held
+the onion to be (the prediction factor's true value), as :func:`step_uncertainties` weighs
+it: set on recorded seeds 900, 902 and 6111 (0.8, 0.9 and 0.95 chose the same wrong steps
+there), never on the seeds that docs/lab.md reports."""
+
+
+def sorter_calls(seen: list) -> list[int]:
+    """What the sorter later does with the onion in focus, by perception's own calls, for each
+    perceived step of one session (in order): ``+1`` where, from this step on and before a new
+    onion is taken up (a claimed onion waiting, an onion just picked), the first step not
+    called occluded has the onion in the bin; ``-1`` where it has it on the conveyor; ``0``
+    where neither shows or the step's prediction rests on no view. The sorter bins the onions
+    it holds blemished and puts back those it holds good, so this is its belief about the
+    onion (what the prediction factor stands for), seen in what it did."""
+    from irl.domains.onion_sorting import Location
+
+    out = [0] * len(seen)
+    for t, step in enumerate(seen):
+        if step.p_blemished is None:
+            continue
+        for u in range(t, len(seen)):
+            later = seen[u]
+            if later.occluded:
+                continue
+            if u > t and (int(np.argmax(later.probs["waiting"])) == 1
+                          or later.onion == int(Location.HOVER)):
+                break
+            if later.onion in (int(Location.BIN), int(Location.CONVEYOR)):
+                out[t] = 1 if later.onion == int(Location.BIN) else -1
+                break
+    return out
+
+
+def step_uncertainties(seen: list, consistency: float = SORTER_CONSISTENCY) -> list[float]:
     """The chance, by the models' own probabilities, that each perceived step of one session
     (:class:`state_abstraction.perceive.PerceivedStep`, in order) has its state guess wrong:
-    ``1 - p(occluded call) * prod_f p(guess of f)`` over the state's factors. The prediction
-    factor's ``p`` is ``max(p_blemished, 1 - p_blemished)`` where the inspection has seen the
-    onion in focus; 1 where it has not since a new onion was taken up (then ``unknown`` is
-    right); and one over the factor's values before the session's first inspection or new
-    onion (as :func:`state_abstraction.perceive.track_predictions` starts its memory over:
-    a claimed onion waiting, an onion just picked), when the sorter may hold an onion
-    inspected before the recording began (nothing shows it)."""
-    from irl.domains.onion_sorting import SORTING_TASK, Location
+    ``1 - p(occluded call) * prod_f p(guess of f)`` over the state's factors.
 
+    The prediction factor's ``p`` is that of its guess under the inspection's fused
+    probability ``p_blemished`` where the inspection has seen the onion in focus, updated by
+    what the sorter later did with it (:func:`sorter_calls`) as one more observation that is
+    right with chance ``consistency``: the odds ``p_blemished / (1 - p_blemished)`` are
+    multiplied by ``consistency / (1 - consistency)`` where it went to the bin and divided by
+    it where it went back on the conveyor. (The prediction factor is the sorter's belief; the
+    views cannot show a blemish on the side they never see, and the sorter's move shows what
+    it believed.) ``p`` is 1 where the inspection has not
+    seen the onion since a new one was taken up (then ``unknown`` is right), and one over the
+    factor's values before the session's first inspection or new onion (as
+    :func:`state_abstraction.perceive.track_predictions` starts its memory over: a claimed
+    onion waiting, an onion just picked), when the sorter may hold an onion inspected before
+    the recording began (nothing shows it)."""
+    from irl.domains.onion_sorting import SORTING_TASK, Location, Prediction
+
+    if not 0.5 <= consistency < 1.0:
+        raise ValueError(f"consistency must be in [0.5, 1); got {consistency}")
     values = len(SORTING_TASK.factors["prediction"])
+    odds = consistency / (1.0 - consistency)
+    calls = sorter_calls(seen)
     out, known = [], False
-    for step in seen:
+    for step, call in zip(seen, calls, strict=True):
         known |= step.inspected is not None or (not step.occluded and (
             int(np.argmax(step.probs["waiting"])) == 1 or step.onion == int(Location.HOVER)))
         sure = float(step.probs["occluded"][int(step.occluded)])
@@ -61,7 +108,10 @@ def step_uncertainties(seen: list) -> list[float]:
             for head in ("onion", "end_effector"):
                 sure *= float(np.max(step.probs[head]))
             if step.p_blemished is not None:
-                sure *= max(step.p_blemished, 1.0 - step.p_blemished)
+                p = min(max(step.p_blemished, 1e-9), 1.0 - 1e-9)
+                ratio = p / (1.0 - p) * odds ** call
+                p_bad = ratio / (1.0 + ratio)
+                sure *= p_bad if step.prediction == int(Prediction.BAD) else 1.0 - p_bad
             elif not known:
                 sure /= values
         out.append(1.0 - sure)
@@ -70,10 +120,15 @@ def step_uncertainties(seen: list) -> list[float]:
 
 def _choose(scores: list[list[float]], frames_per_step: int, budget: int
             ) -> list[tuple[int, int]]:
-    """``(session, step)`` of the steps taken, in the order taken: rounds that take each
-    session's least-sure step left, the least sure first, until ``budget`` frames."""
-    order = [sorted(range(len(s)), key=lambda t, s=s: (-s[t], t)) for s in scores]
-    taken: list[tuple[int, int]] = []
+    """``(session, step)`` of the steps taken, in the order taken, until ``budget`` frames:
+    first every step more likely wrong than right (uncertainty at least 1/2), the least sure
+    first; then rounds that take each session's least-sure step left, the least sure first."""
+    likely = sorted((-u, k, t) for k, s in enumerate(scores) for t, u in enumerate(s)
+                    if u >= 0.5)
+    taken = [(k, t) for _, k, t in likely][:budget // frames_per_step]
+    done = set(taken)
+    order = [[t for t in sorted(range(len(s)), key=lambda t, s=s: (-s[t], t))
+              if (k, t) not in done] for k, s in enumerate(scores)]
     next_ = [0] * len(scores)
     while len(taken) * frames_per_step < budget:
         round_ = sorted((-scores[k][order[k][next_[k]]], k) for k in range(len(scores))
@@ -202,6 +257,7 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
         choices.update(action=task.action_names, occluded=("no", "yes"))
         (tmp / "labeling_config.xml").write_text(labeling_config(CLASSES, choices))
     write_json(tmp / "selection.json", {"measure": "the chance that the step's state guess is "
-                                                   "wrong, by the models' probabilities",
+                                                   "wrong, by the models' probabilities and "
+                                                   "what the sorter later did with the onion",
                                         "frames": selection})
     return selection

@@ -91,7 +91,8 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     torch.set_num_threads(torch_threads())
     model = ClassifierConfig(frames=frames[config.data[0]],
                              epochs=config.epochs, batch_size=config.batch_size,
-                             seed=config.seed, depth_dropout=config.depth_dropout)
+                             seed=config.seed, depth_dropout=config.depth_dropout,
+                             lr=config.lr)
     splits = {}
     for split in ("train", "val", "test"):
         splits[split] = [step for data, weight in zip(config.data, config.data_weights,

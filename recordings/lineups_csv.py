@@ -1,0 +1,92 @@
+"""Where each of the robot's inspection views comes from, as a CSV file beside its images.
+
+The Sawyer's views of its line-ups carry no state: what makes them the robot's is their
+line-up, the onion's place in it and the view's number (a dataset record's ``source: robot``,
+``lineup``, ``index``, ``view``). ``label export`` writes them to ``inspection/lineups.csv``
+and ``label import`` reads them back, so the robot's views come back as the robot's.
+
+Columns: ``split`` (``train``, ``val``, ``test``; may be empty in a set without splits),
+``image`` (the file name as the annotations give it), ``lineup``, ``index``, ``view``
+(integers >= 0).
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from recordings.annotated import BadAnnotations, split_name
+
+__all__ = ["LINEUPS_COLUMNS", "LINEUPS_FILE", "LineupRow", "read_lineups", "write_lineups"]
+
+LINEUPS_FILE = "lineups.csv"
+LINEUPS_COLUMNS = ("split", "image", "lineup", "index", "view")
+
+
+@dataclass(frozen=True)
+class LineupRow:
+    """One robot's view: where the image is (``split``, ``image``), its line-up, the onion's
+    place in it and the view's number; ``line`` in the file, for messages."""
+
+    split: str | None
+    image: str
+    lineup: int
+    index: int
+    view: int
+    line: int = 0
+
+
+def read_lineups(path: Path | str) -> list[LineupRow]:
+    """The rows of a line-ups CSV; a bad value is a
+    :class:`recordings.annotated.BadAnnotations` naming the file, the line and the column."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except UnicodeDecodeError:
+        raise BadAnnotations(f"{path} is not a text CSV file") from None
+    reader = csv.DictReader(lines)
+    missing = [c for c in LINEUPS_COLUMNS if c not in (reader.fieldnames or [])]
+    if missing:
+        raise BadAnnotations(f"{path}: the columns {missing} are missing; a line-ups CSV has "
+                             f"{', '.join(LINEUPS_COLUMNS)}")
+    rows, seen = [], {}
+    for row in reader:
+        where = f"{path} line {reader.line_num}"
+        split_text = (row["split"] or "").strip()
+        split = split_name(split_text) if split_text else None
+        if split_text and split is None:
+            raise BadAnnotations(f"{where}: split {split_text!r} is not train, val or test")
+        image = (row["image"] or "").strip()
+        if not image:
+            raise BadAnnotations(f"{where}: image is empty")
+        if (split, image) in seen:
+            raise BadAnnotations(f"{where}: image {image!r} already has a row (line "
+                                 f"{seen[split, image]})")
+        seen[split, image] = reader.line_num
+        numbers = {}
+        for column in ("lineup", "index", "view"):
+            try:
+                numbers[column] = int(row[column])
+            except (TypeError, ValueError):
+                numbers[column] = -1
+            if numbers[column] < 0:
+                raise BadAnnotations(f"{where}: {column} must be an integer >= 0; got "
+                                     f"{row[column]!r}")
+        rows.append(LineupRow(split, image, **numbers, line=reader.line_num))
+    return rows
+
+
+def write_lineups(path: Path | str, rows: Iterable[LineupRow]) -> Path:
+    """Write ``rows`` as a line-ups CSV (through a temporary name)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".partial")
+    with tmp.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(LINEUPS_COLUMNS)
+        for r in rows:
+            writer.writerow([r.split or "", r.image, r.lineup, r.index, r.view])
+    tmp.replace(path)
+    return path
