@@ -553,8 +553,13 @@ def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
         w, ess = _normalized(log_w[:hi])
         if ess * n_proposals / hi < n:
             return None, ess * n_proposals / hi, hi
-    picks = np.searchsorted(np.cumsum(w), (offset + np.arange(n)) / n)
-    return theta[np.minimum(picks, n_proposals - 1)], ess, n_proposals
+    # systematic resampling: proposal i for the points u in [c_{i-1}, c_i) of the running sums
+    # c (the last set to 1): a proposal of weight 0 has an empty interval and is never picked;
+    # a point that rounding takes to 1 goes to the last proposal of positive weight
+    cum = np.cumsum(w)
+    cum /= cum[-1]
+    picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
+    return theta[np.minimum(picks, np.flatnonzero(w)[-1])], ess, n_proposals
 
 
 def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:

@@ -66,3 +66,11 @@ def test_the_gradient_on_one_thread_equals_the_default_pool(two_threads, monkeyp
     np.testing.assert_allclose(limited, pooled, rtol=1e-10, atol=1e-10)
     log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
     assert np.isfinite(posterior_stats(mdp, log_pi, demos, om).log_likelihood).all()
+
+
+def test_the_pool_is_restored_when_the_block_raises(two_threads):
+    with pytest.raises(RuntimeError, match="inside"), _blas.one_blas_thread(_blas.MIN_ELEMENTS):
+        raise RuntimeError("inside")
+    assert max(_blas_threads()) == 2 and not _blas._inside.active
+    with _blas.one_blas_thread(_blas.MIN_ELEMENTS):  # and the next block limits again
+        assert set(_blas_threads()) == {1}
