@@ -657,7 +657,8 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
             chain_cost = diag.n_gradients - laplace[2]
         logger.info("reading swapped %s (weight %.3f, %d samples): %s, %d gradients, %d "
                     "draws a chain, max R-hat %.3f", list(fitted[i][0]), weights[i], n,
-                    "Laplace" if by_laplace[i] else "chains", diag.n_gradients, diag.n_draws,
+                    "chains" if opts["method"] == "mcmc" else "Laplace", diag.n_gradients,
+                    diag.n_draws,
                     diag.max_r_hat())
         diag = replace(diag, ess=np.minimum(diag.ess, n))  # what it gave, at most
         (gaussian if by_laplace[i] and draw["method"] == "mcmc" else chains).append(diag)

@@ -264,6 +264,18 @@ def test_importance_resampling_never_picks_a_proposal_of_weight_zero():
     assert not np.any(np.all(theta == calls[0], axis=1))
 
 
+
+def test_the_log_says_how_each_reading_was_drawn(caplog):
+    """With ``method="laplace"`` every reading is drawn from its Laplace approximation, and
+    the per-reading log line says so (it said "chains")."""
+    _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        sample_posterior(est, demos, n_samples=100, seed=0, method="laplace")
+    lines = [r.getMessage() for r in caplog.records if "samples):" in r.getMessage()]
+    assert lines and all("): Laplace," in line for line in lines)
+
+
 def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():
     """Where one reading gets every sample, the draws for a seed are those of the plain
     posterior of that reading (the same chains, the same length)."""
