@@ -25,8 +25,15 @@ from collections.abc import Iterator
 #: above 10,000 numbers.
 MIN_ELEMENTS = 10_000
 
-_lock = threading.Lock()
+_lock = threading.RLock()
 _controller = None
+#: The limit in force (threadpoolctl's limiter, which restores the pool) and how many blocks,
+#: in every thread, are inside it. The limit is the process's, so the first block to enter
+#: sets it and the last to leave restores it: a block that restored the pool as it left while
+#: another thread's was inside would hand that one the pool, and the other's exit would then
+#: restore the one thread it had found, for good.
+_limiter = None
+_n_inside = 0
 #: Whether this thread is inside a limiting block already (a nested block sets nothing).
 _inside = threading.local()
 
@@ -42,16 +49,43 @@ def _blas_controller():
         return _controller
 
 
+def _set_pool(change) -> None:
+    """``change()`` the pool's size from this thread: threadpoolctl (3.8 on) lets one thread
+    at a time set OpenBLAS's pool, the first that sets it until it is cleared, and ignores
+    the others; the thread that enters or leaves last here may be another than the first."""
+    clears = {getattr(type(lib), "clear_controlling_thread", None)
+              for lib in _blas_controller().lib_controllers} - {None}
+    for clear in clears:
+        clear(force=True)
+    try:
+        change()
+    finally:
+        for clear in clears:
+            clear(force=True)
+
+
 @contextlib.contextmanager
 def one_blas_thread(n_elements: int) -> Iterator[None]:
     """BLAS on one thread within the block, where its arrays hold ``n_elements`` numbers or
-    more (for example ``S * A`` for an MDP's Q-function); a limit already lower is kept."""
+    more (for example ``S * A`` for an MDP's Q-function); a limit already lower is kept. The
+    pool comes back when the last block of any thread leaves, by an exception or not."""
+    global _limiter, _n_inside
     if n_elements < MIN_ELEMENTS or getattr(_inside, "active", False):
         yield
         return
-    with _blas_controller().limit(limits=1):
-        _inside.active = True
-        try:
-            yield
-        finally:
-            _inside.active = False
+    with _lock:
+        if _n_inside == 0:
+            made = []
+            _set_pool(lambda: made.append(_blas_controller().limit(limits=1)))
+            _limiter = made[0]
+        _n_inside += 1
+    _inside.active = True
+    try:
+        yield
+    finally:
+        _inside.active = False
+        with _lock:
+            _n_inside -= 1
+            if _n_inside == 0:
+                _set_pool(_limiter.restore_original_limits)
+                _limiter = None

@@ -553,8 +553,13 @@ def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
         w, ess = _normalized(log_w[:hi])
         if ess * n_proposals / hi < n:
             return None, ess * n_proposals / hi, hi
-    picks = np.searchsorted(np.cumsum(w), (offset + np.arange(n)) / n)
-    return theta[np.minimum(picks, n_proposals - 1)], ess, n_proposals
+    # systematic resampling: proposal i for the points u in [c_{i-1}, c_i) of the running sums
+    # c (the last set to 1): a proposal of weight 0 has an empty interval and is never picked;
+    # a point that rounding takes to 1 goes to the last proposal of positive weight
+    cum = np.cumsum(w)
+    cum /= cum[-1]
+    picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
+    return theta[np.minimum(picks, np.flatnonzero(w)[-1])], ess, n_proposals
 
 
 def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:
@@ -652,7 +657,8 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
             chain_cost = diag.n_gradients - laplace[2]
         logger.info("reading swapped %s (weight %.3f, %d samples): %s, %d gradients, %d "
                     "draws a chain, max R-hat %.3f", list(fitted[i][0]), weights[i], n,
-                    "Laplace" if by_laplace[i] else "chains", diag.n_gradients, diag.n_draws,
+                    "chains" if opts["method"] == "mcmc" else "Laplace", diag.n_gradients,
+                    diag.n_draws,
                     diag.max_r_hat())
         diag = replace(diag, ess=np.minimum(diag.ess, n))  # what it gave, at most
         (gaussian if by_laplace[i] and draw["method"] == "mcmc" else chains).append(diag)

@@ -66,3 +66,33 @@ def test_the_gradient_on_one_thread_equals_the_default_pool(two_threads, monkeyp
     np.testing.assert_allclose(limited, pooled, rtol=1e-10, atol=1e-10)
     log_pi = log_boltzmann_policy(OptimalQSolver(mdp).q_values(theta), 1.0)
     assert np.isfinite(posterior_stats(mdp, log_pi, demos, om).log_likelihood).all()
+
+
+def test_the_pool_is_restored_when_the_block_raises(two_threads):
+    with pytest.raises(RuntimeError, match="inside"), _blas.one_blas_thread(_blas.MIN_ELEMENTS):
+        raise RuntimeError("inside")
+    assert max(_blas_threads()) == 2 and not _blas._inside.active
+    with _blas.one_blas_thread(_blas.MIN_ELEMENTS):  # and the next block limits again
+        assert set(_blas_threads()) == {1}
+
+
+def test_blocks_of_two_threads_that_overlap_give_the_pool_back(two_threads):
+    """The limit is the process's: where the main thread's block and a worker's overlap and
+    the worker's leaves last, BLAS stays on one thread until then and gets its pool back
+    after (it stayed on one thread for good)."""
+    worker_in, main_out, seen = threading.Event(), threading.Event(), []
+
+    def worker():
+        with _blas.one_blas_thread(_blas.MIN_ELEMENTS):
+            worker_in.set()
+            main_out.wait(20)
+            seen.append(max(_blas_threads()))
+
+    thread = threading.Thread(target=worker)
+    with _blas.one_blas_thread(_blas.MIN_ELEMENTS):
+        thread.start()
+        worker_in.wait(20)
+    main_out.set()
+    thread.join(20)
+    assert seen == [1]  # inside the worker's block after the main thread's left
+    assert max(_blas_threads()) == 2

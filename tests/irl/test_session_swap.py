@@ -231,6 +231,51 @@ def test_importance_resampling_draws_the_density_or_refuses():
     assert a.random() == b.random()
 
 
+
+def test_importance_resampling_never_picks_a_proposal_of_weight_zero():
+    """Systematic resampling picks proposal i for the points in [c_{i-1}, c_i) of the
+    weights' running sums c: a proposal whose density is -inf (weight 0) is never drawn, even
+    where the resampling's offset is 0 (the first point is then 0, which c_0 = 0 equals)."""
+    from irl.posterior import _importance_draws
+
+    class OffsetZero:
+        """A generator whose uniform draw (the resampling's offset) is 0."""
+
+        def __init__(self):
+            self._rng = np.random.default_rng(3)
+
+        def standard_normal(self, size):
+            return self._rng.standard_normal(size)
+
+        def chisquare(self, df, size):
+            return self._rng.chisquare(df, size)
+
+        def random(self):
+            return 0.0
+
+    calls = []
+
+    def density(t):  # standard normal, but the first proposal evaluated is ruled out
+        calls.append(t)
+        return (-np.inf if len(calls) == 1 else -0.5 * float(t @ t)), None
+
+    theta, ess, _ = _importance_draws(density, np.zeros(2), np.eye(2), 20, 400, OffsetZero())
+    assert theta is not None and ess >= 20
+    assert not np.any(np.all(theta == calls[0], axis=1))
+
+
+
+def test_the_log_says_how_each_reading_was_drawn(caplog):
+    """With ``method="laplace"`` every reading is drawn from its Laplace approximation, and
+    the per-reading log line says so (it said "chains")."""
+    _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
+    est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        sample_posterior(est, demos, n_samples=100, seed=0, method="laplace")
+    lines = [r.getMessage() for r in caplog.records if "samples):" in r.getMessage()]
+    assert lines and all("): Laplace," in line for line in lines)
+
+
 def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():
     """Where one reading gets every sample, the draws for a seed are those of the plain
     posterior of that reading (the same chains, the same length)."""
