@@ -34,6 +34,8 @@ RULES: dict[str, set[str]] = {
 OPTIONAL: dict[str, set[str]] = {
     "irl/_numba.py": {"numba"},
     "irl/posterior.py": {"mici"},
+    # one BLAS thread inside a large MDP's solve (a core dependency, imported when first used)
+    "irl/_blas.py": {"threadpoolctl"},
 }
 
 
