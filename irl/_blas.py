@@ -11,8 +11,9 @@ s), while at 10,000 states, under OpenBLAS's threshold, the two were the same
 (x29 for x10.24 the states, against x14 on one thread).
 
 :func:`one_blas_thread` limits BLAS to one thread for the length of a block whose arrays are
-large enough for OpenBLAS to thread them; below, it does nothing, since setting the limit
-costs about 50 microseconds, a sixth of a small gradient. Layout: none (a context manager).
+large enough for OpenBLAS to thread them; below, it does nothing, since a limiting block
+costs about 12 microseconds (``bench/blas_block_cost.py``). Layout: none (a context
+manager).
 """
 
 from __future__ import annotations
