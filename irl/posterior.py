@@ -523,6 +523,16 @@ IMPORTANCE_PROPOSALS = 20
 _PROPOSAL_DOF = 5.0
 
 
+def _resampled_ess(weights_ess: float, n: int) -> float:
+    """The effective sample size of ``n`` draws resampled from importance weights whose own
+    (Kish's) effective sample size is ``weights_ess``: ``1 / (1 / n + 1 / weights_ess)``, as a
+    mean over the resampled draws has the weights' variance plus the resampling's. Below both
+    ``n`` and ``weights_ess`` (about ``n / 2`` where they are equal)."""
+    if n < 1 or not weights_ess > 0:
+        raise ValueError(f"n must be >= 1 and weights_ess > 0; got {n} and {weights_ess}")
+    return 1.0 / (1.0 / n + 1.0 / weights_ess)
+
+
 def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
     """``n`` draws from the density ``exp(value_and_grad(theta)[0])`` by importance
     resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom round ``mode`` with
@@ -640,7 +650,8 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         if resampled is not None:  # counted as the Gaussian draws are: sizes and costs
             thetas[i] = resampled
             gaussian.append(Diagnostics(
-                r_hat=np.full(K, np.nan), ess=np.full(K, min(ess, n)), acceptance=1.0,
+                r_hat=np.full(K, np.nan), ess=np.full(K, _resampled_ess(ess, n)),
+                acceptance=1.0,
                 n_chains=1, n_warmup=0, n_draws=n, n_divergent=0,
                 n_gradients=laplace[2] + weighed, hessian_clipped=laplace[1]))
             continue

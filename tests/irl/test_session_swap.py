@@ -290,3 +290,17 @@ def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():
     alone = sample_posterior(plain, [swap.apply(d) if i in (0, 1) else d
                                      for i, d in enumerate(read)], **kw)
     np.testing.assert_array_equal(post.theta, alone.theta)
+
+
+def test_resampled_draws_count_fewer_effective_samples_than_either_the_weights_or_the_draws():
+    """n draws resampled from weights of Kish ESS E are worth 1 / (1/n + 1/E) draws: below both,
+    n / 2 where E = n (the reading's diagnostics said min(E, n) before, which overstated it)."""
+    from irl.posterior import _resampled_ess
+
+    assert _resampled_ess(100.0, 100) == pytest.approx(50.0)
+    assert _resampled_ess(400.0, 100) == pytest.approx(80.0)
+    for ess, n in ((1.0, 1), (37.5, 200), (5000.0, 20)):
+        assert _resampled_ess(ess, n) < min(ess, n)
+    for ess, n in ((0.0, 10), (10.0, 0), (float("nan"), 10)):
+        with pytest.raises(ValueError, match="weights_ess"):
+            _resampled_ess(ess, n)
