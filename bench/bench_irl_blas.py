@@ -45,8 +45,8 @@ def main() -> None:
             irl.MMAPBIRL(mdp, factored, beta=1.0, backend=backend).log_posterior_gradient(
                 theta * 1.1, demos)
             times = {"one": [], "pool": []}
-            for _ in range(args.pairs):
-                for name in ("pool", "one"):
+            for pair in range(args.pairs):  # which goes first alternates pair by pair
+                for name in (("pool", "one") if pair % 2 == 0 else ("one", "pool")):
                     _blas.MIN_ELEMENTS = limit if name == "one" else 10**15
                     cpu, wall = time.process_time(), time.perf_counter()
                     irl.MMAPBIRL(mdp, factored, beta=1.0, backend=backend) \
