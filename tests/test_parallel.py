@@ -48,6 +48,10 @@ def killed_on_two(x: int) -> int:
     return x
 
 
+def working_folder(_: int) -> str:
+    return os.getcwd()
+
+
 def run(fn, pieces, **options):
     return dict(run_pieces(fn, pieces, ParallelOptions(**options),
                            names=[f"piece {p}" for p in pieces], desc="test", progress=False))
@@ -465,3 +469,14 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except OSError:
         return "gone"
+
+
+def test_a_kept_pool_is_not_used_from_another_working_folder(tmp_path, monkeypatch):
+    """Workers resolve relative paths against the folder they started in: after the caller
+    moves to another folder, its pieces run where it is now (as the api example's relative
+    run folders need, in a process that ran pieces elsewhere before)."""
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        monkeypatch.chdir(tmp_path / name)
+        got = run(working_folder, range(2), workers=2)
+        assert set(got.values()) == {str(tmp_path / name)}

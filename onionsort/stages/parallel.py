@@ -245,6 +245,10 @@ def _executor(options: ParallelOptions, n_pieces: int):
         return RayExecutor(options.ray_address, options.n_workers), None
     if workers <= 1:
         return None, None
+    if workers in _POOLS and _POOL_DIRS.get(workers) != os.getcwd():
+        # its workers resolve relative paths against the folder they started in: a kept pool
+        # serves only callers in that folder
+        _drop(_POOLS[workers][0])
     if workers not in _POOLS:
         method = _start_method()
         logger.info("a local pool of %d workers (%s)", workers, method)
@@ -253,6 +257,7 @@ def _executor(options: ParallelOptions, n_pieces: int):
         _POOLS[workers] = (ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                                initializer=_start_worker,
                                                initargs=(running, os.getpid())), running)
+        _POOL_DIRS[workers] = os.getcwd()
     return _POOLS[workers]
 
 
@@ -277,6 +282,8 @@ def _start_method() -> str:
 #: stage, or of the next one, as in a demo) run on workers that have imported and loaded what
 #: they need already. A pool is dropped after a failure or an interruption.
 _POOLS: dict[int, tuple[ProcessPoolExecutor, object]] = {}
+#: The working folder each kept pool's workers started in (and so resolve relative paths in).
+_POOL_DIRS: dict[int, str] = {}
 
 
 def _drop(executor: Executor) -> None:
@@ -284,6 +291,7 @@ def _drop(executor: Executor) -> None:
     for workers, (pool, _) in list(_POOLS.items()):
         if pool is executor:
             del _POOLS[workers]
+            _POOL_DIRS.pop(workers, None)
     executor.shutdown(wait=True, cancel_futures=True)
 
 
