@@ -12,12 +12,12 @@ Columns: ``split`` (``train``, ``val``, ``test``; may be empty in a set without 
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from recordings.annotated import BadAnnotations, split_name
+from recordings.annotated import BadAnnotations
+from recordings.states_csv import csv_reader, read_image, read_split, write_csv
 
 __all__ = ["LINEUPS_COLUMNS", "LINEUPS_FILE", "LineupRow", "read_lineups", "write_lineups"]
 
@@ -41,30 +41,12 @@ class LineupRow:
 def read_lineups(path: Path | str) -> list[LineupRow]:
     """The rows of a line-ups CSV; a bad value is a
     :class:`recordings.annotated.BadAnnotations` naming the file, the line and the column."""
-    path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except UnicodeDecodeError:
-        raise BadAnnotations(f"{path} is not a text CSV file") from None
-    reader = csv.DictReader(lines)
-    missing = [c for c in LINEUPS_COLUMNS if c not in (reader.fieldnames or [])]
-    if missing:
-        raise BadAnnotations(f"{path}: the columns {missing} are missing; a line-ups CSV has "
-                             f"{', '.join(LINEUPS_COLUMNS)}")
+    reader = csv_reader(Path(path), LINEUPS_COLUMNS, "a line-ups CSV")
     rows, seen = [], {}
     for row in reader:
         where = f"{path} line {reader.line_num}"
-        split_text = (row["split"] or "").strip()
-        split = split_name(split_text) if split_text else None
-        if split_text and split is None:
-            raise BadAnnotations(f"{where}: split {split_text!r} is not train, val or test")
-        image = (row["image"] or "").strip()
-        if not image:
-            raise BadAnnotations(f"{where}: image is empty")
-        if (split, image) in seen:
-            raise BadAnnotations(f"{where}: image {image!r} already has a row (line "
-                                 f"{seen[split, image]})")
-        seen[split, image] = reader.line_num
+        split = read_split(row, where)
+        image = read_image(row, where, split, seen, reader.line_num)
         numbers = {}
         for column in ("lineup", "index", "view"):
             try:
@@ -80,13 +62,5 @@ def read_lineups(path: Path | str) -> list[LineupRow]:
 
 def write_lineups(path: Path | str, rows: Iterable[LineupRow]) -> Path:
     """Write ``rows`` as a line-ups CSV (through a temporary name)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial")
-    with tmp.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(LINEUPS_COLUMNS)
-        for r in rows:
-            writer.writerow([r.split or "", r.image, r.lineup, r.index, r.view])
-    tmp.replace(path)
-    return path
+    return write_csv(path, LINEUPS_COLUMNS,
+                     ([r.split or "", r.image, r.lineup, r.index, r.view] for r in rows))
