@@ -92,7 +92,8 @@ class Diagnostics:
     n_divergent : int
         Main transitions whose energy error diverged (0 for Laplace).
     n_gradients : int
-        Gradients of the exact log posterior evaluated, warm-up included.
+        Gradients of the exact log posterior evaluated, warm-up included (with a session swap,
+        a resampled reading's proposals count here too, though each costs a value alone).
     hessian_clipped : int
         Eigenvalues of minus the Hessian at the MAP raised to the prior's precision (the
         Hessian by differences can miss curvature where the MAP lies on the border between two

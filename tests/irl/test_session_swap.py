@@ -171,6 +171,7 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
         return real_chains(value_and_grad, mean, chol, **kw)
 
     def spy_importance(log_density, mode, cov, n, n_proposals, rng):
+        assert isinstance(log_density(mode), float)  # the value alone, not with a gradient
         got = real_importance(log_density, mode, cov, n, n_proposals, rng)
         tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2]))
         return got
