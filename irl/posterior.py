@@ -92,7 +92,8 @@ class Diagnostics:
     n_divergent : int
         Main transitions whose energy error diverged (0 for Laplace).
     n_gradients : int
-        Gradients of the exact log posterior evaluated, warm-up included.
+        Gradients of the exact log posterior evaluated, warm-up included (with a session swap,
+        a resampled reading's proposals count here too, though each costs a value alone).
     hessian_clipped : int
         Eigenvalues of minus the Hessian at the MAP raised to the prior's precision (the
         Hessian by differences can miss curvature where the MAP lies on the border between two
@@ -533,8 +534,8 @@ def _resampled_ess(weights_ess: float, n: int) -> float:
     return 1.0 / (1.0 / n + 1.0 / weights_ess)
 
 
-def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
-    """``n`` draws from the density ``exp(value_and_grad(theta)[0])`` by importance
+def _importance_draws(log_density, mode, cov, n, n_proposals, rng):
+    """``n`` draws from the density ``exp(log_density(theta))`` by importance
     resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom round ``mode`` with
     scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
     density over proposal and resampled systematically. Returns ``(theta[n, K], ess,
@@ -558,7 +559,7 @@ def _importance_draws(value_and_grad, mode, cov, n, n_proposals, rng):
     pilot = max(1, n_proposals // 4)
     log_w = np.full(n_proposals, -np.inf)
     for lo, hi in ((0, pilot), (pilot, n_proposals)):
-        log_w[lo:hi] = [value_and_grad(t)[0] for t in theta[lo:hi]]
+        log_w[lo:hi] = [log_density(t) for t in theta[lo:hi]]
         log_w[lo:hi] -= log_q[lo:hi]
         w, ess = _normalized(log_w[:hi])
         if ess * n_proposals / hi < n:
@@ -611,13 +612,17 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     for z in readings:
         read = [swap.apply(d) if i in z else d for i, d in enumerate(demos)]
         est = type(estimator)(**plain).fit(read)
-        value_and_grad = est.log_posterior_function(read)
+        logger.info("reading swapped %s fitted: %d evaluations, log posterior %.6f", list(z),
+                    len(est.history_), est.log_posterior_)
+        # the value with its gradient (chains, Hessian) and alone (importance proposals), on
+        # one preparation of the demonstrations read so
+        value_and_grad, value = est._objectives(est._check_model(), read)
         theta_z = np.asarray(est.theta_, float)
         laplace = _laplace_covariance(value_and_grad, theta_z, prior_precision, draw["step"])
         log_weight = (len(z) * np.log(swap.rate) + (N - len(z)) * np.log1p(-swap.rate)
                       + est.log_posterior_ + 0.5 * K * np.log(2 * np.pi)
                       + 0.5 * np.linalg.slogdet(laplace[0])[1])
-        fitted.append((z, theta_z, value_and_grad, laplace, float(log_weight)))
+        fitted.append((z, theta_z, (value_and_grad, value), laplace, float(log_weight)))
     logs = np.array([f[-1] for f in fitted])
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
@@ -636,14 +641,14 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         n = int(counts[i])
         if not n:
             continue
-        _, theta_z, value_and_grad, laplace, _ = fitted[i]
+        _, theta_z, (value_and_grad, value), laplace, _ = fitted[i]
         resampled, weighed = None, 0
         if draw["method"] == "mcmc" and not by_laplace[i] and i != heaviest \
                 and chain_cost is not None and IMPORTANCE_PROPOSALS * n < chain_cost:
             # cheaper than chains of its own: importance resampling from its Laplace
             # approximation, where the weights' ESS reaches its samples
             resampled, ess, weighed = _importance_draws(
-                value_and_grad, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"])
+                value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"])
             logger.info("reading swapped %s: importance weights' ESS %.0f (%d proposals "
                         "weighed) for %d samples%s", list(fitted[i][0]), ess, weighed, n,
                         "" if resampled is not None else ": chains instead")

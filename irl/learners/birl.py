@@ -171,7 +171,22 @@ class _BayesianIRL(LearnerBase):
         """
         return self._objective(self._check_model(), demos)
 
+    def log_posterior_value_function(self, demos: Sequence[Demonstration]):
+        """``theta -> log posterior`` for these demonstrations, checked once: the value of
+        :meth:`log_posterior_function` without its gradient (no product with ``dQ``), for
+        a caller that needs only values (importance weights).
+
+        Prepared as :meth:`log_posterior_function` is (``theta`` taken as a finite float
+        array of shape (K,) without checks); values equal its value and :meth:`log_posterior`.
+        """
+        return self._objectives(self._check_model(), demos)[1]
+
     def _objective(self, model: _Model, demos):
+        return self._objectives(model, demos)[0]
+
+    def _objectives(self, model: _Model, demos):
+        """``(theta -> (log posterior, gradient), theta -> log posterior)`` on one
+        preparation of the demonstrations and one solver (whose cached policies both use)."""
         data = self._prepare(model, self._check_problem(demos))
         log_prior = model.prior._value_and_grad(self.mdp.n_features)
 
@@ -180,7 +195,12 @@ class _BayesianIRL(LearnerBase):
             value, prior_grad = log_prior(theta)
             return ll + value, grad + prior_grad
 
-        return value_and_gradient
+        def value(theta: np.ndarray) -> float:
+            with one_blas_thread(model.mdp.n_states * model.mdp.n_actions):
+                ll = self._pair_stats(model, self._log_policy(model, theta)[1], data)[0]
+            return ll + log_prior(theta)[0]
+
+        return value_and_gradient, value
 
     # -- fitting --------------------------------------------------------------------------
 

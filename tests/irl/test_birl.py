@@ -126,3 +126,37 @@ def test_gradient_is_cached_per_greedy_policy():
     fresh = OptimalQSolver(dom.mdp).solve(est.theta_)
     np.testing.assert_array_equal(solver.solve(est.theta_).policy, fresh.policy)
     np.testing.assert_allclose(solver.solve(est.theta_).dQ, fresh.dQ, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_value_only_log_posterior_is_the_value_of_the_one_with_a_gradient(backend):
+    """log_posterior_value_function gives the value of log_posterior_function (and of
+    log_posterior) without the gradient's product: the same number at thetas across several
+    greedy policies, with and without a session swap, and for MAP-BIRL, on either backend."""
+    if backend == "numba":
+        pytest.importorskip("numba")
+    from irl.observation.swap import value_swap
+
+    dom = irl.domains.onion_sorting(noise=0.3)
+    demos, _ = dom.sample(n=3, length=15, occlusion=0.2, seed=4)
+    swap = value_swap(dom.task, "prediction", ("good", "bad"), 0.1)
+    kw = {"beta": dom.beta, "prior": dom.prior}
+    identity = irl.identity_observation_model(dom.mdp.n_states, dom.mdp.n_actions)
+    _, trajs = dom.sample(n=3, length=15, seed=4)
+    seen = [irl.Demonstration.from_pairs(t.states, t.actions, dom.mdp.n_actions) for t in trajs]
+    estimators = [
+        (irl.MMAPBIRL(dom.mdp, dom.observation_model, backend=backend, **kw), demos),
+        (irl.MMAPBIRL(dom.mdp, dom.observation_model, backend=backend, session_swap=swap,
+                      **kw), demos),
+        (irl.MAPBIRL(dom.mdp, identity, **kw), seen)]
+    thetas = np.random.default_rng(5).normal(scale=2.0, size=(12, dom.mdp.n_features))
+    for est, data in estimators:
+        value_and_grad = est.log_posterior_function(data)
+        value = est.log_posterior_value_function(data)
+        policies = {OptimalQSolver(dom.mdp).solve(t).policy.tobytes() for t in thetas}
+        assert len(policies) > 3  # the thetas cross several greedy policies
+        for t in thetas:
+            v = value(t)
+            assert isinstance(v, float)
+            np.testing.assert_allclose(v, value_and_grad(t)[0], rtol=0, atol=1e-10)
+            np.testing.assert_allclose(v, est.log_posterior(t, data), rtol=0, atol=1e-10)

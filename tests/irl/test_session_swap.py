@@ -170,8 +170,9 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
         runs.append((mean.copy(), kw["n_draws"], kw["max_draws"]))
         return real_chains(value_and_grad, mean, chol, **kw)
 
-    def spy_importance(value_and_grad, mode, cov, n, n_proposals, rng):
-        got = real_importance(value_and_grad, mode, cov, n, n_proposals, rng)
+    def spy_importance(log_density, mode, cov, n, n_proposals, rng):
+        assert isinstance(log_density(mode), float)  # the value alone, not with a gradient
+        got = real_importance(log_density, mode, cov, n, n_proposals, rng)
         tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2]))
         return got
 
@@ -217,7 +218,7 @@ def test_importance_resampling_draws_the_density_or_refuses():
     prec = np.linalg.inv(cov)
 
     def gaussian(scale):
-        return lambda t: (-0.5 * (t - mean) @ prec @ (t - mean) / scale**2, None)
+        return lambda t: -0.5 * (t - mean) @ prec @ (t - mean) / scale**2
 
     rng = np.random.default_rng(0)
     theta, ess, weighed = _importance_draws(gaussian(1.0), mean, cov, 2000, 40_000, rng)
@@ -257,7 +258,7 @@ def test_importance_resampling_never_picks_a_proposal_of_weight_zero():
 
     def density(t):  # standard normal, but the first proposal evaluated is ruled out
         calls.append(t)
-        return (-np.inf if len(calls) == 1 else -0.5 * float(t @ t)), None
+        return -np.inf if len(calls) == 1 else -0.5 * float(t @ t)
 
     theta, ess, _ = _importance_draws(density, np.zeros(2), np.eye(2), 20, 400, OffsetZero())
     assert theta is not None and ess >= 20
