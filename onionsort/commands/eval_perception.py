@@ -98,7 +98,8 @@ def _print_inspection(report: dict) -> None:
             for rule, f in m["fused"].items():
                 print(f"      fused by {rule:8s}: accuracy {f['accuracy']:.3f}, precision "
                       f"{f['precision']:.3f}, recall {f['recall']:.3f}, ECE {f['ece']:.3f} "
-                      f"({f['onions']} onions)")
+                      f"({f['onions']} onions; a calibrated model's by chance: "
+                      f"{f['ece_by_chance']:.3f})")
 
 
 def _print_shift(r: dict, shifted: dict, seed: int) -> None:

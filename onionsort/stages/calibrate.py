@@ -365,6 +365,7 @@ def perception_figures(r: dict) -> dict[str, float | None]:
                 out[f"{who}: fused by {rule}, precision"] = f["precision"]
                 out[f"{who}: fused by {rule}, recall"] = f["recall"]
                 out[f"{who}: fused by {rule}, ECE"] = f["ece"]
+                out[f"{who}: fused by {rule}, ECE by chance"] = f.get("ece_by_chance")
     return out
 
 

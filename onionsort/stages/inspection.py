@@ -468,6 +468,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     from onionsort.stages.models import sorting_threshold
     from perception.fusion import (
         FUSION_RULES,
+        chance_calibration_error,
         expected_calibration_error,
         precision_recall_curve,
     )
@@ -528,6 +529,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                     "precision": tp / (tp + fp) if tp + fp else 0.0,
                     "recall": tp / (tp + fn) if tp + fn else 0.0,
                     "ece": expected_calibration_error(fused, y),
+                    "ece_by_chance": chance_calibration_error(fused),
                     "pr_curve": {"precision": precision.round(4).tolist(),
                                  "recall": recall.round(4).tolist(),
                                  "threshold": cut.round(5).tolist()}}

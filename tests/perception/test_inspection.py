@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from perception.fusion import (
+    chance_calibration_error,
     cost_threshold,
     expected_calibration_error,
     fuse,
@@ -109,6 +110,28 @@ def test_the_default_threshold_comes_from_the_tasks_reward():
     theta[0] = -5.0  # a reward that prefers binning good onions is no sorting task
     with pytest.raises(ValueError, match="misplacing"):
         misplacement_costs(theta)
+
+
+def test_the_chance_calibration_error_is_what_a_calibrated_model_shows_on_so_few():
+    """ECE's floor by chance: the median ECE of labels drawn from the probabilities; it falls
+    as the onions grow in number, is reproducible from its seed, and a calibrated model's
+    measured ECE sits about at it while a miscalibrated one's sits far above."""
+    rng = np.random.default_rng(1)
+    p = rng.uniform(0, 0.6, 60)
+    floor = chance_calibration_error(p)
+    assert chance_calibration_error(p) == floor  # the same seed, the same figure
+    big = rng.uniform(0, 1, 6000)
+    assert chance_calibration_error(big) < floor / 4  # about 1/sqrt(N)
+    assert 0.04 < floor < 0.2  # 60 onions in 15 bins: a few each
+    calibrated = [expected_calibration_error(p, rng.random(p.size) < p) for _ in range(300)]
+    assert np.mean(np.array(calibrated) <= floor) == pytest.approx(0.5, abs=0.1)
+    off = [expected_calibration_error(p + 0.4, rng.random(p.size) < p)
+           for _ in range(50)]
+    assert min(off) > 2 * floor
+    with pytest.raises(ValueError, match="probabilities in"):
+        chance_calibration_error([0.2, 1.5])
+    with pytest.raises(ValueError, match="non-empty"):
+        chance_calibration_error([])
 
 
 def test_expected_calibration_error_and_the_precision_recall_curve():
