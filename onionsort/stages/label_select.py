@@ -6,7 +6,8 @@ probabilities, that its state guess is wrong (:func:`step_uncertainties`): the o
 and, on a step not called occluded, each factor's guess; the prediction's from the
 inspection's fused probability, weighed against what the sorter later did with the onion
 (:func:`sorter_calls`: the bin or back on the conveyor), or unknown before the session's first
-inspection. Every step more likely wrong than right is taken, the least sure first; the rest
+inspection; a step whose guess the sorter's move contradicts counts as at least as likely
+wrong as right. Every step more likely wrong than right is taken, the least sure first; the rest
 of the budget is spread over the sessions by rounds that take each session's least-sure step
 left (the least sure first), until ``frames`` frames; every frame of a taken step is
 labelled, so the state classifier gets whole steps.
@@ -86,7 +87,12 @@ def step_uncertainties(seen: list, consistency: float = SORTER_CONSISTENCY) -> l
     multiplied by ``consistency / (1 - consistency)`` where it went to the bin and divided by
     it where it went back on the conveyor. (The prediction factor is the sorter's belief; the
     views cannot show a blemish on the side they never see, and the sorter's move shows what
-    it believed.) ``p`` is 1 where the inspection has not
+    it believed.) Where the sorter's move contradicts the guess (and ``consistency`` is above
+    1/2: the move says something), the step counts as at least as likely wrong as right
+    (uncertainty at least 1/2) however sure the views were: the views' probability is the
+    models' own, and a confident misreading is what they cannot tell from a right call;
+    either the models or the sorter erred there, and a person's label settles which. ``p`` is
+    1 where the inspection has not
     seen the onion since a new one was taken up (then ``unknown`` is right), and one over the
     factor's values before the session's first inspection or new onion (as
     :func:`state_abstraction.perceive.track_predictions` starts its memory over: a claimed
@@ -112,6 +118,9 @@ def step_uncertainties(seen: list, consistency: float = SORTER_CONSISTENCY) -> l
                 ratio = p / (1.0 - p) * odds ** call
                 p_bad = ratio / (1.0 + ratio)
                 sure *= p_bad if step.prediction == int(Prediction.BAD) else 1.0 - p_bad
+                if (call and consistency > 0.5
+                        and (call > 0) != (step.prediction == int(Prediction.BAD))):
+                    sure = min(sure, 0.5)  # the sorter's move contradicts the guess
             elif not known:
                 sure /= values
         out.append(1.0 - sure)
