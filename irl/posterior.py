@@ -525,23 +525,16 @@ IMPORTANCE_PROPOSALS = 20
 #: are heavier than a Gaussian's.
 _PROPOSAL_DOF = 5.0
 
-#: Rounds of adaptation of a reading's importance proposal (population Monte Carlo) where the
-#: pilot of its Laplace proposal falls short (see :func:`_importance_draws`). Fixed before any
-#: reading was measured: the first round moves the proposal to where the pilot's weight lies,
-#: from a pilot whose effective sample size may be a handful (the covariance then stays mostly
-#: the Laplace one); the second re-estimates centre and covariance from a pilot that now
-#: overlaps the posterior. For a posterior of the Student-t family's shape two rounds of moment
-#: matching suffice; one they do not cover is skewed or has more than one mode, and further
-#: rounds of the same would not cover it either. Each round costs a pilot, a quarter of the
-#: proposals, so two bound an attempt at 1.5 times the proposals.
+#: Rounds of adaptation of a reading's importance proposal (population Monte Carlo) where its
+#: pilot, or all its proposals, fall short (see :func:`_importance_draws`). Fixed before any
+#: reading was measured: the first round moves the proposal to where the weight lies, from
+#: weights whose effective sample size may be a handful (the covariance then stays mostly the
+#: Laplace one); the second re-estimates centre and covariance from draws that now overlap the
+#: posterior. For a posterior of the Student-t family's shape two rounds of moment matching
+#: suffice; one they do not cover is skewed or has more than one mode, and further rounds of
+#: the same would not cover it either. Each round costs at most the proposals again, and is
+#: begun only where the attempt would still cost fewer evaluations than chains.
 IMPORTANCE_ADAPTATIONS = 2
-
-
-def _importance_cost(n_proposals: int) -> int:
-    """The most evaluations of the density that :func:`_importance_draws` makes for
-    ``n_proposals`` proposals: the first pilot, one pilot a round of adaptation, and the rest
-    of the proposals from the last proposal."""
-    return n_proposals + IMPORTANCE_ADAPTATIONS * max(1, n_proposals // 4)
 
 
 def _resampled_ess(weights_ess: float, n: int) -> float:
@@ -573,36 +566,37 @@ def _adapted_proposal(theta: np.ndarray, w: np.ndarray, ess: float, cov: np.ndar
     return mean, (shape + shape.T) / 2
 
 
-def _importance_draws(log_density, mode, cov, n, n_proposals, rng):
+def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     """``n`` draws from the density ``exp(log_density(theta))`` by importance
     resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom, first round ``mode``
     with scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
-    density over proposal and resampled systematically. A pilot of a quarter of the proposals
-    comes first; where its effective sample size (Kish's, ``1 / sum w^2``), times 4, falls
-    short of ``n``, the proposal is adapted (population Monte Carlo, Cappe et al. 2004): the
-    next is centred on the pilot's weighted mean with its weighted covariance, shrunk toward
-    ``cov`` (:func:`_adapted_proposal`), and draws a pilot of its own, up to
-    :data:`IMPORTANCE_ADAPTATIONS` times. Only the last proposal's draws, its pilot and the rest
-    of the proposals, are weighed for the resampling (a proposal built from earlier draws is
-    valid for the draws made after it). Each round's ESS is logged.
+    density over proposal and resampled systematically, where their weights' effective sample
+    size (Kish's, ``1 / sum w^2``) reaches ``n``. A pilot of a quarter of the proposals comes
+    first, and the rest are weighed only where its ESS, times 4, reaches ``n``. Where the pilot
+    or all the proposals fall short, the proposal is adapted (population Monte Carlo, Cappe et
+    al. 2004): the next is centred on the weighted mean of the draws just weighed, with their
+    weighted covariance shrunk toward ``cov`` (:func:`_adapted_proposal`), and draws
+    ``n_proposals`` of its own in the same way, up to :data:`IMPORTANCE_ADAPTATIONS` times and
+    while the evaluations stay below ``budget`` (a round is begun only where all its proposals
+    would keep them below it; None: no limit). Only the last proposal's draws are weighed for
+    the resampling (a proposal built from earlier draws is valid for the draws made after it).
+    Each pilot's and each whole set's ESS is logged.
 
-    Returns ``(theta[n, K], ess, n_weighed)`` (the evaluations of the density in all rounds,
-    at most :func:`_importance_cost`), or ``(None, ess, n_weighed)`` where the last pilot's
-    ESS, times 4, or the last proposal's weights' ESS is below ``n`` (the ESS returned is
-    then that projection, or that ESS): the proposal then misses too much of the posterior to
-    stand for chains. The generator's draws are the same whatever the outcome (every round's
-    variates are drawn first)."""
+    Returns ``(theta[n, K], ess, n_weighed)`` (the evaluations of the density in all rounds),
+    or ``(None, ess, n_weighed)`` where the last proposal tried falls short too (the ESS
+    returned is then its pilot's, times 4, or its weights'): it then misses too much of the
+    posterior to stand for chains. The generator's draws are the same whatever the outcome
+    (every proposal's variates are drawn first)."""
     K = mode.size
     nu = _PROPOSAL_DOF
     pilot = max(1, n_proposals // 4)
-    # standard Student-t variates u = z sqrt(nu / chi2): the first proposal's, then a pilot's
-    # for each round of adaptation; a proposal maps them to theta = centre + chol u
+    # standard Student-t variates u = z sqrt(nu / chi2), n_proposals for the first proposal and
+    # as many for each round of adaptation; a proposal maps them to theta = centre + chol u
     u = rng.standard_normal((n_proposals, K))
     u *= np.sqrt(nu / rng.chisquare(nu, n_proposals))[:, None]
     offset = rng.random()  # of the systematic resampling, drawn whether or not it is used
-    more = rng.standard_normal((IMPORTANCE_ADAPTATIONS, pilot, K))
-    more *= np.sqrt(nu / rng.chisquare(nu, (IMPORTANCE_ADAPTATIONS, pilot)))[:, :, None]
-    pilots = [u[:pilot], *more]
+    more = rng.standard_normal((IMPORTANCE_ADAPTATIONS, n_proposals, K))
+    more *= np.sqrt(nu / rng.chisquare(nu, (IMPORTANCE_ADAPTATIONS, n_proposals)))[:, :, None]
 
     def log_q(v):  # up to a constant of the proposal: -(nu + K) / 2 log(1 + |v|^2 / nu)
         return -0.5 * (nu + K) * np.log1p(np.sum(v * v, axis=1) / nu)
@@ -614,27 +608,30 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng):
     laplace_chol = np.linalg.cholesky(cov)
     centre, chol = mode, laplace_chol
     n_weighed = 0
-    for r, v in enumerate(pilots):
-        theta, log_w = proposed(centre, chol, v)
-        n_weighed += v.shape[0]
+    for r, v in enumerate([u, *more]):
+        theta, log_w = proposed(centre, chol, v[:pilot])
+        n_weighed += pilot
         w, ess = _normalized(log_w)
-        projected = ess * n_proposals / pilot
+        found = ess * n_proposals / pilot  # projected to all the proposals
         moved = np.linalg.norm(np.linalg.solve(laplace_chol, centre - mode))
         logger.info("importance proposal %d (centre %.2f Laplace sd from the mode): ESS %.1f "
                     "of a pilot of %d, projected %.0f for %d samples", r, moved, ess, pilot,
-                    projected, n)
-        if projected >= n:
-            break
-        if r == IMPORTANCE_ADAPTATIONS or ess == 0:
-            return None, projected, n_weighed
+                    found, n)
+        if found >= n:  # the pilot suffices: the rest of this proposal's draws
+            rest, log_w_rest = proposed(centre, chol, v[pilot:])
+            n_weighed += n_proposals - pilot
+            theta = np.vstack([theta, rest])
+            w, ess = _normalized(np.concatenate([log_w, log_w_rest]))
+            found = ess
+            logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples",
+                        r, ess, n_proposals, n)
+            if ess >= n:
+                break
+        if r == IMPORTANCE_ADAPTATIONS or ess == 0 \
+                or (budget is not None and n_weighed + n_proposals >= budget):
+            return None, found, n_weighed
         centre, shape = _adapted_proposal(theta, w, ess, cov)
         chol = np.linalg.cholesky(shape)
-    rest, log_w_rest = proposed(centre, chol, u[pilot:])
-    n_weighed += n_proposals - pilot
-    theta = np.vstack([theta, rest])
-    w, ess = _normalized(np.concatenate([log_w, log_w_rest]))
-    if ess < n:
-        return None, ess, n_weighed
     # systematic resampling: proposal i for the points u in [c_{i-1}, c_i) of the running sums
     # c (the last set to 1): a proposal of weight 0 has an empty interval and is never picked;
     # a point that rounding takes to 1 goes to the last proposal of positive weight
@@ -672,8 +669,8 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     reading's chains run first; every other reading that would get chains is first drawn by
     importance resampling from its Laplace approximation (:func:`_importance_draws`,
     :data:`IMPORTANCE_PROPOSALS` proposals a sample, the proposal adapted up to
-    :data:`IMPORTANCE_ADAPTATIONS` times where a pilot's effective sample size falls short),
-    tried where the attempt's evaluations, at most, number fewer than the heaviest reading's
+    :data:`IMPORTANCE_ADAPTATIONS` times where the effective sample size falls short), tried
+    where its evaluations, all its rounds' together, number fewer than the heaviest reading's
     chain gradients and kept where the importance weights' effective sample size reaches the
     reading's samples; else it gets chains, in the readings' order. Then the Gaussian draws."""
     swap = estimator.session_swap
@@ -716,12 +713,13 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         _, theta_z, (value_and_grad, value), laplace, _ = fitted[i]
         resampled, weighed = None, 0
         if draw["method"] == "mcmc" and not by_laplace[i] and i != heaviest \
-                and chain_cost is not None \
-                and _importance_cost(IMPORTANCE_PROPOSALS * n) < chain_cost:
+                and chain_cost is not None and IMPORTANCE_PROPOSALS * n < chain_cost:
             # cheaper than chains of its own: importance resampling from its Laplace
-            # approximation, where the weights' ESS reaches its samples
+            # approximation (adapted while still cheaper), where the weights' ESS reaches its
+            # samples
             resampled, ess, weighed = _importance_draws(
-                value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"])
+                value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"],
+                budget=chain_cost)
             logger.info("reading swapped %s: importance weights' ESS %.0f (%d proposals "
                         "weighed) for %d samples%s", list(fitted[i][0]), ess, weighed, n,
                         "" if resampled is not None else ": chains instead")
