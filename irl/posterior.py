@@ -554,7 +554,7 @@ def _adapted_proposal(theta: np.ndarray, w: np.ndarray, ess: float, cov: np.ndar
     covariance (unbiased for reliability weights, ``/ (1 - sum w^2)``) shrunk toward the
     Laplace covariance ``cov`` as the mean of an inverse-Wishart posterior whose prior holds
     ``K`` pseudo-observations of ``cov``: ``(ess S + K cov) / (ess + K)``. Positive definite
-    as ``cov`` is; mostly ``cov`` while the pilot's ESS is below the dimension, whose
+    as ``cov`` is; mostly ``cov`` while the ESS is below the dimension, whose
     covariance so few points cannot estimate."""
     K = theta.shape[1]
     mean = w @ theta
