@@ -52,6 +52,7 @@ from irl.solvers import OptimalQSolver, solve_policy_derivatives
 from irl.stats import effective_sample_size, split_rhat
 
 __all__ = [
+    "IMPORTANCE_ADAPTATIONS",
     "IMPORTANCE_PROPOSALS",
     "LAPLACE_SHARE",
     "METHODS",
@@ -416,9 +417,10 @@ def sample_posterior(
     (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
     samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
     together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
-    approximation, and the others but the heaviest by importance resampling from it where
-    that is cheaper than chains and its effective sample size suffices
-    (:data:`IMPORTANCE_PROPOSALS`). Readings outside that set are not weighed.
+    approximation, and the others but the heaviest by importance resampling from it (adapted
+    where it misses) where that is cheaper than chains and its effective sample size suffices
+    (:data:`IMPORTANCE_PROPOSALS`, :data:`IMPORTANCE_ADAPTATIONS`). Readings outside that set
+    are not weighed.
 
     Returns
     -------
@@ -523,6 +525,17 @@ IMPORTANCE_PROPOSALS = 20
 #: are heavier than a Gaussian's.
 _PROPOSAL_DOF = 5.0
 
+#: Rounds of adaptation of a reading's importance proposal (population Monte Carlo) where its
+#: pilot, or all its proposals, fall short (see :func:`_importance_draws`). Fixed before any
+#: reading was measured: the first round moves the proposal to where the weight lies, from
+#: weights whose effective sample size may be a handful (the covariance then stays mostly the
+#: Laplace one); the second re-estimates centre and covariance from draws that now overlap the
+#: posterior. For a posterior of the Student-t family's shape two rounds of moment matching
+#: suffice; one they do not cover is skewed or has more than one mode, and further rounds of
+#: the same would not cover it either. Each round costs at most the proposals again, and is
+#: begun only where the attempt would still cost fewer evaluations than chains.
+IMPORTANCE_ADAPTATIONS = 2
+
 
 def _resampled_ess(weights_ess: float, n: int) -> float:
     """The effective sample size of ``n`` draws resampled from importance weights whose own
@@ -534,43 +547,98 @@ def _resampled_ess(weights_ess: float, n: int) -> float:
     return 1.0 / (1.0 / n + 1.0 / weights_ess)
 
 
-def _importance_draws(log_density, mode, cov, n, n_proposals, rng):
+def _adapted_proposal(theta: np.ndarray, w: np.ndarray, ess: float, cov: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The centre and scale matrix of the next proposal from weighted proposals ``theta[m, K]``
+    (weights ``w`` summing to 1, Kish's ESS ``ess``): their weighted mean, and their weighted
+    covariance (unbiased for reliability weights, ``/ (1 - sum w^2)``) shrunk toward the
+    Laplace covariance ``cov`` as the mean of an inverse-Wishart posterior whose prior holds
+    ``K`` pseudo-observations of ``cov``: ``(ess S + K cov) / (ess + K)``. Positive definite
+    as ``cov`` is; mostly ``cov`` while the ESS is below the dimension, whose
+    covariance so few points cannot estimate."""
+    K = theta.shape[1]
+    mean = w @ theta
+    d = theta - mean
+    spread = np.zeros((K, K))
+    if (denom := 1.0 - float(w @ w)) > 0:
+        spread = (w[:, None] * d).T @ d / denom
+    shape = (ess * spread + K * cov) / (ess + K)
+    return mean, (shape + shape.T) / 2
+
+
+def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     """``n`` draws from the density ``exp(log_density(theta))`` by importance
-    resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom round ``mode`` with
-    scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
-    density over proposal and resampled systematically. Returns ``(theta[n, K], ess,
-    n_weighed)`` (the proposals whose density was evaluated), or ``(None, ess, n_weighed)``
-    where the weights' effective sample size (Kish's, ``1 / sum w^2``) is
-    below ``n``, or is projected to be from the first quarter of the proposals (whose ESS,
-    times 4, falls short of ``n``; the rest are then not weighed, and the ESS returned is
-    that projection): the proposal then misses too much of the posterior to stand for
-    chains. The generator's draws are the same either way."""
+    resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom, first round ``mode``
+    with scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
+    density over proposal and resampled systematically, where their weights' effective sample
+    size (Kish's, ``1 / sum w^2``) reaches ``n``. A pilot of a quarter of the proposals comes
+    first, and the rest are weighed only where its ESS, times 4, reaches ``n``. Where the pilot
+    or all the proposals fall short, the proposal is adapted (population Monte Carlo, Cappe et
+    al. 2004): the next is centred on the weighted mean of the draws just weighed, with their
+    weighted covariance shrunk toward ``cov`` (:func:`_adapted_proposal`), and draws
+    ``n_proposals`` of its own in the same way, up to :data:`IMPORTANCE_ADAPTATIONS` times and
+    while the evaluations stay below ``budget`` (a round is begun only where all its proposals
+    would keep them below it; None: no limit). Only the last proposal's draws are weighed for
+    the resampling (a proposal built from earlier draws is valid for the draws made after it).
+    Each pilot's and each whole set's ESS is logged.
+
+    Returns ``(theta[n, K], ess, n_weighed)`` (the evaluations of the density in all rounds),
+    or ``(None, ess, n_weighed)`` where the last proposal tried falls short too (the ESS
+    returned is then its pilot's, times 4, or its weights'): it then misses too much of the
+    posterior to stand for chains. The generator's draws are the same whatever the outcome
+    (every proposal's variates are drawn first)."""
     K = mode.size
-    chol = np.linalg.cholesky(cov)
     nu = _PROPOSAL_DOF
-    z = rng.standard_normal((n_proposals, K))
-    scale = np.sqrt(nu / rng.chisquare(nu, n_proposals))
-    offset = rng.random()  # of the systematic resampling, drawn whether or not it is used
-    theta = mode + (z * scale[:, None]) @ chol.T
-    # log q up to a constant: -(nu + K) / 2 log(1 + |L^-1 (theta - mode)|^2 / nu)
-    log_q = -0.5 * (nu + K) * np.log1p(np.sum((z * scale[:, None]) ** 2, axis=1) / nu)
-    # a pilot of a quarter of the proposals first: the ESS grows about in proportion to the
-    # proposals, so where the pilot's falls short of a quarter of n, the rest are not weighed
     pilot = max(1, n_proposals // 4)
-    log_w = np.full(n_proposals, -np.inf)
-    for lo, hi in ((0, pilot), (pilot, n_proposals)):
-        log_w[lo:hi] = [log_density(t) for t in theta[lo:hi]]
-        log_w[lo:hi] -= log_q[lo:hi]
-        w, ess = _normalized(log_w[:hi])
-        if ess * n_proposals / hi < n:
-            return None, ess * n_proposals / hi, hi
+    # standard Student-t variates u = z sqrt(nu / chi2), n_proposals for the first proposal and
+    # as many for each round of adaptation; a proposal maps them to theta = centre + chol u
+    u = rng.standard_normal((n_proposals, K))
+    u *= np.sqrt(nu / rng.chisquare(nu, n_proposals))[:, None]
+    offset = rng.random()  # of the systematic resampling, drawn whether or not it is used
+    more = rng.standard_normal((IMPORTANCE_ADAPTATIONS, n_proposals, K))
+    more *= np.sqrt(nu / rng.chisquare(nu, (IMPORTANCE_ADAPTATIONS, n_proposals)))[:, :, None]
+
+    def log_q(v):  # up to a constant of the proposal: -(nu + K) / 2 log(1 + |v|^2 / nu)
+        return -0.5 * (nu + K) * np.log1p(np.sum(v * v, axis=1) / nu)
+
+    def proposed(centre, chol, v):  # the proposals and their log weights
+        theta = centre + v @ chol.T
+        return theta, np.array([log_density(t) for t in theta], dtype=float) - log_q(v)
+
+    laplace_chol = np.linalg.cholesky(cov)
+    centre, chol = mode, laplace_chol
+    n_weighed = 0
+    for r, v in enumerate([u, *more]):
+        theta, log_w = proposed(centre, chol, v[:pilot])
+        n_weighed += pilot
+        w, ess = _normalized(log_w)
+        found = ess * n_proposals / pilot  # projected to all the proposals
+        moved = np.linalg.norm(np.linalg.solve(laplace_chol, centre - mode))
+        logger.info("importance proposal %d (centre %.2f Laplace sd from the mode): ESS %.1f "
+                    "of a pilot of %d, projected %.0f for %d samples", r, moved, ess, pilot,
+                    found, n)
+        if found >= n:  # the pilot suffices: the rest of this proposal's draws
+            rest, log_w_rest = proposed(centre, chol, v[pilot:])
+            n_weighed += n_proposals - pilot
+            theta = np.vstack([theta, rest])
+            w, ess = _normalized(np.concatenate([log_w, log_w_rest]))
+            found = ess
+            logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples",
+                        r, ess, n_proposals, n)
+            if ess >= n:
+                break
+        if r == IMPORTANCE_ADAPTATIONS or ess == 0 \
+                or (budget is not None and n_weighed + n_proposals >= budget):
+            return None, found, n_weighed
+        centre, shape = _adapted_proposal(theta, w, ess, cov)
+        chol = np.linalg.cholesky(shape)
     # systematic resampling: proposal i for the points u in [c_{i-1}, c_i) of the running sums
     # c (the last set to 1): a proposal of weight 0 has an empty interval and is never picked;
     # a point that rounding takes to 1 goes to the last proposal of positive weight
     cum = np.cumsum(w)
     cum /= cum[-1]
     picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
-    return theta[np.minimum(picks, np.flatnonzero(w)[-1])], ess, n_proposals
+    return theta[np.minimum(picks, np.flatnonzero(w)[-1])], ess, n_weighed
 
 
 def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:
@@ -600,10 +668,11 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     their own, each of which would cost a warm-up as long as the main reading's. The heaviest
     reading's chains run first; every other reading that would get chains is first drawn by
     importance resampling from its Laplace approximation (:func:`_importance_draws`,
-    :data:`IMPORTANCE_PROPOSALS` proposals a sample), tried where those proposals number fewer
-    than the heaviest reading's chain gradients and kept where the importance weights'
-    effective sample size reaches the reading's samples; else it gets chains, in the readings'
-    order. Then the Gaussian draws."""
+    :data:`IMPORTANCE_PROPOSALS` proposals a sample, the proposal adapted up to
+    :data:`IMPORTANCE_ADAPTATIONS` times where the effective sample size falls short), tried
+    where its evaluations, all its rounds' together, number fewer than the heaviest reading's
+    chain gradients and kept where the importance weights' effective sample size reaches the
+    reading's samples; else it gets chains, in the readings' order. Then the Gaussian draws."""
     swap = estimator.session_swap
     plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
@@ -646,9 +715,11 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         if draw["method"] == "mcmc" and not by_laplace[i] and i != heaviest \
                 and chain_cost is not None and IMPORTANCE_PROPOSALS * n < chain_cost:
             # cheaper than chains of its own: importance resampling from its Laplace
-            # approximation, where the weights' ESS reaches its samples
+            # approximation (adapted while still cheaper), where the weights' ESS reaches its
+            # samples
             resampled, ess, weighed = _importance_draws(
-                value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"])
+                value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"],
+                budget=chain_cost)
             logger.info("reading swapped %s: importance weights' ESS %.0f (%d proposals "
                         "weighed) for %d samples%s", list(fitted[i][0]), ess, weighed, n,
                         "" if resampled is not None else ": chains instead")

@@ -170,10 +170,10 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
         runs.append((mean.copy(), kw["n_draws"], kw["max_draws"]))
         return real_chains(value_and_grad, mean, chol, **kw)
 
-    def spy_importance(log_density, mode, cov, n, n_proposals, rng):
+    def spy_importance(log_density, mode, cov, n, n_proposals, rng, budget):
         assert isinstance(log_density(mode), float)  # the value alone, not with a gradient
-        got = real_importance(log_density, mode, cov, n, n_proposals, rng)
-        tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2]))
+        got = real_importance(log_density, mode, cov, n, n_proposals, rng, budget)
+        tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2], budget))
         return got
 
     monkeypatch.setattr(posterior, "_run_chains", spy_chains)
@@ -200,19 +200,22 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     assert runs[0][1] == max(-(-100 * heaviest.n_samples // 400), 4) and runs[0][2] == 300
     resampled = sum(t[3] for t in tries)
     assert len(runs) == 1 + len(tries) - resampled  # chains where resampling was refused
-    for c, (_, n, n_proposals, ok, ess, weighed) in zip(others, tries, strict=True):
+    chain_cost = post.diagnostics.n_gradients  # at least the heaviest's chain gradients
+    for c, (_, n, n_proposals, ok, ess, weighed, budget) in zip(others, tries, strict=True):
         assert n == c.n_samples and n_proposals == posterior.IMPORTANCE_PROPOSALS * n
-        assert ok == (ess >= n) and (weighed == n_proposals if ok else weighed >= n_proposals // 4)
+        assert n_proposals < budget < chain_cost and weighed < budget  # cheaper than chains
+        assert ok == (ess >= n) and weighed >= (n_proposals if ok else n_proposals // 4)
     assert post.n_samples == 400 and post.theta.shape == (400, 1)
     assert np.all(np.isfinite(post.diagnostics.r_hat))  # the chains' R-hat, not the Gaussian's
 
 
 def test_importance_resampling_draws_the_density_or_refuses():
     """From a Student-t round the mode, resampling by density over proposal: on a Gaussian
-    that the proposal covers, draws with its mean and spread; on one whose scale the proposal
-    misses by far, a refusal (ESS below the samples asked for), the generator's draws the same
-    either way."""
-    from irl.posterior import _importance_draws
+    that the proposal covers, draws with its mean and spread from the first proposal; on one
+    whose scale the proposal misses by far, a refusal (ESS below the samples asked for) after
+    the first pilot and one a round of adaptation, the generator's draws the same either
+    way."""
+    from irl.posterior import IMPORTANCE_ADAPTATIONS, _importance_draws
 
     mean, cov = np.array([1.0, -2.0]), np.array([[1.0, 0.3], [0.3, 0.5]])
     prec = np.linalg.inv(cov)
@@ -227,9 +230,101 @@ def test_importance_resampling_draws_the_density_or_refuses():
     np.testing.assert_allclose(np.cov(theta.T), cov, atol=0.08)
     a, b = np.random.default_rng(1), np.random.default_rng(1)
     refused = _importance_draws(gaussian(0.02), mean, cov, 200, 4000, a)
-    assert refused[0] is None and refused[1] < 200 and refused[2] == 1000  # the pilot only
+    assert refused[0] is None and refused[1] < 200
+    assert refused[2] == 1000 * (1 + IMPORTANCE_ADAPTATIONS)  # the pilots only
     _importance_draws(gaussian(1.0), mean, cov, 200, 4000, b)
     assert a.random() == b.random()
+
+
+def _gamma_skewed(t):
+    """x + 1 ~ Gamma(3, 1), y | x ~ N(x / 2, 1/4): mean (2, 1), covariance [[3, 1.5], [1.5,
+    1]], skewed along x."""
+    x, y = t
+    if x <= -1:
+        return -np.inf
+    return 2 * np.log(x + 1) - (x + 1) - 2 * (y - x / 2) ** 2
+
+
+@pytest.mark.parametrize(("case", "target_mean", "target_cov"), [
+    # a Gaussian 3 sd (of the proposal's scale) from the proposal's centre along its first axis
+    ("offset", [1.0 + 3.0, -2.0 + 0.9], [[1.0, 0.3], [0.3, 0.5]]),
+    # the skewed density above, the proposal centred 4 (x) and 2 (y) below its mean
+    ("skewed", [2.0, 1.0], [[3.0, 1.5], [1.5, 1.0]]),
+])
+def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, caplog, case,
+                                                                  target_mean, target_cov):
+    """Population Monte Carlo: where the first pilot's ESS, times 4, falls short of the samples
+    (without adaptation: a refusal), the proposal moves to the pilot's weighted mean and
+    covariance, and the draws of the adapted proposal have the density's moments."""
+    from irl import posterior
+
+    if case == "offset":
+        centre, cov = np.array([1.0, -2.0]), np.array(target_cov)
+        target_cov = np.array(target_cov)
+        # 3 sd along the first axis of the proposal's Cholesky factor: (3, 0.9) from the centre
+        shift = np.linalg.cholesky(cov) @ np.array([3.0, 0.0])
+        np.testing.assert_allclose(shift, np.array(target_mean) - centre)
+        prec = np.linalg.inv(cov)
+
+        def density(t):
+            return -0.5 * (t - target_mean) @ prec @ (t - target_mean)
+    else:
+        centre, cov, density = np.array([-2.0, -1.0]), np.eye(2), _gamma_skewed
+    n, n_proposals = 2000, 40_000
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    alone = posterior._importance_draws(density, centre, cov, n, n_proposals,
+                                        np.random.default_rng(0))
+    assert alone[0] is None and alone[1] < n and alone[2] == n_proposals // 4
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        theta, ess, weighed = posterior._importance_draws(density, centre, cov, n, n_proposals,
+                                                          np.random.default_rng(0))
+    lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
+    pilots = [line for line in lines if "of a pilot" in line]
+    wholes = [line for line in lines if "of all" in line]
+    assert len(pilots) >= 2 and pilots[0].startswith("importance proposal 0 ")  # adapted
+    assert theta is not None and ess >= n
+    assert weighed == len(pilots) * (n_proposals // 4) + len(wholes) * (n_proposals * 3 // 4)
+    np.testing.assert_allclose(theta.mean(axis=0), target_mean, atol=0.08)
+    np.testing.assert_allclose(np.cov(theta.T), target_cov, atol=0.2)
+    # a seed gives the same draws
+    again = posterior._importance_draws(density, centre, cov, n, n_proposals,
+                                        np.random.default_rng(0))
+    np.testing.assert_array_equal(again[0], theta)
+    # no round begun that could take the evaluations to the budget
+    short = posterior._importance_draws(density, centre, cov, n, n_proposals,
+                                        np.random.default_rng(0), budget=weighed)
+    assert short[0] is None and short[2] == n_proposals // 4 * (len(pilots) - 1)
+
+
+def test_a_second_mode_that_all_the_proposals_show_and_the_pilot_does_not_is_adapted_to(
+        monkeypatch, caplog):
+    """A density with a fifth of its mass in a narrow mode 5 sd away: the first proposal's
+    pilot misses that mode (its ESS suffices), all its proposals hit it (their ESS falls short:
+    without adaptation, a refusal); adapted to those weights, the next proposal draws both
+    modes in their shares."""
+    from irl import posterior
+
+    def density(t):  # 0.8 N(0, I) + 0.2 N((5, 0), 0.3^2 I)
+        far = t - np.array([5.0, 0.0])
+        return np.logaddexp(np.log(0.8) - 0.5 * t @ t,
+                            np.log(0.2) - 0.5 * far @ far / 0.09 - 2 * np.log(0.3))
+
+    n, n_proposals = 400, 8000
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    alone = posterior._importance_draws(density, np.zeros(2), np.eye(2), n, n_proposals,
+                                        np.random.default_rng(1))
+    assert alone[0] is None and alone[1] < n and alone[2] == n_proposals  # all weighed
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        theta, ess, weighed = posterior._importance_draws(
+            density, np.zeros(2), np.eye(2), n, n_proposals, np.random.default_rng(1))
+    lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
+    assert lines[0].startswith("importance proposal 0 ") and "of a pilot" in lines[0]
+    assert lines[1].startswith("importance proposal 0:") and "of all" in lines[1]
+    assert theta is not None and ess >= n and weighed == 2 * n_proposals
+    assert abs(np.mean(theta[:, 0] > 3.5) - 0.2) < 0.06  # the far mode's share
+    np.testing.assert_allclose(theta.mean(axis=0), [1.0, 0.0], atol=0.25)
 
 
 
