@@ -49,7 +49,12 @@ from irl.inference import scratch_held
 from irl.learners.birl import MAPBIRL, MMAPBIRL
 from irl.mdp import TabularMDP
 from irl.solvers import OptimalQSolver, solve_policy_derivatives
-from irl.stats import effective_sample_size, split_rhat
+from irl.stats import (
+    effective_sample_size,
+    pareto_smoothed,
+    psis_khat_threshold,
+    split_rhat,
+)
 
 __all__ = [
     "IMPORTANCE_ADAPTATIONS",
@@ -570,26 +575,38 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     """``n`` draws from the density ``exp(log_density(theta))`` by importance
     resampling from a Student-t of ``_PROPOSAL_DOF`` degrees of freedom, first round ``mode``
     with scale matrix ``cov`` (its Laplace approximation): ``n_proposals`` proposals, weighed by
-    density over proposal and resampled systematically, where their weights' effective sample
-    size (Kish's, ``1 / sum w^2``) reaches ``n``. A pilot of a quarter of the proposals comes
-    first, and the rest are weighed only where its ESS, times 4, reaches ``n``. Where the pilot
-    or all the proposals fall short, the proposal is adapted (population Monte Carlo, Cappe et
+    density over proposal and resampled systematically, where their weights pass two tests:
+    their effective sample size (Kish's, ``1 / sum w^2``) reaches ``n``, and the Pareto shape
+    ``k`` of their largest weights (:func:`irl.stats.pareto_smoothed`) is below the threshold
+    of Pareto-smoothed importance sampling for ``n_proposals`` draws,
+    ``min(1 - 1 / log10(S), 0.7)`` (:func:`irl.stats.psis_khat_threshold`; Vehtari et al.
+    2024): Kish's ESS can pass weights whose tail is too heavy for their mean to be trusted,
+    where the proposal misses part of the density, and ``k`` sees that tail. The resampling
+    then draws from the Pareto-smoothed weights (the largest replaced by the fitted Pareto's
+    expected order statistics), whose noise in the few weights that decide which proposals are
+    repeated is lower, at a bias the test on ``k`` keeps small. A pilot of a quarter of the
+    proposals comes first, and the rest are weighed only where its ESS, times 4, reaches ``n``
+    (its ``k`` is logged, not tested: from a quarter of the draws the fit of the tail is
+    noisier, and the threshold is set for the set that is resampled). Where the pilot or all
+    the proposals fall short, the proposal is adapted (population Monte Carlo, Cappe et
     al. 2004): the next is centred on the weighted mean of the draws just weighed, with their
     weighted covariance shrunk toward ``cov`` (:func:`_adapted_proposal`), and draws
     ``n_proposals`` of its own in the same way, up to :data:`IMPORTANCE_ADAPTATIONS` times and
     while the evaluations stay below ``budget`` (a round is begun only where all its proposals
     would keep them below it; None: no limit). Only the last proposal's draws are weighed for
     the resampling (a proposal built from earlier draws is valid for the draws made after it).
-    Each pilot's and each whole set's ESS is logged.
+    Each pilot's and each whole set's ESS and ``k`` are logged.
 
-    Returns ``(theta[n, K], ess, n_weighed)`` (the evaluations of the density in all rounds),
-    or ``(None, ess, n_weighed)`` where the last proposal tried falls short too (the ESS
-    returned is then its pilot's, times 4, or its weights'): it then misses too much of the
-    posterior to stand for chains. The generator's draws are the same whatever the outcome
-    (every proposal's variates are drawn first)."""
+    Returns ``(theta[n, K], ess, n_weighed, k)`` (``ess`` and ``k`` of the raw weights;
+    ``n_weighed`` the evaluations of the density in all rounds), or ``(None, ess, n_weighed,
+    k)`` where the last proposal tried falls short too (the ESS returned is then its pilot's,
+    times 4, or its weights', and ``k`` that of the weights it was from): it then misses too
+    much of the posterior to stand for chains. The generator's draws are the same whatever the
+    outcome (every proposal's variates are drawn first)."""
     K = mode.size
     nu = _PROPOSAL_DOF
     pilot = max(1, n_proposals // 4)
+    k_max = psis_khat_threshold(n_proposals)
     # standard Student-t variates u = z sqrt(nu / chi2), n_proposals for the first proposal and
     # as many for each round of adaptation; a proposal maps them to theta = centre + chol u
     u = rng.standard_normal((n_proposals, K))
@@ -612,33 +629,45 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
         theta, log_w = proposed(centre, chol, v[:pilot])
         n_weighed += pilot
         w, ess = _normalized(log_w)
+        k = _pareto_k(log_w)
         found = ess * n_proposals / pilot  # projected to all the proposals
         moved = np.linalg.norm(np.linalg.solve(laplace_chol, centre - mode))
         logger.info("importance proposal %d (centre %.2f Laplace sd from the mode): ESS %.1f "
-                    "of a pilot of %d, projected %.0f for %d samples", r, moved, ess, pilot,
-                    found, n)
+                    "of a pilot of %d (Pareto k %.2f), projected %.0f for %d samples", r,
+                    moved, ess, pilot, k, found, n)
         if found >= n:  # the pilot suffices: the rest of this proposal's draws
             rest, log_w_rest = proposed(centre, chol, v[pilot:])
             n_weighed += n_proposals - pilot
             theta = np.vstack([theta, rest])
-            w, ess = _normalized(np.concatenate([log_w, log_w_rest]))
+            log_w = np.concatenate([log_w, log_w_rest])
+            w, ess = _normalized(log_w)
+            k = _pareto_k(log_w)
             found = ess
-            logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples",
-                        r, ess, n_proposals, n)
-            if ess >= n:
+            logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples, "
+                        "Pareto k %.2f (at most %.2f)", r, ess, n_proposals, n, k, k_max)
+            if ess >= n and k < k_max:
                 break
         if r == IMPORTANCE_ADAPTATIONS or ess == 0 \
                 or (budget is not None and n_weighed + n_proposals >= budget):
-            return None, found, n_weighed
+            return None, found, n_weighed, k
         centre, shape = _adapted_proposal(theta, w, ess, cov)
         chol = np.linalg.cholesky(shape)
-    # systematic resampling: proposal i for the points u in [c_{i-1}, c_i) of the running sums
-    # c (the last set to 1): a proposal of weight 0 has an empty interval and is never picked;
-    # a point that rounding takes to 1 goes to the last proposal of positive weight
-    cum = np.cumsum(w)
+    # systematic resampling from the Pareto-smoothed weights: proposal i for the points u in
+    # [c_{i-1}, c_i) of the running sums c (the last set to 1): a proposal of weight 0 has an
+    # empty interval and is never picked; a point that rounding takes to 1 goes to the last
+    # proposal of positive weight
+    smoothed = np.exp(pareto_smoothed(log_w)[0])
+    cum = np.cumsum(smoothed)
     cum /= cum[-1]
     picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
-    return theta[np.minimum(picks, np.flatnonzero(w)[-1])], ess, n_weighed
+    return theta[np.minimum(picks, np.flatnonzero(smoothed)[-1])], ess, n_weighed, k
+
+
+def _pareto_k(log_w: np.ndarray) -> float:
+    """The Pareto shape ``k`` of importance weights ``log_w[S]`` (:func:`pareto_smoothed`);
+    ``inf`` where no weight is positive or too few are to fit a tail."""
+    finite = np.isfinite(log_w)
+    return pareto_smoothed(log_w)[1] if np.count_nonzero(finite) else float("inf")
 
 
 def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:
@@ -669,10 +698,11 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     reading's chains run first; every other reading that would get chains is first drawn by
     importance resampling from its Laplace approximation (:func:`_importance_draws`,
     :data:`IMPORTANCE_PROPOSALS` proposals a sample, the proposal adapted up to
-    :data:`IMPORTANCE_ADAPTATIONS` times where the effective sample size falls short), tried
-    where its evaluations, all its rounds' together, number fewer than the heaviest reading's
-    chain gradients and kept where the importance weights' effective sample size reaches the
-    reading's samples; else it gets chains, in the readings' order. Then the Gaussian draws."""
+    :data:`IMPORTANCE_ADAPTATIONS` times where its weights fail), tried where its evaluations,
+    all its rounds' together, number fewer than the heaviest reading's chain gradients and kept
+    where the importance weights' effective sample size reaches the reading's samples and
+    their Pareto shape ``k`` is below the threshold of Pareto-smoothed importance sampling;
+    else it gets chains, in the readings' order. Then the Gaussian draws."""
     swap = estimator.session_swap
     plain = {**estimator.get_params(), "session_swap": None}
     readings = swap_readings(estimator.swap_probabilities(map_theta, demos))
@@ -717,11 +747,13 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
             # cheaper than chains of its own: importance resampling from its Laplace
             # approximation (adapted while still cheaper), where the weights' ESS reaches its
             # samples
-            resampled, ess, weighed = _importance_draws(
+            resampled, ess, weighed, k = _importance_draws(
                 value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"],
                 budget=chain_cost)
-            logger.info("reading swapped %s: importance weights' ESS %.0f (%d proposals "
-                        "weighed) for %d samples%s", list(fitted[i][0]), ess, weighed, n,
+            logger.info("reading swapped %s: importance weights' ESS %.0f, Pareto k %.2f (at "
+                        "most %.2f; %d proposals weighed) for %d samples%s",
+                        list(fitted[i][0]), ess, k,
+                        psis_khat_threshold(IMPORTANCE_PROPOSALS * n), weighed, n,
                         "" if resampled is not None else ": chains instead")
         if resampled is not None:  # counted as the Gaussian draws are: sizes and costs
             thetas[i] = resampled

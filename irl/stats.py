@@ -6,7 +6,10 @@ Layouts: ``values[n]``, one number per independent unit (e.g. one batch of demon
 The chain diagnostics are those of Vehtari, Gelman, Simpson, Carpenter and Buerkner (2021),
 "Rank-normalization, folding, and localization: an improved R-hat", as ArviZ computes them
 (``arviz.rhat(method="rank")``, ``arviz.ess(method="bulk")``): the tests check them against
-ArviZ.
+ArviZ. Importance weights ``log_w[S]`` are judged by Pareto-smoothed importance sampling
+(Vehtari, Simpson, Gelman, Yao and Gabry 2024, "Pareto smoothed importance sampling", JMLR
+25(72)), as ``arviz.psislw`` computes it (the tests check it against ArviZ, which is a
+development dependency only).
 """
 
 from __future__ import annotations
@@ -17,8 +20,10 @@ import numpy as np
 from scipy import fft, special, stats
 
 from irl._random import check_random_state
+from irl._validation import check_int
 
-__all__ = ["bootstrap_ci", "effective_sample_size", "split_rhat"]
+__all__ = ["bootstrap_ci", "effective_sample_size", "pareto_smoothed", "psis_khat_threshold",
+           "split_rhat"]
 
 
 def bootstrap_ci(
@@ -171,3 +176,68 @@ def effective_sample_size(draws) -> float:
     """Bulk effective sample size of one scalar's chains ``draws[m, n]``: how many independent
     draws estimate its mean as well (of the rank-normalized split chains)."""
     return _ess(_z_scale(_split_chains(_check_draws(draws))))
+
+
+def psis_khat_threshold(n_draws: int) -> float:
+    """The largest Pareto shape ``k`` for which ``n_draws`` importance draws give a reliable
+    estimate: ``min(1 - 1 / log10(S), 0.7)`` (Vehtari et al. 2024: below it the estimate's error
+    falls as for a finite variance within ``S`` draws; above 0.7 no practical ``S``
+    suffices). At most 0 for fewer than 10 draws, which no ``k`` passes."""
+    S = check_int(n_draws, "n_draws", low=1)
+    return min(1.0 - 1.0 / np.log10(S), 0.7) if S > 1 else float("-inf")
+
+
+def _gpd_fit(x: np.ndarray) -> tuple[float, float]:
+    """Shape ``k`` and scale ``sigma`` of a generalized Pareto fitted to the sorted positive
+    exceedances ``x[M]`` by Zhang and Stephens' (2009) empirical Bayes estimate, with the
+    weakly informative prior on ``k`` (10 pseudo-observations at 0.5) of Vehtari et al.
+    (2024), as ``arviz``'s ``_gpdfit``."""
+    n = x.size
+    m = 30 + int(np.sqrt(n))
+    b = 1.0 - np.sqrt(m / (np.arange(1, m + 1, dtype=float) - 0.5))
+    b /= 3.0 * x[int(n / 4 + 0.5) - 1]
+    b += 1.0 / x[-1]
+    k = np.mean(np.log1p(-b[:, None] * x), axis=1)
+    log_lik = n * (np.log(-b / k) - k - 1.0)
+    w = np.exp(log_lik - special.logsumexp(log_lik))  # 1 / sum_j exp(L_j - L_i), no overflow
+    keep = w >= 10 * np.finfo(float).eps
+    b, w = b[keep], w[keep] / w[keep].sum()
+    b_post = float(b @ w)
+    k_post = float(np.mean(np.log1p(-b_post * x)))
+    sigma = -k_post / b_post
+    return (n * k_post + 10 * 0.5) / (n + 10), sigma
+
+
+def pareto_smoothed(log_weights) -> tuple[np.ndarray, float]:
+    """Pareto-smoothed importance sampling of independent draws' weights ``log_w[S]`` (up to a
+    constant; ``-inf`` or NaN: weight 0): a generalized Pareto fitted (:func:`_gpd_fit`) to the
+    ``M = ceil(min(S / 5, 3 sqrt(S)))`` largest weights less the next one, whose shape ``k``
+    says how heavy the weights' tail is, and those weights replaced by the fit's expected
+    order statistics, truncated at the largest raw weight (Vehtari et al. 2024, with a
+    relative efficiency of 1).
+
+    Returns ``(log_w_smoothed[S], k)``, the smoothed log weights normalized to sum to 1 in
+    exp; ``k`` is ``inf`` where fewer than 5 weights exceed the cutoff (no fit possible) and
+    the weights are then only normalized. Compare ``k`` with :func:`psis_khat_threshold`."""
+    x = np.asarray(log_weights, dtype=float).copy()
+    if x.ndim != 1 or not x.size:
+        raise ValueError(f"log_weights must be a non-empty 1-D array; got shape {x.shape}")
+    x[np.isnan(x)] = -np.inf
+    if not np.isfinite(top := x.max()):
+        raise ValueError("log_weights must hold a finite weight; got none")
+    x -= top
+    S = x.size
+    order = np.argsort(x)
+    cutoff = max(x[order[-int(np.ceil(min(S / 5.0, 3.0 * np.sqrt(S)))) - 1]],
+                 np.log(np.finfo(float).tiny))
+    tail = np.flatnonzero(x > cutoff)
+    k = float("inf")
+    if tail.size > 4:
+        tail = tail[np.argsort(x[tail])]
+        k, sigma = _gpd_fit(np.exp(x[tail]) - np.exp(cutoff))
+        if np.isfinite(k) and sigma > 0:
+            p = np.arange(0.5, tail.size) / tail.size
+            q = -np.log1p(-p) if abs(k) < np.finfo(float).eps \
+                else np.expm1(-k * np.log1p(-p)) / k
+            x[tail] = np.minimum(np.log(sigma * q + np.exp(cutoff)), 0.0)
+    return x - special.logsumexp(x), k

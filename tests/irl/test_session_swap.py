@@ -9,6 +9,7 @@ import pytest
 import irl
 from irl.observation.swap import SessionSwap, value_swap
 from irl.posterior import load_posterior, sample_posterior, swap_readings
+from irl.stats import pareto_smoothed, psis_khat_threshold
 from tests.irl.test_posterior import noisy_two_state_problem, quadrature
 
 #: the two-state problem's observations (s * 2 + a): action 0 and 1 read backwards
@@ -173,7 +174,8 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     def spy_importance(log_density, mode, cov, n, n_proposals, rng, budget):
         assert isinstance(log_density(mode), float)  # the value alone, not with a gradient
         got = real_importance(log_density, mode, cov, n, n_proposals, rng, budget)
-        tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2], budget))
+        tries.append((mode.copy(), n, n_proposals, got[0] is not None, got[1], got[2], budget,
+                      got[3]))
         return got
 
     monkeypatch.setattr(posterior, "_run_chains", spy_chains)
@@ -201,10 +203,11 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     resampled = sum(t[3] for t in tries)
     assert len(runs) == 1 + len(tries) - resampled  # chains where resampling was refused
     chain_cost = post.diagnostics.n_gradients  # at least the heaviest's chain gradients
-    for c, (_, n, n_proposals, ok, ess, weighed, budget) in zip(others, tries, strict=True):
+    for c, (_, n, n_proposals, ok, ess, weighed, budget, k) in zip(others, tries, strict=True):
         assert n == c.n_samples and n_proposals == posterior.IMPORTANCE_PROPOSALS * n
         assert n_proposals < budget < chain_cost and weighed < budget  # cheaper than chains
-        assert ok == (ess >= n) and weighed >= (n_proposals if ok else n_proposals // 4)
+        assert ok == (ess >= n and k < psis_khat_threshold(n_proposals))
+        assert weighed >= (n_proposals if ok else n_proposals // 4)
     assert post.n_samples == 400 and post.theta.shape == (400, 1)
     assert np.all(np.isfinite(post.diagnostics.r_hat))  # the chains' R-hat, not the Gaussian's
 
@@ -224,8 +227,8 @@ def test_importance_resampling_draws_the_density_or_refuses():
         return lambda t: -0.5 * (t - mean) @ prec @ (t - mean) / scale**2
 
     rng = np.random.default_rng(0)
-    theta, ess, weighed = _importance_draws(gaussian(1.0), mean, cov, 2000, 40_000, rng)
-    assert theta.shape == (2000, 2) and weighed == 40_000 and ess > 2000
+    theta, ess, weighed, k = _importance_draws(gaussian(1.0), mean, cov, 2000, 40_000, rng)
+    assert theta.shape == (2000, 2) and weighed == 40_000 and ess > 2000 and k < 0.7
     np.testing.assert_allclose(theta.mean(axis=0), mean, atol=0.06)
     np.testing.assert_allclose(np.cov(theta.T), cov, atol=0.08)
     a, b = np.random.default_rng(1), np.random.default_rng(1)
@@ -277,8 +280,8 @@ def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, c
     assert alone[0] is None and alone[1] < n and alone[2] == n_proposals // 4
     monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed = posterior._importance_draws(density, centre, cov, n, n_proposals,
-                                                          np.random.default_rng(0))
+        theta, ess, weighed, _ = posterior._importance_draws(
+            density, centre, cov, n, n_proposals, np.random.default_rng(0))
     lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
     pilots = [line for line in lines if "of a pilot" in line]
     wholes = [line for line in lines if "of all" in line]
@@ -297,18 +300,22 @@ def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, c
     assert short[0] is None and short[2] == n_proposals // 4 * (len(pilots) - 1)
 
 
+@pytest.mark.parametrize("sd", [0.5, 0.3])
 def test_a_second_mode_that_all_the_proposals_show_and_the_pilot_does_not_is_adapted_to(
-        monkeypatch, caplog):
+        monkeypatch, caplog, sd):
     """A density with a fifth of its mass in a narrow mode 5 sd away: the first proposal's
     pilot misses that mode (its ESS suffices), all its proposals hit it (their ESS falls short:
     without adaptation, a refusal); adapted to those weights, the next proposal draws both
-    modes in their shares."""
+    modes in their shares where the far mode's sd is 0.5. Where it is 0.3, the adapted
+    proposals' Kish ESS reaches the samples (about 2,000 for 400) but few of them fall in that
+    mode, so the largest weights span orders of magnitude: their Pareto shape k is far above
+    the threshold (about 2), and the draws are refused after the last round."""
     from irl import posterior
 
-    def density(t):  # 0.8 N(0, I) + 0.2 N((5, 0), 0.3^2 I)
+    def density(t):  # 0.8 N(0, I) + 0.2 N((5, 0), sd^2 I)
         far = t - np.array([5.0, 0.0])
         return np.logaddexp(np.log(0.8) - 0.5 * t @ t,
-                            np.log(0.2) - 0.5 * far @ far / 0.09 - 2 * np.log(0.3))
+                            np.log(0.2) - 0.5 * far @ far / sd**2 - 2 * np.log(sd))
 
     n, n_proposals = 400, 8000
     monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
@@ -317,14 +324,75 @@ def test_a_second_mode_that_all_the_proposals_show_and_the_pilot_does_not_is_ada
     assert alone[0] is None and alone[1] < n and alone[2] == n_proposals  # all weighed
     monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed = posterior._importance_draws(
+        theta, ess, weighed, k = posterior._importance_draws(
             density, np.zeros(2), np.eye(2), n, n_proposals, np.random.default_rng(1))
     lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
     assert lines[0].startswith("importance proposal 0 ") and "of a pilot" in lines[0]
     assert lines[1].startswith("importance proposal 0:") and "of all" in lines[1]
-    assert theta is not None and ess >= n and weighed == 2 * n_proposals
+    assert ess >= n  # Kish's ESS passes either way
+    if sd == 0.3:
+        assert theta is None and k > 1.0 and weighed == 3 * n_proposals
+        return
+    assert theta is not None and k < psis_khat_threshold(n_proposals)
+    assert weighed == 2 * n_proposals
     assert abs(np.mean(theta[:, 0] > 3.5) - 0.2) < 0.06  # the far mode's share
     np.testing.assert_allclose(theta.mean(axis=0), [1.0, 0.0], atol=0.25)
+
+
+def _multivariate_cauchy(t):
+    """A 2-D Cauchy (Student-t of 1 degree of freedom) round 0 of unit scale, up to a
+    constant: heavier tails than the Student-t (5 degrees of freedom) proposal, so that the
+    importance weights grow as |theta|^4 and their tail's Pareto shape is 4 / 5 = 0.8 (the
+    proposal's tail exponent 5 over the weights' growth 4), above PSIS's 0.7."""
+    return -1.5 * np.log1p(t @ t)
+
+
+@pytest.mark.parametrize("seed", [0, 6])
+def test_a_proposal_with_too_light_tails_is_refused_by_pareto_k_where_kish_ess_passes(
+        monkeypatch, caplog, seed):
+    """The proposal (the t of 5 degrees of freedom at the target's scale) has lighter tails
+    than the Cauchy target: on these seeds the weights' Kish ESS reaches the samples asked for
+    (Kish's test alone would have resampled them), but their Pareto shape k is above the
+    threshold for the proposals weighed, and the draws are refused (without adaptation); the
+    log line of the whole set gives both."""
+    from irl import posterior
+
+    n, n_proposals = 200, 4000
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        theta, ess, weighed, k = posterior._importance_draws(
+            _multivariate_cauchy, np.zeros(2), np.eye(2), n, n_proposals,
+            np.random.default_rng(seed))
+    assert weighed == n_proposals and ess >= n  # Kish's ESS passes
+    assert k > psis_khat_threshold(n_proposals) and theta is None  # k does not
+    whole = [r.getMessage() for r in caplog.records if "of all" in r.getMessage()]
+    assert len(whole) == 1 and f"Pareto k {k:.2f} (at most 0.70)" in whole[0]
+
+
+def test_pareto_smoothing_equals_arviz():
+    """The smoothed log weights and the Pareto shape k equal ``arviz.psislw``'s (relative
+    efficiency 1), on bounded weights (a Gaussian proposal wider than its target: k < 0), heavy
+    ones (a Gaussian proposal for a Student-t(2) target) and weights some of which are 0; and
+    the threshold is min(1 - 1 / log10(S), 0.7)."""
+    az = pytest.importorskip("arviz")
+    rng = np.random.default_rng(4)
+    for S in (60, 500, 4000):
+        z = rng.standard_normal(S)
+        zeroed = -0.5 * z * z * 0.5
+        zeroed[::7] = -np.inf
+        for log_w in (-0.5 * z * z * (1 / 0.8**2 - 1), -1.5 * np.log1p(z * z / 2) + 0.5 * z * z,
+                      zeroed):
+            with np.errstate(all="ignore"):
+                want, want_k = az.psislw(log_w.copy())
+            got, k = pareto_smoothed(log_w)
+            assert k == pytest.approx(float(want_k), abs=1e-10)
+            np.testing.assert_allclose(np.exp(got), np.exp(want), atol=1e-12)
+            assert np.exp(got).sum() == pytest.approx(1.0)
+    assert psis_khat_threshold(100) == pytest.approx(0.5)
+    assert psis_khat_threshold(1000) == pytest.approx(2 / 3)
+    assert psis_khat_threshold(10**5) == 0.7
+    with pytest.raises(ValueError, match="log_weights"):
+        pareto_smoothed(np.full(5, -np.inf))
 
 
 
@@ -355,7 +423,7 @@ def test_importance_resampling_never_picks_a_proposal_of_weight_zero():
         calls.append(t)
         return -np.inf if len(calls) == 1 else -0.5 * float(t @ t)
 
-    theta, ess, _ = _importance_draws(density, np.zeros(2), np.eye(2), 20, 400, OffsetZero())
+    theta, ess, *_ = _importance_draws(density, np.zeros(2), np.eye(2), 20, 400, OffsetZero())
     assert theta is not None and ess >= 20
     assert not np.any(np.all(theta == calls[0], axis=1))
 
