@@ -629,7 +629,7 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
         theta, log_w = proposed(centre, chol, v[:pilot])
         n_weighed += pilot
         w, ess = _normalized(log_w)
-        k = _pareto_k(log_w)
+        k = _pareto_smoothed(log_w)[1]
         found = ess * n_proposals / pilot  # projected to all the proposals
         moved = np.linalg.norm(np.linalg.solve(laplace_chol, centre - mode))
         logger.info("importance proposal %d (centre %.2f Laplace sd from the mode): ESS %.1f "
@@ -641,7 +641,7 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
             theta = np.vstack([theta, rest])
             log_w = np.concatenate([log_w, log_w_rest])
             w, ess = _normalized(log_w)
-            k = _pareto_k(log_w)
+            smoothed, k = _pareto_smoothed(log_w)
             found = ess
             logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples, "
                         "Pareto k %.2f (at most %.2f)", r, ess, n_proposals, n, k, k_max)
@@ -656,18 +656,19 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     # [c_{i-1}, c_i) of the running sums c (the last set to 1): a proposal of weight 0 has an
     # empty interval and is never picked; a point that rounding takes to 1 goes to the last
     # proposal of positive weight
-    smoothed = np.exp(pareto_smoothed(log_w)[0])
+    smoothed = np.exp(smoothed)  # of the set that passed, smoothed when it was tested
     cum = np.cumsum(smoothed)
     cum /= cum[-1]
     picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
     return theta[np.minimum(picks, np.flatnonzero(smoothed)[-1])], ess, n_weighed, k
 
 
-def _pareto_k(log_w: np.ndarray) -> float:
-    """The Pareto shape ``k`` of importance weights ``log_w[S]`` (:func:`pareto_smoothed`);
-    ``inf`` where no weight is positive or too few are to fit a tail."""
-    finite = np.isfinite(log_w)
-    return pareto_smoothed(log_w)[1] if np.count_nonzero(finite) else float("inf")
+def _pareto_smoothed(log_w: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """:func:`pareto_smoothed` of importance weights ``log_w[S]``: the smoothed log weights
+    and their Pareto shape ``k``; ``(None, inf)`` where no weight is positive."""
+    if not np.count_nonzero(np.isfinite(log_w)):
+        return None, float("inf")
+    return pareto_smoothed(log_w)
 
 
 def _normalized(log_w: np.ndarray) -> tuple[np.ndarray, float]:
