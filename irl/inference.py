@@ -103,6 +103,11 @@ _NUMBA_FACTOR_ELEMENTS = 1 << 25
 _SEPARABLE_ELEMENTS = 1 << 24
 #: Largest scratch array (floats) a thread keeps between passes (8 MB).
 _WORKSPACE_ELEMENTS = 1 << 20
+#: Floats of one block of states (``block A N``) that the scaled pass computes at once
+#: where it goes by blocks (a separable model, a stationary policy, a sparse MDP; 1 MB, a
+#: core's L2 cache on the machine of docs/performance.md): the step's ``(A, S, N)`` message
+#: then stays in the cache at any S.
+_BLOCK_ELEMENTS = 1 << 17
 #: Largest ``N S A`` whose scaled pass renormalizes every few steps rather than at each.
 _LAZY_ELEMENTS = 1 << 16
 #: What the scaled pass returns when renormalizing at every step may keep it in range.
@@ -652,17 +657,27 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             np.multiply(vec, policy, out=out)
         out *= action[i][:, None, :]
 
+    # a separable model under a stationary policy goes by blocks of states (_block_push,
+    # _blocked_backward); None where the MDP's products are dense
+    block = min(S, max(1, _BLOCK_ELEMENTS // (A * n_demos)))
+    blocked = (mdp.state_block_products(block, n_demos, np.exp(log_policy).ravel())
+               if separable and stationary else None)
     preds = ws.get("preds", (length, S, n_demos))
     shifts = ws.get("shifts", (length, n_demos))
     norms = ws.get("norms", (length, n_demos))
     preds[0] = np.exp(log_p0)[:, None]
-    preds[1:] = 0.0  # the pushes add into it
+    if blocked is None:
+        preds[1:] = 0.0  # the pushes add into it (the blocks write theirs)
+    else:
+        buf = ws.get("block", (A * block * n_demos,))  # a block's pairs, [a, s, n]
+        act = ws.get("act", (A, block, n_demos))  # a step's action part over a block
     preds_1d = preds.reshape(length, S * n_demos)
-    alpha = ws.get("alpha", (A, S, n_demos))
-    alpha_flat = alpha.reshape(A * S, n_demos)
-    alpha_1d = alpha.reshape(-1)
-    pair_weights = pi.ravel() if stationary else np.ones(A * S)  # alpha's sum: w alpha
-    push, expect = mdp.column_products(n_demos, pair_weights if stationary else None)
+    if blocked is None:
+        alpha = ws.get("alpha", (A, S, n_demos))
+        alpha_flat = alpha.reshape(A * S, n_demos)
+        alpha_1d = alpha.reshape(-1)
+        pair_weights = pi.ravel() if stationary else np.ones(A * S)  # alpha's sum: w alpha
+        push, expect = mdp.column_products(n_demos, pair_weights if stationary else None)
     closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
     closing[lengths - 1] = True
     single = len(chunks) == 1
@@ -685,12 +700,16 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
                     np.multiply(state, preds[t], out=u)
-                    np.multiply(action[:, None, :], u, out=alpha)
+                    if blocked is None:
+                        np.multiply(action[:, None, :], u, out=alpha)
                     since += 1
                     if closing[t]:  # the likelihood's own sum: sum_s e_t pred_t (pi' e'_t)
                         np.einsum("sn,sn->n", u, pi.T @ action, out=norms[t])
                     if t + 1 < length:
-                        push(alpha_1d, preds_1d[t + 1])
+                        if blocked is None:
+                            push(alpha_1d, preds_1d[t + 1])
+                        else:
+                            _block_push(blocked[0], u, action, preds[t + 1], buf, act)
                         if closing[t] or since >= every:
                             if not closing[t]:  # the pushed mass: alpha's sum without a
                                 # pass over alpha (see the module's numerics)
@@ -741,6 +760,11 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
             scale *= valid[:, None, :]
             last = lengths - 1
+        if blocked is not None:
+            occupancy, initial = _blocked_backward(
+                blocked[1], chunks, kept, local, scale, inv_norms, lengths if ragged else None,
+                pi, buf, act, ws)
+            return _finish(occupancy, initial, shifts, norms, valid if ragged else None)
         occupancy = np.zeros((A, S, n_demos))
         restart = pi[:, :, None] if stationary else 1.0  # pi beta when pi is folded into T
         beta = ws.get("beta", (A, S, n_demos))
@@ -787,14 +811,98 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             gamma *= weights[:, None]
             occupancy += gamma[0] if t1 - t0 == 1 else np.add.reduce(gamma, axis=0)
         initial = np.ascontiguousarray(gamma[0].sum(axis=0).T)
+    return _finish(occupancy.transpose(2, 1, 0), initial, shifts, norms, valid if ragged else None)
+
+
+def _finish(occupancy, initial, shifts, norms, valid) -> PosteriorStats | None:
+    """:class:`PosteriorStats` of the scaled pass from ``occupancy[n, s, a]`` and
+    ``initial[n, s]`` (views), its shifts and normalizers ``(T, N)`` and the mask of real steps
+    ``valid[t, n]`` (None: every step is real); None where they are not finite."""
     if not np.isfinite(occupancy.sum() + initial.sum()):  # (each entry is at most T)
         return None
     per_step = shifts + np.log(norms)
-    if ragged:
+    if valid is not None:
         per_step = np.where(valid, per_step, 0.0)
     return PosteriorStats(log_likelihood=per_step.sum(axis=0),
-                          occupancy=np.ascontiguousarray(occupancy.transpose(2, 1, 0)),
-                          initial=initial)
+                          occupancy=np.ascontiguousarray(occupancy),
+                          initial=np.ascontiguousarray(initial))
+
+
+def _block_push(push, u, action, out, buf, act) -> None:
+    """``out[s', n] = sum_{s, a} T[s, a, s'] pi(a | s) u[s, n] e'[a, n]``: the forward
+    pass's push of ``alpha = u e'`` (``u = e_t pred_t`` (S, N), ``e'`` the action part (A, N)),
+    block by block of next states (:meth:`TabularMDP.state_block_products`), so that alpha is
+    never formed whole; ``buf`` holds a block's pairs, ``act`` (A, block, N) gets ``e'``."""
+    S, n_demos = u.shape
+    A, block, _ = act.shape
+    np.copyto(act, action[:, None, :])  # then the block's products run over whole slabs
+    u_1d = u.reshape(-1)
+    for s0 in range(0, S, block):
+        m = min(block, S - s0)
+        flat = buf[:A * m * n_demos]
+        flat.fill(0.0)
+        push(s0, u_1d, flat)
+        b = flat.reshape(A, m, n_demos)
+        b *= act[:, :m]
+        np.add.reduce(b, axis=0, out=out[s0:s0 + m])
+
+
+def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi, buf, act,
+                      ws):
+    """The backward pass of a separable model under a stationary policy, block by block of
+    states (:meth:`TabularMDP.state_block_products`): ``(occupancy[n, s, a], initial[n, s])``
+    (views).
+
+    At step t, a block's ``pi beta_t[a, s, n]`` (``pi[a, s]`` at a demonstration's last step,
+    else ``pi`` times the expectation of ``g_{t+1}``) is multiplied by the action part
+    ``e'_t[a, n]`` into gamma; ``g_t = sends_t sum_a gamma`` goes back to step t - 1, and
+    gamma times the state weights ``scale_t e_t`` is the block's posterior. ``scale`` (T, S, N)
+    is ``pred_t / c_t`` (zero at padded steps), ``lengths`` None when every demonstration is as
+    long as the batch; ``buf`` holds a block's pairs, ``act`` (A, block, N) gets ``e'_t``;
+    ``ws`` is the thread's :class:`_Workspace`.
+    """
+    length, S, n_demos = scale.shape
+    A, block, _ = act.shape
+    occupancy = np.zeros((A, S, n_demos))
+    initial = np.empty((S, n_demos))
+    g_next, g_cur = ws.get("g", (S, n_demos)), ws.get("g2", (S, n_demos))
+    restart = pi[:, :, None]
+    for t0, t1 in reversed(chunks):
+        state, action = kept if kept is not None else local(t0, t1)[0]
+        # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real step;
+        # padded steps are zeroed and send nothing either)
+        sends = ws.get("sends", (t1 - t0, S, n_demos))
+        np.multiply(scale[t0:t1] > 0.0, inv_norms[t0:t1, None, :], out=sends)
+        sends *= state
+        # (L, S, N): the posterior is gamma times this
+        weights = np.multiply(scale[t0:t1], state, out=ws.get("weights", sends.shape))
+        for t in range(t1 - 1, t0 - 1, -1):
+            i = t - t0
+            ends = None if lengths is None else np.flatnonzero(lengths - 1 == t)
+            np.copyto(act, action[i][:, None, :])
+            g_1d = g_next.reshape(-1)
+            for s0 in range(0, S, block):
+                m = min(block, S - s0)
+                s1 = s0 + m
+                flat = buf[:A * m * n_demos]
+                b = flat.reshape(A, m, n_demos)
+                if t == length - 1:
+                    b[...] = restart[:, s0:s1]
+                else:
+                    flat.fill(0.0)
+                    expect(s0, g_1d, flat)
+                    if ends is not None and ends.size:
+                        b[:, :, ends] = restart[:, s0:s1]
+                b *= act[:, :m]
+                if t > 0:
+                    g = np.add.reduce(b, axis=0, out=g_cur[s0:s1])
+                    g *= sends[i, s0:s1]
+                b *= weights[i, s0:s1]
+                if t == 0:
+                    np.add.reduce(b, axis=0, out=initial[s0:s1])
+                occupancy[:, s0:s1] += b
+            g_next, g_cur = g_cur, g_next
+    return occupancy.transpose(2, 1, 0), initial.T
 
 
 def log_forward_backward(
