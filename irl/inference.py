@@ -613,24 +613,41 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     separable = (emissions.factors is None and len(chunks) > 1
                  and emissions.separable(0, 1) is not None)
     u = ws.get("u", (S, n_demos)) if separable else None
+
+    def separable_parts(t0, t1, name):
+        """``(state[t, s, n], action[t, a, n], shift[n, t], min_log)`` of steps t0..t1-1; the
+        state part formed in the workspace array ``name`` from its two factors where the model
+        has them (the products :meth:`~irl.observation.ObservationModel.separable_likelihoods`
+        forms, bit for bit, in the pass's layout), else views of the model's."""
+        kron = emissions.kronecker(t0, t1)
+        if kron is None:
+            state, action, shift, min_log = emissions.separable(t0, t1)
+            return np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1), shift, min_log
+        head, tail, action, shift, min_log = kron
+        state = ws.get(name, (t1 - t0, S, n_demos))
+        np.multiply(np.moveaxis(head, 0, -1)[:, :, None, :],
+                    np.moveaxis(tail, 0, -1)[:, None, :, :],
+                    out=state.reshape(t1 - t0, head.shape[-1], tail.shape[-1], n_demos))
+        return state, np.moveaxis(action, 0, -1), shift, min_log
+
     # the separable parts of every step, when small enough to hold for both passes
-    whole = (emissions.separable(0, length) if separable
+    whole = (separable_parts(0, length, "whole") if separable
              and n_demos * length * S <= _SEPARABLE_ELEMENTS else None)
 
     def local(t0, t1):
         """The chunk's local factors and the log of their smallest positive entry, ``(E[t, a,
         s, n], shift[n, t], min_log)``, or ``((state[t, s, n], action[t, a, n]), shift,
-        min_log)`` (views) when separable; None outside the safe range. ``E`` leaves out the
-        policy where it is folded into T."""
+        min_log)`` when separable (the state part valid until the next call); None outside
+        the safe range. ``E`` leaves out the policy where it is folded into T."""
         if separable:
             if whole is not None:
                 state, action, shift, min_log = whole
-                state, action, shift = state[:, t0:t1], action[:, t0:t1], shift[:, t0:t1]
+                state, action, shift = state[t0:t1], action[t0:t1], shift[:, t0:t1]
             else:
-                state, action, shift, min_log = emissions.separable(t0, t1)
+                state, action, shift, min_log = separable_parts(t0, t1, "state")
             if not np.all(np.isfinite(shift)) or min_log + log_pi_min < -F:
                 return None
-            return (np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1)), shift, min_log
+            return (state, action), shift, min_log
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
