@@ -7,7 +7,9 @@ exp(log O - shift[n, t])`` with ``shift[n, t] = max_{s, a} log O``. The scaled p
 batch's messages action-major with the demonstrations innermost, ``alpha[a, s, n]`` and
 ``pred[s, n]`` (its sparse products then read and write their blocks in place, and a state
 array broadcasts over the few actions as whole ``(S, N)`` slabs); its results are returned as
-``[n, s, a]`` like everything else.
+``[n, s, a]`` like everything else. Where it goes by blocks of states (a separable model under
+a stationary policy on a sparse MDP), a block's pairs are ``[a, s, n]`` over the block's
+states alone, and a step's ``(A, S, N)`` message is never held whole.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
 ``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
@@ -597,7 +599,12 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     When the observations are computed chunk by chunk (too many to keep) and the model's
     likelihoods are a state part times an action part
     (:meth:`~irl.observation.ObservationModel.separable_likelihoods`), ``E`` is never formed:
-    ``alpha_t / pi = (e_t pred_t) e'_t``.
+    ``alpha_t / pi = (e_t pred_t) e'_t``. Under a stationary policy on a sparse MDP such a
+    pass then goes by blocks of states (``_BLOCK_ELEMENTS``; :func:`_block_push`,
+    :func:`_blocked_backward`): a block's products, its action part and its sum over the
+    actions are done while its ``(A, block, N)`` pairs are in the cache, so that no ``(A, S,
+    N)`` message goes through memory, which at 100,000 states (33 MB for 10 demonstrations)
+    it would at every step, several times.
     """
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
@@ -686,8 +693,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     if blocked is None:
         preds[1:] = 0.0  # the pushes add into it (the blocks write theirs)
     else:
-        buf = ws.get("block", (A * block * n_demos,))  # a block's pairs, [a, s, n]
-        act = ws.get("act", (A, block, n_demos))  # a step's action part over a block
+        blocks = _Blocks(S, A, n_demos, block, ws)
     preds_1d = preds.reshape(length, S * n_demos)
     if blocked is None:
         alpha = ws.get("alpha", (A, S, n_demos))
@@ -726,7 +732,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                         if blocked is None:
                             push(alpha_1d, preds_1d[t + 1])
                         else:
-                            _block_push(blocked[0], u, action, preds[t + 1], buf, act)
+                            _block_push(blocked[0], u, action, preds[t + 1], blocks)
                         if closing[t] or since >= every:
                             if not closing[t]:  # the pushed mass: alpha's sum without a
                                 # pass over alpha (see the module's numerics)
@@ -780,7 +786,7 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
         if blocked is not None:
             occupancy, initial = _blocked_backward(
                 blocked[1], chunks, kept, local, scale, inv_norms, lengths if ragged else None,
-                pi, buf, act, ws)
+                pi, blocks, ws)
             return _finish(occupancy, initial, shifts, norms, valid if ragged else None)
         occupancy = np.zeros((A, S, n_demos))
         restart = pi[:, :, None] if stationary else 1.0  # pi beta when pi is folded into T
@@ -845,45 +851,81 @@ def _finish(occupancy, initial, shifts, norms, valid) -> PosteriorStats | None:
                           initial=np.ascontiguousarray(initial))
 
 
-def _block_push(push, u, action, out, buf, act) -> None:
+class _Blocks:
+    """The blocks of states of a blocked pass and the views of its scratch that each block
+    reads and writes, made once per pass (the loops then make few Python objects per block).
+
+    Attributes
+    ----------
+    spans : list of (int, int)
+        Each block's states ``s0..s1-1``.
+    pairs : list of ndarray
+        Each block's pairs, flat (``A m N``, one scratch array for all).
+    cubes : list of ndarray
+        The same as ``(A, m, N)``.
+    act : ndarray of shape (A, block, N)
+        A step's action part, repeated over a block's states.
+    acts : list of ndarray
+        Its ``(A, m, N)`` view for each block.
+    """
+
+    def __init__(self, S: int, A: int, n_demos: int, block: int, ws: _Workspace) -> None:
+        buf = ws.get("block", (A * block * n_demos,))
+        self.act = ws.get("act", (A, block, n_demos))
+        self.spans = [(s0, min(s0 + block, S)) for s0 in range(0, S, block)]
+        self.pairs = [buf[:A * (s1 - s0) * n_demos] for s0, s1 in self.spans]
+        self.cubes = [p.reshape(A, -1, n_demos) for p in self.pairs]
+        self.acts = [self.act[:, :s1 - s0] for s0, s1 in self.spans]
+
+    def rows(self, array: np.ndarray, axis: int = 0) -> list[np.ndarray]:
+        """The view of each block's states in ``array``, whose axis ``axis`` is the state."""
+        lead = (slice(None),) * axis
+        return [array[(*lead, slice(s0, s1))] for s0, s1 in self.spans]
+
+
+def _block_push(push, u, action, out, blocks: _Blocks) -> None:
     """``out[s', n] = sum_{s, a} T[s, a, s'] pi(a | s) u[s, n] e'[a, n]``: the forward
     pass's push of ``alpha = u e'`` (``u = e_t pred_t`` (S, N), ``e'`` the action part (A, N)),
     block by block of next states (:meth:`TabularMDP.state_block_products`), so that alpha is
-    never formed whole; ``buf`` holds a block's pairs, ``act`` (A, block, N) gets ``e'``."""
-    S, n_demos = u.shape
-    A, block, _ = act.shape
-    np.copyto(act, action[:, None, :])  # then the block's products run over whole slabs
+    never formed whole."""
+    np.copyto(blocks.act, action[:, None, :])  # then the block's products run over whole slabs
     u_1d = u.reshape(-1)
-    for s0 in range(0, S, block):
-        m = min(block, S - s0)
-        flat = buf[:A * m * n_demos]
+    for k, (s0, s1) in enumerate(blocks.spans):
+        flat, b = blocks.pairs[k], blocks.cubes[k]
         flat.fill(0.0)
-        push(s0, u_1d, flat)
-        b = flat.reshape(A, m, n_demos)
-        b *= act[:, :m]
-        np.add.reduce(b, axis=0, out=out[s0:s0 + m])
+        push(k, u_1d, flat)
+        b *= blocks.acts[k]
+        np.add.reduce(b, axis=0, out=out[s0:s1])
 
 
-def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi, buf, act,
-                      ws):
+def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi,
+                      blocks: _Blocks, ws):
     """The backward pass of a separable model under a stationary policy, block by block of
-    states (:meth:`TabularMDP.state_block_products`): ``(occupancy[n, s, a], initial[n, s])``
-    (views).
+    states (:meth:`TabularMDP.state_block_products`): ``(occupancy[n, s, a], initial[n, s])``,
+    C-contiguous.
 
     At step t, a block's ``pi beta_t[a, s, n]`` (``pi[a, s]`` at a demonstration's last step,
     else ``pi`` times the expectation of ``g_{t+1}``) is multiplied by the action part
     ``e'_t[a, n]`` into gamma; ``g_t = sends_t sum_a gamma`` goes back to step t - 1, and
-    gamma times the state weights ``scale_t e_t`` is the block's posterior. ``scale`` (T, S, N)
+    gamma times the state weights ``scale_t e_t`` is the block's posterior. At step 0 a
+    block's occupancy is complete, and is written to the ``[n, s, a]`` result while it is in
+    the cache (a transposed copy of the whole ``(A, S, N)`` array afterwards reads it from
+    memory once per demonstration at large S). ``scale`` (T, S, N)
     is ``pred_t / c_t`` (zero at padded steps), ``lengths`` None when every demonstration is as
-    long as the batch; ``buf`` holds a block's pairs, ``act`` (A, block, N) gets ``e'_t``;
-    ``ws`` is the thread's :class:`_Workspace`.
+    long as the batch; ``ws`` is the thread's :class:`_Workspace`.
     """
     length, S, n_demos = scale.shape
-    A, block, _ = act.shape
-    occupancy = np.zeros((A, S, n_demos))
-    initial = np.empty((S, n_demos))
+    A = pi.shape[0]
+    occupancy = ws.get("occupancy", (A, S, n_demos))
+    occupancy.fill(0.0)
+    result = np.empty((n_demos, S, A))
+    initial = np.empty((n_demos, S))
     g_next, g_cur = ws.get("g", (S, n_demos)), ws.get("g2", (S, n_demos))
-    restart = pi[:, :, None]
+    restarts = blocks.rows(pi[:, :, None], axis=1)
+    occupancies = blocks.rows(occupancy, axis=1)
+    results = [r.transpose(2, 1, 0) for r in blocks.rows(result, axis=1)]  # [a, s, n] views
+    initials = [r.T for r in blocks.rows(initial, axis=1)]
+    g_rows = {id(g): blocks.rows(g) for g in (g_next, g_cur)}
     for t0, t1 in reversed(chunks):
         state, action = kept if kept is not None else local(t0, t1)[0]
         # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real step;
@@ -896,30 +938,32 @@ def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi
         for t in range(t1 - 1, t0 - 1, -1):
             i = t - t0
             ends = None if lengths is None else np.flatnonzero(lengths - 1 == t)
-            np.copyto(act, action[i][:, None, :])
+            if ends is not None and not ends.size:
+                ends = None
+            np.copyto(blocks.act, action[i][:, None, :])
             g_1d = g_next.reshape(-1)
-            for s0 in range(0, S, block):
-                m = min(block, S - s0)
-                s1 = s0 + m
-                flat = buf[:A * m * n_demos]
-                b = flat.reshape(A, m, n_demos)
+            sends_t, weights_t, g_out = sends[i], weights[i], g_rows[id(g_cur)]
+            for k, (s0, s1) in enumerate(blocks.spans):
+                flat, b = blocks.pairs[k], blocks.cubes[k]
                 if t == length - 1:
-                    b[...] = restart[:, s0:s1]
+                    b[...] = restarts[k]
                 else:
                     flat.fill(0.0)
-                    expect(s0, g_1d, flat)
-                    if ends is not None and ends.size:
-                        b[:, :, ends] = restart[:, s0:s1]
-                b *= act[:, :m]
+                    expect(k, g_1d, flat)
+                    if ends is not None:
+                        b[:, :, ends] = restarts[k]
+                b *= blocks.acts[k]
                 if t > 0:
-                    g = np.add.reduce(b, axis=0, out=g_cur[s0:s1])
-                    g *= sends[i, s0:s1]
-                b *= weights[i, s0:s1]
+                    g = np.add.reduce(b, axis=0, out=g_out[k])
+                    g *= sends_t[s0:s1]
+                b *= weights_t[s0:s1]
                 if t == 0:
-                    np.add.reduce(b, axis=0, out=initial[s0:s1])
-                occupancy[:, s0:s1] += b
+                    np.add.reduce(b, axis=0, out=initials[k])
+                    np.add(occupancies[k], b, out=results[k])
+                else:
+                    occupancies[k] += b
             g_next, g_cur = g_cur, g_next
-    return occupancy.transpose(2, 1, 0), initial.T
+    return result, initial
 
 
 def log_forward_backward(

@@ -238,9 +238,9 @@ class TabularMDP:
 
         Block k holds the ``m`` states from ``s0 = k block``, its pairs laid out ``[a, s - s0,
         n]`` (action-major within the block, so that a state array broadcasts over its actions
-        as whole ``(m, n)`` slabs). ``push(s0, values, out)`` adds to ``out[a, s' - s0, n]``
-        the mass that ``values[s, n]`` (S, n) sends to each ``s'`` of the block through action
-        a, ``sum_s T[s, a, s'] w[s, a] values[s, n]``; ``expect(s0, values, out)`` adds ``w[s,
+        as whole ``(m, n)`` slabs). ``push(k, values, out)`` adds to ``out[a, s' - s0, n]``
+        the mass that ``values[s, n]`` (S, n) sends to each ``s'`` of block k through action
+        a, ``sum_s T[s, a, s'] w[s, a] values[s, n]``; ``expect(k, values, out)`` adds ``w[s,
         a] sum_s' T[s, a, s'] values[s', n]`` to ``out[a, s - s0, n]``. ``w`` is
         ``pair_weights`` (S A,), indexed ``s * A + a``; all arrays are flat views of
         C-contiguous ones.
@@ -257,17 +257,15 @@ class TabularMDP:
         f_data = fwd.data * pair_weights[fwd_pairs]
         b_data = bwd.data * pair_weights[bwd_pairs]
         A, S = self.n_actions, self.n_states
-        f_ptr, f_idx, b_ptr, b_idx = fwd.indptr, fwd.indices, bwd.indptr, bwd.indices
+        rows = [(s0 * A, min(s0 + block, S) * A) for s0 in range(0, S, block)]
+        f_args = [(r1 - r0, S, n, fwd.indptr[r0:r1 + 1], fwd.indices, f_data) for r0, r1 in rows]
+        b_args = [(r1 - r0, S, n, bwd.indptr[r0:r1 + 1], bwd.indices, b_data) for r0, r1 in rows]
 
-        def push(s0, values, out):
-            s1 = min(s0 + block, S)
-            _csr_matvecs((s1 - s0) * A, S, n, f_ptr[s0 * A:s1 * A + 1], f_idx, f_data,
-                         values, out)
+        def push(k, values, out):
+            _csr_matvecs(*f_args[k], values, out)
 
-        def expect(s0, values, out):
-            s1 = min(s0 + block, S)
-            _csr_matvecs((s1 - s0) * A, S, n, b_ptr[s0 * A:s1 * A + 1], b_idx, b_data,
-                         values, out)
+        def expect(k, values, out):
+            _csr_matvecs(*b_args[k], values, out)
 
         return push, expect
 

@@ -263,13 +263,13 @@ def test_state_block_products_equal_the_column_ones(block, rng):
     push, expect = mdp.state_block_products(block, 4, w)
     pushed = np.ones((5, 3, 4))  # [s', a, n]: the mass through each action
     expected = np.ones((3, 5, 4))  # [a, s, n]
-    for s0 in range(0, 5, block):
+    for k, s0 in enumerate(range(0, 5, block)):
         m = min(block, 5 - s0)
         out = np.ones(3 * m * 4)
-        push(s0, values.ravel(), out)
+        push(k, values.ravel(), out)
         pushed[s0:s0 + m] = out.reshape(3, m, 4).transpose(1, 0, 2)
         out = np.ones(3 * m * 4)
-        expect(s0, values.ravel(), out)
+        expect(k, values.ravel(), out)
         expected[:, s0:s0 + m] = out.reshape(3, m, 4)
     w_as = w.reshape(5, 3).T[:, :, None]  # [a, s, 1]
     for a in range(3):  # one action's mass at a time: what it sends through T
