@@ -926,15 +926,13 @@ def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi
     results = [r.transpose(2, 1, 0) for r in blocks.rows(result, axis=1)]  # [a, s, n] views
     initials = [r.T for r in blocks.rows(initial, axis=1)]
     g_rows = {id(g): blocks.rows(g) for g in (g_next, g_cur)}
+    # a block's sends and state weights, formed in the block's loop (in the cache)
+    block = blocks.act.shape[1]
+    sends_buf, weights_buf = (ws.get(name, (block, n_demos)) for name in ("sends", "weights"))
+    sends, weights = ([buf[:s1 - s0] for s0, s1 in blocks.spans]
+                      for buf in (sends_buf, weights_buf))
     for t0, t1 in reversed(chunks):
         state, action = kept if kept is not None else local(t0, t1)[0]
-        # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real step;
-        # padded steps are zeroed and send nothing either)
-        sends = ws.get("sends", (t1 - t0, S, n_demos))
-        np.multiply(scale[t0:t1] > 0.0, inv_norms[t0:t1, None, :], out=sends)
-        sends *= state
-        # (L, S, N): the posterior is gamma times this
-        weights = np.multiply(scale[t0:t1], state, out=ws.get("weights", sends.shape))
         for t in range(t1 - 1, t0 - 1, -1):
             i = t - t0
             ends = None if lengths is None else np.flatnonzero(lengths - 1 == t)
@@ -942,9 +940,16 @@ def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi
                 ends = None
             np.copyto(blocks.act, action[i][:, None, :])
             g_1d = g_next.reshape(-1)
-            sends_t, weights_t, g_out = sends[i], weights[i], g_rows[id(g_cur)]
+            scale_t, state_t, inv_t, g_out = scale[t], state[i], inv_norms[t], g_rows[id(g_cur)]
             for k, (s0, s1) in enumerate(blocks.spans):
                 flat, b = blocks.pairs[k], blocks.cubes[k]
+                # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real
+                # step; padded steps are zeroed and send nothing either); the posterior is
+                # gamma times the weights
+                sc, st, sends_k, weights_k = scale_t[s0:s1], state_t[s0:s1], sends[k], weights[k]
+                np.multiply(sc > 0.0, inv_t, out=sends_k)
+                sends_k *= st
+                np.multiply(sc, st, out=weights_k)
                 if t == length - 1:
                     b[...] = restarts[k]
                 else:
@@ -955,8 +960,8 @@ def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi
                 b *= blocks.acts[k]
                 if t > 0:
                     g = np.add.reduce(b, axis=0, out=g_out[k])
-                    g *= sends_t[s0:s1]
-                b *= weights_t[s0:s1]
+                    g *= sends_k
+                b *= weights_k
                 if t == 0:
                     np.add.reduce(b, axis=0, out=initials[k])
                     np.add(occupancies[k], b, out=results[k])
