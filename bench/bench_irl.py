@@ -3,6 +3,7 @@
     python bench/bench_irl.py              # everything (about 6 minutes on 2 cores)
     python bench/bench_irl.py --quick      # one repeat, S up to 40,000 (about 2 minutes)
     python bench/bench_irl.py --clock cpu  # CPU time instead of wall time (a shared machine)
+    python bench/bench_irl.py --scaling-only --clock cpu  # section 3 alone
 
 BLAS threads: the bench runs OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``, set before
 numpy loads, unless the variable is already set), the library and its baseline alike: at these
@@ -376,10 +377,15 @@ def main() -> None:
     parser.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                         help="what every timing reads: wall time (default), or this process's "
                              "CPU time, which leaves out waiting for a core on a shared machine")
+    parser.add_argument("--scaling-only", action="store_true",
+                        help="run section 3 alone (the scaling in S)")
     args = parser.parse_args()
     global CLOCK
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     repeats = 1 if args.quick else 3
+    if args.scaling_only:
+        bench_scaling(args.quick)
+        return
     bench_fit_sorting(repeats)
     bench_gradient_vs_occlusion(repeats)
     bench_scaling(args.quick)

@@ -7,7 +7,9 @@ exp(log O - shift[n, t])`` with ``shift[n, t] = max_{s, a} log O``. The scaled p
 batch's messages action-major with the demonstrations innermost, ``alpha[a, s, n]`` and
 ``pred[s, n]`` (its sparse products then read and write their blocks in place, and a state
 array broadcasts over the few actions as whole ``(S, N)`` slabs); its results are returned as
-``[n, s, a]`` like everything else.
+``[n, s, a]`` like everything else. Where it goes by blocks of states (a separable model under
+a stationary policy on a sparse MDP), a block's pairs are ``[a, s, n]`` over the block's
+states alone, and a step's ``(A, S, N)`` message is never held whole.
 
 A demonstration is a hidden Markov model over ``x_t = (s_t, a_t)``:
 ``P(x_1) = p0(s_1) pi(a_1 | s_1)``,
@@ -103,6 +105,11 @@ _NUMBA_FACTOR_ELEMENTS = 1 << 25
 _SEPARABLE_ELEMENTS = 1 << 24
 #: Largest scratch array (floats) a thread keeps between passes (8 MB).
 _WORKSPACE_ELEMENTS = 1 << 20
+#: Floats of one block of states (``block A N``) that the scaled pass computes at once
+#: where it goes by blocks (a separable model, a stationary policy, a sparse MDP; 1 MB, a
+#: core's L2 cache on the machine of docs/performance.md): the step's ``(A, S, N)`` message
+#: then stays in the cache at any S.
+_BLOCK_ELEMENTS = 1 << 17
 #: Largest ``N S A`` whose scaled pass renormalizes every few steps rather than at each.
 _LAZY_ELEMENTS = 1 << 16
 #: What the scaled pass returns when renormalizing at every step may keep it in range.
@@ -592,7 +599,12 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     When the observations are computed chunk by chunk (too many to keep) and the model's
     likelihoods are a state part times an action part
     (:meth:`~irl.observation.ObservationModel.separable_likelihoods`), ``E`` is never formed:
-    ``alpha_t / pi = (e_t pred_t) e'_t``.
+    ``alpha_t / pi = (e_t pred_t) e'_t``. Under a stationary policy on a sparse MDP such a
+    pass then goes by blocks of states (``_BLOCK_ELEMENTS``; :func:`_block_push`,
+    :func:`_blocked_backward`): a block's products, its action part and its sum over the
+    actions are done while its ``(A, block, N)`` pairs are in the cache, so that no ``(A, S,
+    N)`` message goes through memory, which at 100,000 states (33 MB for 10 demonstrations)
+    it would at every step, several times.
     """
     n_demos, length = shape
     S, A = mdp.n_states, mdp.n_actions
@@ -608,24 +620,41 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
     separable = (emissions.factors is None and len(chunks) > 1
                  and emissions.separable(0, 1) is not None)
     u = ws.get("u", (S, n_demos)) if separable else None
+
+    def separable_parts(t0, t1, name):
+        """``(state[t, s, n], action[t, a, n], shift[n, t], min_log)`` of steps t0..t1-1; the
+        state part formed in the workspace array ``name`` from its two factors where the model
+        has them (the products :meth:`~irl.observation.ObservationModel.separable_likelihoods`
+        forms, bit for bit, in the pass's layout), else views of the model's."""
+        kron = emissions.kronecker(t0, t1)
+        if kron is None:
+            state, action, shift, min_log = emissions.separable(t0, t1)
+            return np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1), shift, min_log
+        head, tail, action, shift, min_log = kron
+        state = ws.get(name, (t1 - t0, S, n_demos))
+        np.multiply(np.moveaxis(head, 0, -1)[:, :, None, :],
+                    np.moveaxis(tail, 0, -1)[:, None, :, :],
+                    out=state.reshape(t1 - t0, head.shape[-1], tail.shape[-1], n_demos))
+        return state, np.moveaxis(action, 0, -1), shift, min_log
+
     # the separable parts of every step, when small enough to hold for both passes
-    whole = (emissions.separable(0, length) if separable
+    whole = (separable_parts(0, length, "whole") if separable
              and n_demos * length * S <= _SEPARABLE_ELEMENTS else None)
 
     def local(t0, t1):
         """The chunk's local factors and the log of their smallest positive entry, ``(E[t, a,
         s, n], shift[n, t], min_log)``, or ``((state[t, s, n], action[t, a, n]), shift,
-        min_log)`` (views) when separable; None outside the safe range. ``E`` leaves out the
-        policy where it is folded into T."""
+        min_log)`` when separable (the state part valid until the next call); None outside
+        the safe range. ``E`` leaves out the policy where it is folded into T."""
         if separable:
             if whole is not None:
                 state, action, shift, min_log = whole
-                state, action, shift = state[:, t0:t1], action[:, t0:t1], shift[:, t0:t1]
+                state, action, shift = state[t0:t1], action[t0:t1], shift[:, t0:t1]
             else:
-                state, action, shift, min_log = emissions.separable(t0, t1)
+                state, action, shift, min_log = separable_parts(t0, t1, "state")
             if not np.all(np.isfinite(shift)) or min_log + log_pi_min < -F:
                 return None
-            return (np.moveaxis(state, 0, -1), np.moveaxis(action, 0, -1)), shift, min_log
+            return (state, action), shift, min_log
         blk = emissions.steps(t0, t1)
         if not blk.possible:
             return None  # a step no pair can emit: the log-space pass names it
@@ -652,17 +681,26 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             np.multiply(vec, policy, out=out)
         out *= action[i][:, None, :]
 
+    # a separable model under a stationary policy goes by blocks of states (_block_push,
+    # _blocked_backward); None where the MDP's products are dense
+    block = min(S, max(1, _BLOCK_ELEMENTS // (A * n_demos)))
+    blocked = (mdp.state_block_products(block, n_demos, np.exp(log_policy).ravel())
+               if separable and stationary else None)
     preds = ws.get("preds", (length, S, n_demos))
     shifts = ws.get("shifts", (length, n_demos))
     norms = ws.get("norms", (length, n_demos))
     preds[0] = np.exp(log_p0)[:, None]
-    preds[1:] = 0.0  # the pushes add into it
+    if blocked is None:
+        preds[1:] = 0.0  # the pushes add into it (the blocks write theirs)
+    else:
+        blocks = _Blocks(S, A, n_demos, block, ws)
     preds_1d = preds.reshape(length, S * n_demos)
-    alpha = ws.get("alpha", (A, S, n_demos))
-    alpha_flat = alpha.reshape(A * S, n_demos)
-    alpha_1d = alpha.reshape(-1)
-    pair_weights = pi.ravel() if stationary else np.ones(A * S)  # alpha's sum: w alpha
-    push, expect = mdp.column_products(n_demos, pair_weights if stationary else None)
+    if blocked is None:
+        alpha = ws.get("alpha", (A, S, n_demos))
+        alpha_flat = alpha.reshape(A * S, n_demos)
+        alpha_1d = alpha.reshape(-1)
+        pair_weights = pi.ravel() if stationary else np.ones(A * S)  # alpha's sum: w alpha
+        push, expect = mdp.column_products(n_demos, pair_weights if stationary else None)
     closing = np.zeros(length, dtype=bool)  # the steps at which some demonstration ends
     closing[lengths - 1] = True
     single = len(chunks) == 1
@@ -685,12 +723,16 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
                 for t in range(t0, t1):
                     state, action = E[0][t - t0], E[1][t - t0]
                     np.multiply(state, preds[t], out=u)
-                    np.multiply(action[:, None, :], u, out=alpha)
+                    if blocked is None:
+                        np.multiply(action[:, None, :], u, out=alpha)
                     since += 1
                     if closing[t]:  # the likelihood's own sum: sum_s e_t pred_t (pi' e'_t)
                         np.einsum("sn,sn->n", u, pi.T @ action, out=norms[t])
                     if t + 1 < length:
-                        push(alpha_1d, preds_1d[t + 1])
+                        if blocked is None:
+                            push(alpha_1d, preds_1d[t + 1])
+                        else:
+                            _block_push(blocked[0], u, action, preds[t + 1], blocks)
                         if closing[t] or since >= every:
                             if not closing[t]:  # the pushed mass: alpha's sum without a
                                 # pass over alpha (see the module's numerics)
@@ -741,6 +783,11 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             valid = np.arange(length)[:, None] < lengths[None, :]  # (T, N)
             scale *= valid[:, None, :]
             last = lengths - 1
+        if blocked is not None:
+            occupancy, initial = _blocked_backward(
+                blocked[1], chunks, kept, local, scale, inv_norms, lengths if ragged else None,
+                pi, blocks, ws)
+            return _finish(occupancy, initial, shifts, norms, valid if ragged else None)
         occupancy = np.zeros((A, S, n_demos))
         restart = pi[:, :, None] if stationary else 1.0  # pi beta when pi is folded into T
         beta = ws.get("beta", (A, S, n_demos))
@@ -787,14 +834,141 @@ def _scaled_forward_backward(mdp, log_policy, emissions: _Emissions, shape, leng
             gamma *= weights[:, None]
             occupancy += gamma[0] if t1 - t0 == 1 else np.add.reduce(gamma, axis=0)
         initial = np.ascontiguousarray(gamma[0].sum(axis=0).T)
+    return _finish(occupancy.transpose(2, 1, 0), initial, shifts, norms, valid if ragged else None)
+
+
+def _finish(occupancy, initial, shifts, norms, valid) -> PosteriorStats | None:
+    """:class:`PosteriorStats` of the scaled pass from ``occupancy[n, s, a]`` and
+    ``initial[n, s]`` (views), its shifts and normalizers ``(T, N)`` and the mask of real steps
+    ``valid[t, n]`` (None: every step is real); None where they are not finite."""
     if not np.isfinite(occupancy.sum() + initial.sum()):  # (each entry is at most T)
         return None
     per_step = shifts + np.log(norms)
-    if ragged:
+    if valid is not None:
         per_step = np.where(valid, per_step, 0.0)
     return PosteriorStats(log_likelihood=per_step.sum(axis=0),
-                          occupancy=np.ascontiguousarray(occupancy.transpose(2, 1, 0)),
-                          initial=initial)
+                          occupancy=np.ascontiguousarray(occupancy),
+                          initial=np.ascontiguousarray(initial))
+
+
+class _Blocks:
+    """The blocks of states of a blocked pass and the views of its scratch that each block
+    reads and writes, made once per pass (the loops then make few Python objects per block).
+
+    Attributes
+    ----------
+    spans : list of (int, int)
+        Each block's states ``s0..s1-1``.
+    pairs : list of ndarray
+        Each block's pairs, flat (``A m N``, one scratch array for all).
+    cubes : list of ndarray
+        The same as ``(A, m, N)``.
+    act : ndarray of shape (A, block, N)
+        A step's action part, repeated over a block's states.
+    acts : list of ndarray
+        Its ``(A, m, N)`` view for each block.
+    """
+
+    def __init__(self, S: int, A: int, n_demos: int, block: int, ws: _Workspace) -> None:
+        buf = ws.get("block", (A * block * n_demos,))
+        self.act = ws.get("act", (A, block, n_demos))
+        self.spans = [(s0, min(s0 + block, S)) for s0 in range(0, S, block)]
+        self.pairs = [buf[:A * (s1 - s0) * n_demos] for s0, s1 in self.spans]
+        self.cubes = [p.reshape(A, -1, n_demos) for p in self.pairs]
+        self.acts = [self.act[:, :s1 - s0] for s0, s1 in self.spans]
+
+    def rows(self, array: np.ndarray, axis: int = 0) -> list[np.ndarray]:
+        """The view of each block's states in ``array``, whose axis ``axis`` is the state."""
+        lead = (slice(None),) * axis
+        return [array[(*lead, slice(s0, s1))] for s0, s1 in self.spans]
+
+
+def _block_push(push, u, action, out, blocks: _Blocks) -> None:
+    """``out[s', n] = sum_{s, a} T[s, a, s'] pi(a | s) u[s, n] e'[a, n]``: the forward
+    pass's push of ``alpha = u e'`` (``u = e_t pred_t`` (S, N), ``e'`` the action part (A, N)),
+    block by block of next states (:meth:`TabularMDP.state_block_products`), so that alpha is
+    never formed whole."""
+    np.copyto(blocks.act, action[:, None, :])  # then the block's products run over whole slabs
+    u_1d = u.reshape(-1)
+    for k, (s0, s1) in enumerate(blocks.spans):
+        flat, b = blocks.pairs[k], blocks.cubes[k]
+        flat.fill(0.0)
+        push(k, u_1d, flat)
+        b *= blocks.acts[k]
+        np.add.reduce(b, axis=0, out=out[s0:s1])
+
+
+def _blocked_backward(expect, chunks, kept, local, scale, inv_norms, lengths, pi,
+                      blocks: _Blocks, ws):
+    """The backward pass of a separable model under a stationary policy, block by block of
+    states (:meth:`TabularMDP.state_block_products`): ``(occupancy[n, s, a], initial[n, s])``,
+    C-contiguous.
+
+    At step t, a block's ``pi beta_t[a, s, n]`` (``pi[a, s]`` at a demonstration's last step,
+    else ``pi`` times the expectation of ``g_{t+1}``) is multiplied by the action part
+    ``e'_t[a, n]`` into gamma; ``g_t = sends_t sum_a gamma`` goes back to step t - 1, and
+    gamma times the state weights ``scale_t e_t`` is the block's posterior. At step 0 a
+    block's occupancy is complete, and is written to the ``[n, s, a]`` result while it is in
+    the cache (a transposed copy of the whole ``(A, S, N)`` array afterwards reads it from
+    memory once per demonstration at large S). ``scale`` (T, S, N)
+    is ``pred_t / c_t`` (zero at padded steps), ``lengths`` None when every demonstration is as
+    long as the batch; ``ws`` is the thread's :class:`_Workspace`.
+    """
+    length, S, n_demos = scale.shape
+    A = pi.shape[0]
+    occupancy = ws.get("occupancy", (A, S, n_demos))
+    occupancy.fill(0.0)
+    result = np.empty((n_demos, S, A))
+    initial = np.empty((n_demos, S))
+    g_next, g_cur = ws.get("g", (S, n_demos)), ws.get("g2", (S, n_demos))
+    restarts = blocks.rows(pi[:, :, None], axis=1)
+    occupancies = blocks.rows(occupancy, axis=1)
+    results = [r.transpose(2, 1, 0) for r in blocks.rows(result, axis=1)]  # [a, s, n] views
+    initials = [r.T for r in blocks.rows(initial, axis=1)]
+    g_rows = {id(g): blocks.rows(g) for g in (g_next, g_cur)}
+    # a block's sends and state weights, formed in the block's loop (in the cache)
+    block = blocks.act.shape[1]
+    sends_buf, weights_buf = (ws.get(name, (block, n_demos)) for name in ("sends", "weights"))
+    sends, weights = ([buf[:s1 - s0] for s0, s1 in blocks.spans]
+                      for buf in (sends_buf, weights_buf))
+    for t0, t1 in reversed(chunks):
+        state, action = kept if kept is not None else local(t0, t1)[0]
+        for t in range(t1 - 1, t0 - 1, -1):
+            i = t - t0
+            ends = None if lengths is None else np.flatnonzero(lengths - 1 == t)
+            if ends is not None and not ends.size:
+                ends = None
+            np.copyto(blocks.act, action[i][:, None, :])
+            g_1d = g_next.reshape(-1)
+            scale_t, state_t, inv_t, g_out = scale[t], state[i], inv_norms[t], g_rows[id(g_cur)]
+            for k, (s0, s1) in enumerate(blocks.spans):
+                flat, b = blocks.pairs[k], blocks.cubes[k]
+                # unreachable states send nothing back (scale_t > 0 iff pred_t > 0 at a real
+                # step; padded steps are zeroed and send nothing either); the posterior is
+                # gamma times the weights
+                sc, st, sends_k, weights_k = scale_t[s0:s1], state_t[s0:s1], sends[k], weights[k]
+                np.multiply(sc > 0.0, inv_t, out=sends_k)
+                sends_k *= st
+                np.multiply(sc, st, out=weights_k)
+                if t == length - 1:
+                    b[...] = restarts[k]
+                else:
+                    flat.fill(0.0)
+                    expect(k, g_1d, flat)
+                    if ends is not None:
+                        b[:, :, ends] = restarts[k]
+                b *= blocks.acts[k]
+                if t > 0:
+                    g = np.add.reduce(b, axis=0, out=g_out[k])
+                    g *= sends_k
+                b *= weights_k
+                if t == 0:
+                    np.add.reduce(b, axis=0, out=initials[k])
+                    np.add(occupancies[k], b, out=results[k])
+                else:
+                    occupancies[k] += b
+            g_next, g_cur = g_cur, g_next
+    return result, initial
 
 
 def log_forward_backward(

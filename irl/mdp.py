@@ -231,6 +231,72 @@ class TabularMDP:
         return (lambda mass, out: _csr_matvecs(*f_args, mass, out),
                 lambda values, out: _csr_matvecs(*b_args, values, out))
 
+    def state_block_products(self, block: int, n: int, pair_weights: np.ndarray):
+        """``(push, expect)`` by blocks of ``block`` states, for a batch of n columns, or None
+        where the products do not go through scipy's CSR kernel (a dense MDP, or a scipy
+        without it).
+
+        Block k holds the ``m`` states from ``s0 = k block``, its pairs laid out ``[a, s - s0,
+        n]`` (action-major within the block, so that a state array broadcasts over its actions
+        as whole ``(m, n)`` slabs). ``push(k, values, out)`` adds to ``out[a, s' - s0, n]``
+        the mass that ``values[s, n]`` (S, n) sends to each ``s'`` of block k through action
+        a, ``sum_s T[s, a, s'] w[s, a] values[s, n]``; ``expect(k, values, out)`` adds ``w[s,
+        a] sum_s' T[s, a, s'] values[s', n]`` to ``out[a, s - s0, n]``. ``w`` is
+        ``pair_weights`` (S A,), indexed ``s * A + a``; all arrays are flat views of
+        C-contiguous ones.
+
+        Forward-backward with a stationary policy and separable observations computes a step
+        block by block this way, so that the ``(A, S, N)`` message of the step lives in the
+        cache instead of memory at any S: a block's products are rows of one operator (for the
+        push, ``T[s, a, s']`` re-indexed by ``(s', a)``), and the observation's parts are
+        applied to the block before it is summed over the actions.
+        """
+        if not self._products_sparse or _csr_matvecs is None:
+            return None
+        fwd, fwd_pairs, bwd, bwd_pairs = self._state_block_operators(block)
+        f_data = fwd.data * pair_weights[fwd_pairs]
+        b_data = bwd.data * pair_weights[bwd_pairs]
+        A, S = self.n_actions, self.n_states
+        rows = [(s0 * A, min(s0 + block, S) * A) for s0 in range(0, S, block)]
+        f_args = [(r1 - r0, S, n, fwd.indptr[r0:r1 + 1], fwd.indices, f_data) for r0, r1 in rows]
+        b_args = [(r1 - r0, S, n, bwd.indptr[r0:r1 + 1], bwd.indices, b_data) for r0, r1 in rows]
+
+        def push(k, values, out):
+            _csr_matvecs(*f_args[k], values, out)
+
+        def expect(k, values, out):
+            _csr_matvecs(*b_args[k], values, out)
+
+        return push, expect
+
+    def _state_block_operators(self, block: int):
+        """``(fwd, fwd_pairs, bwd, bwd_pairs)`` of :meth:`state_block_products` (kept per
+        block size): ``fwd`` holds ``T[s, a, s']`` in row ``(s', a)`` and column ``s``, ``bwd``
+        in row ``(s, a)`` and column ``s'``, as CSR with rows in the blocks' order, and
+        ``*_pairs`` the pair ``s * A + a`` of each stored entry."""
+        kept = self.__dict__.setdefault("_block_operators", {})
+        if block in kept:
+            return kept[block]
+        csr = sp.csr_matrix(self._flat, dtype=float)
+        csr.sum_duplicates()
+        csr.eliminate_zeros()
+        S, A = self.n_states, self.n_actions
+        rows = np.repeat(np.arange(S * A), np.diff(csr.indptr))  # s * A + a of each entry
+        states = np.arange(S)
+        start = states // block * block
+        local = (start * A + states - start)[:, None] + (
+            np.minimum(block, S - start)[:, None] * np.arange(A)[None, :])  # [s, a]
+        order = np.empty(S * A, dtype=np.int64)
+        order[local.ravel()] = np.arange(S * A)  # the pair in each block row
+        bwd = csr[order]
+        bwd_pairs = np.repeat(order, np.diff(bwd.indptr))
+        fwd = sp.csr_matrix((csr.data, (csr.indices * A + rows % A, rows // A)),
+                            shape=(S * A, S))[order]
+        fwd.sort_indices()
+        fwd_pairs = fwd.indices * A + np.repeat(order % A, np.diff(fwd.indptr))
+        kept[block] = (fwd, fwd_pairs, bwd, bwd_pairs)
+        return kept[block]
+
     @cached_property
     def _products_sparse(self) -> bool:
         """Whether forward-backward's products go through CSR: a sparse MDP, or a dense one

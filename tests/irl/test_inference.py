@@ -199,8 +199,15 @@ def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatc
 
     monkeypatch.setattr(om, "separable_likelihoods", counted)
     monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
-    for held in (1 << 24, 0):  # separable parts held for both passes, or computed in each
+    blocked = []
+    products = mdp.state_block_products
+    monkeypatch.setattr(mdp, "state_block_products", lambda *args: blocked.append(
+        products(*args)) or blocked[-1])
+    # separable parts held for both passes, or computed in each; a sparse MDP's blocked pass
+    # by blocks of 1, 2, 5 (then a short one of 1) and all 6 states (A = 3, one batch of 4)
+    for held, block in ((1 << 24, 1), (0, 2 * 3 * 4), (1 << 24, 5 * 3 * 4), (0, 1 << 17)):
         monkeypatch.setattr(irl.inference, "_SEPARABLE_ELEMENTS", held)
+        monkeypatch.setattr(irl.inference, "_BLOCK_ELEMENTS", block)
         chunked = posterior_stats(mdp, np.log(pi), demos, om)
         chunked_timed = forward_backward(mdp, np.log(pis), obs, om)
         assert any(separable) == (kind in ("factored", "state"))
@@ -212,6 +219,8 @@ def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatc
                                    rtol=1e-12)
         np.testing.assert_allclose(chunked_timed.occupancy, timed.occupancy, rtol=1e-12,
                                    atol=1e-14)
+    # the stationary policy's separable batches went by blocks where T is sparse
+    assert any(b is not None for b in blocked) == (sparse and kind in ("factored", "state"))
 
 
 @pytest.mark.parametrize("sparse", [False, True])
@@ -240,6 +249,37 @@ def test_column_kernels_equal_the_batch_ones(sparse, rng):
         expect(np.ascontiguousarray(values.T).ravel(), out)
         expected = got if w is None else got * w.reshape(3, 5, 1)
         np.testing.assert_allclose(out.reshape(3, 5, 4), 1.0 + expected, rtol=1e-14)
+
+
+@pytest.mark.parametrize("block", [1, 2, 5])
+def test_state_block_products_equal_the_column_ones(block, rng):
+    """The products by blocks of states (pairs action-major within each block, the policy
+    folded in with weights indexed s * A + a) add what the column products compute."""
+    T = rng.dirichlet(np.ones(5), size=(5, 3))
+    T[T < 0.15] = 0.0
+    mdp = _mdp_of(T, sparse=True)
+    w = rng.random(15)  # [s * A + a]
+    values = rng.random((5, 4))  # [s', n]
+    push, expect = mdp.state_block_products(block, 4, w)
+    pushed = np.ones((5, 3, 4))  # [s', a, n]: the mass through each action
+    expected = np.ones((3, 5, 4))  # [a, s, n]
+    for k, s0 in enumerate(range(0, 5, block)):
+        m = min(block, 5 - s0)
+        out = np.ones(3 * m * 4)
+        push(k, values.ravel(), out)
+        pushed[s0:s0 + m] = out.reshape(3, m, 4).transpose(1, 0, 2)
+        out = np.ones(3 * m * 4)
+        expect(k, values.ravel(), out)
+        expected[:, s0:s0 + m] = out.reshape(3, m, 4)
+    w_as = w.reshape(5, 3).T[:, :, None]  # [a, s, 1]
+    for a in range(3):  # one action's mass at a time: what it sends through T
+        only = np.zeros((3, 5, 4))
+        only[a] = values * w_as[a]
+        np.testing.assert_allclose(pushed[:, a], 1.0 + pushed_of(mdp, only), rtol=1e-14)
+    got = mdp.expect_next_columns(values, out=np.empty((3, 5, 4)))
+    np.testing.assert_allclose(expected, 1.0 + got * w_as, rtol=1e-14)
+    assert _mdp_of(np.full((5, 3, 5), 0.2), sparse=False).state_block_products(
+        block, 4, w) is None  # a dense MDP's products stay dense
 
 
 def pushed_of(mdp, columns):
