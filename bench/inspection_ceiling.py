@@ -13,6 +13,8 @@ factor and the sessions read backwards:
   onion's visible pixels), "none" where it shows none, and "unclear" (probability 1/2) where it
   shows a trace below that. A blemished onion whose rot faces away or lies under the hand in
   every view is still read good: this is the ceiling of any classifier of the views;
+- **a detector of any rot pixel**: the same, with a trace below that share read "rot" too
+  (one rot pixel is enough; past any camera's resolution at ``hard``'s contrast and noise);
 - **a perfect class reader**: each view says the onion's class, as if rot were always in view.
 
 The gap between the models and the perfect rot detector is what a better classifier can win;
@@ -40,13 +42,15 @@ from onionsort.stages.models import PerceptionModels
 from perception.inspection import Inspector, _digest, rot_label
 from recordings.dataset import read_split, split_names
 
-#: what a view read from the truth says, per rot label (1 rot, 0 none, -1 a trace)
-_READ = {1: 0.99, 0: 0.01, -1: 0.5}
+#: what a view read from the truth says, per rot label (1 rot, 0 none, -1 a trace), per mode
+_READ = {"rot": {1: 0.99, 0: 0.01, -1: 0.5}, "trace": {1: 0.99, 0: 0.01, -1: 0.99}}
+_CLASS = {False: 0.01, True: 0.99}
 
 
 def truth_table(root: Path, split: str, mode: str) -> dict[str, float | None]:
     """Per inspection view of ``split`` (by its digest): the probability a perfect reader
-    gives it (``mode`` ``"rot"`` or ``"class"``), None where it shows no onion."""
+    gives it (``mode`` ``"rot"``, ``"trace"`` or ``"class"``), None where it shows no
+    onion."""
     table: dict[str, float | None] = {}
     for name in split_names(split):
         for frame in read_split(root, name, view="inspection"):
@@ -57,14 +61,15 @@ def truth_table(root: Path, split: str, mode: str) -> dict[str, float | None]:
                 continue
             blemished = bool(rec["classes"][k])
             if mode == "class":
-                table[_digest([frame.color])] = _READ[int(blemished)]
+                table[_digest([frame.color])] = _CLASS[blemished]
                 continue
             rot = rec.get("rot_pixels")
             if rot is None:
                 raise SystemExit(f"{root} records no rot pixels; render it again with "
                                  "`onionsort dataset`")
             visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
-            table[_digest([frame.color])] = _READ[rot_label(rot[k], visible, blemished)]
+            table[_digest([frame.color])] = _READ[mode][rot_label(rot[k], visible,
+                                                                  blemished)]
     return table
 
 
@@ -103,17 +108,19 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     models = PerceptionModels.load(args.models, "cpu")
     rows = [("the models", models)]
-    for label, mode in (("a perfect rot detector", "rot"), ("a perfect class reader", "class")):
+    for label, mode in (("a perfect rot detector", "rot"), ("a detector of any rot pixel",
+                                                             "trace"),
+                        ("a perfect class reader", "class")):
         fields = {f.name: getattr(models, f.name) for f in dataclasses.fields(models)}
         rows.append((label, TruthModels(**fields, table=truth_table(args.data, args.split,
                                                                    mode))))
     print(f"{args.data} ({args.split}): the sorter's views read by")
-    print(f"  {'reader':<26}{'prediction':>12}{'after 1st insp.':>17}{'read backwards':>16}")
+    print(f"  {'reader':<29}{'prediction':>12}{'after 1st insp.':>17}{'read backwards':>16}")
     for label, m in rows:
         _, metrics = measure_perception(m, args.data, args.split)
         swaps = metrics["session_swaps"]
         after = metrics["prediction_after_first_inspection"]
-        print(f"  {label:<26}{metrics['accuracy']['prediction']:>12.3f}"
+        print(f"  {label:<29}{metrics['accuracy']['prediction']:>12.3f}"
               f"{'-' if after is None else f'{after:.3f}':>17}"
               f"{swaps['swapped']:>9d} of {swaps['sessions']:<3d}")
     return 0

@@ -29,6 +29,10 @@ def test_the_truth_tables_read_rot_only_where_the_onion_is_blemished(paper):
     # rot is read only on a blemished onion; a blemished one may show none
     assert all(cls[k] == 0.99 for k in shown if rot[k] == 0.99)
     assert all(rot[k] == 0.01 for k in shown if cls[k] == 0.01)
+    # a detector of any rot pixel reads a trace as rot, and agrees with the rot detector
+    # everywhere else
+    trace = truth_table(paper, "all", "trace")
+    assert all(trace[k] == (0.99 if rot[k] == 0.5 else rot[k]) for k in shown)
 
 
 def test_a_perfect_class_reader_reads_no_session_backwards(paper):
