@@ -42,35 +42,36 @@ from onionsort.stages.models import PerceptionModels
 from perception.inspection import Inspector, _digest, rot_label
 from recordings.dataset import read_split, split_names
 
-#: what a view read from the truth says, per rot label (1 rot, 0 none, -1 a trace), per mode
-_READ = {"rot": {1: 0.99, 0: 0.01, -1: 0.5}, "trace": {1: 0.99, 0: 0.01, -1: 0.99}}
-_CLASS = {False: 0.01, True: 0.99}
+#: what a view read from the truth says, per reader: by its rot label (1 rot, 0 none, -1 a
+#: trace) for the rot detectors, by the onion's class (0 good, 1 blemished) for the class reader
+_READ = {"rot": {1: 0.99, 0: 0.01, -1: 0.5}, "trace": {1: 0.99, 0: 0.01, -1: 0.99},
+         "class": {0: 0.01, 1: 0.99}}
 
 
-def truth_table(root: Path, split: str, mode: str) -> dict[str, float | None]:
-    """Per inspection view of ``split`` (by its digest): the probability a perfect reader
-    gives it (``mode`` ``"rot"``, ``"trace"`` or ``"class"``), None where it shows no
-    onion."""
-    table: dict[str, float | None] = {}
+def truth_tables(root: Path, split: str) -> dict[str, dict[str, float | None]]:
+    """Per reader (``"rot"``, ``"trace"``, ``"class"``; :data:`_READ`), per inspection view of
+    ``split`` (by its digest): the probability that perfect reader gives it, None where it
+    shows no onion. One pass over the views."""
+    tables: dict[str, dict[str, float | None]] = {mode: {} for mode in _READ}
     for name in split_names(split):
         for frame in read_split(root, name, view="inspection"):
-            rec = frame.record
+            rec, digest = frame.record, _digest([frame.color])
             k = _held_onion(rec)
             if k is None:
-                table[_digest([frame.color])] = None
-                continue
-            blemished = bool(rec["classes"][k])
-            if mode == "class":
-                table[_digest([frame.color])] = _CLASS[blemished]
+                for table in tables.values():
+                    table[digest] = None
                 continue
             rot = rec.get("rot_pixels")
             if rot is None:
                 raise SystemExit(f"{root} records no rot pixels; render it again with "
                                  "`onionsort dataset`")
+            blemished = bool(rec["classes"][k])
             visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
-            table[_digest([frame.color])] = _READ[mode][rot_label(rot[k], visible,
-                                                                  blemished)]
-    return table
+            label = {"class": int(blemished), "rot": rot_label(rot[k], visible, blemished)}
+            label["trace"] = label["rot"]
+            for mode, table in tables.items():
+                table[digest] = _READ[mode][label[mode]]
+    return tables
 
 
 class TruthInspector(Inspector):
@@ -95,6 +96,12 @@ class TruthModels(PerceptionModels):
 
     table: dict = dataclasses.field(default_factory=dict)
 
+    @classmethod
+    def reading(cls, models: PerceptionModels, table: dict) -> TruthModels:
+        """``models`` (loaded), their sorter's views read from ``table``."""
+        return cls(**{f.name: getattr(models, f.name) for f in dataclasses.fields(models)},
+                   table=table)
+
     def inspector(self, **kwargs):
         return TruthInspector(super().inspector(**kwargs), self.table)
 
@@ -107,13 +114,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="models folder (default: the shipped models)")
     args = parser.parse_args(argv)
     models = PerceptionModels.load(args.models, "cpu")
-    rows = [("the models", models)]
-    for label, mode in (("a perfect rot detector", "rot"), ("a detector of any rot pixel",
-                                                             "trace"),
-                        ("a perfect class reader", "class")):
-        fields = {f.name: getattr(models, f.name) for f in dataclasses.fields(models)}
-        rows.append((label, TruthModels(**fields, table=truth_table(args.data, args.split,
-                                                                   mode))))
+    tables = truth_tables(args.data, args.split)
+    rows = [("the models", models)] + [
+        (label, TruthModels.reading(models, tables[mode]))
+        for label, mode in (("a perfect rot detector", "rot"),
+                            ("a detector of any rot pixel", "trace"),
+                            ("a perfect class reader", "class"))]
     print(f"{args.data} ({args.split}): the sorter's views read by")
     print(f"  {'reader':<29}{'prediction':>12}{'after 1st insp.':>17}{'read backwards':>16}")
     for label, m in rows:

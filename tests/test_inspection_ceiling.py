@@ -1,11 +1,9 @@
 """``bench/inspection_ceiling.py``: the sorter's views read from the renderer's truth (the
 measurement itself: docs/perception.md)."""
 
-import dataclasses
-
 import pytest
 
-from bench.inspection_ceiling import TruthModels, truth_table
+from bench.inspection_ceiling import TruthModels, truth_tables
 from onionsort.cli import main as onionsort
 from onionsort.stages.calibrate import measure_perception
 from onionsort.stages.models import PerceptionModels
@@ -21,7 +19,8 @@ def paper(tmp_path_factory):
 
 
 def test_the_truth_tables_read_rot_only_where_the_onion_is_blemished(paper):
-    rot, cls = truth_table(paper, "all", "rot"), truth_table(paper, "all", "class")
+    tables = truth_tables(paper, "all")
+    rot, cls = tables["rot"], tables["class"]
     assert rot.keys() == cls.keys()
     shown = [k for k, v in cls.items() if v is not None]
     assert shown and {cls[k] for k in shown} <= {0.01, 0.99}
@@ -31,20 +30,19 @@ def test_the_truth_tables_read_rot_only_where_the_onion_is_blemished(paper):
     assert all(rot[k] == 0.01 for k in shown if cls[k] == 0.01)
     # a detector of any rot pixel reads a trace as rot, and agrees with the rot detector
     # everywhere else
-    trace = truth_table(paper, "all", "trace")
+    trace = tables["trace"]
     assert all(trace[k] == (0.99 if rot[k] == 0.5 else rot[k]) for k in shown)
 
 
 def test_a_perfect_class_reader_reads_no_session_backwards(paper):
     models = PerceptionModels.load(None, "cpu")
-    fields = {f.name: getattr(models, f.name) for f in dataclasses.fields(models)}
-    truth = TruthModels(**fields, table=truth_table(paper, "all", "class"))
+    truth = TruthModels.reading(models, truth_tables(paper, "all")["class"])
     _, read = measure_perception(truth, paper, "all")
     assert read["session_swaps"]["swapped"] == 0
     assert sum(read["session_swaps"]["swapped_reads"]) == 0
     # a view the table does not hold is an error that says so, not a silent guess
     with pytest.raises(SystemExit, match="not among"):
-        TruthModels(**fields, table={}).inspector().view_probabilities([paper_view(paper)])
+        TruthModels.reading(models, {}).inspector().view_probabilities([paper_view(paper)])
 
 
 def paper_view(root):
