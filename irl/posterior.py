@@ -331,10 +331,12 @@ def _greedy_policies(mdp: TabularMDP, theta: np.ndarray) -> np.ndarray:
     return np.stack([solver.solve(t).policy for t in theta]).astype(np.int64)
 
 
-def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, max_draws, rng):
+def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, max_draws, rng,
+                max_gradients=None):
     """HMC chains (mici's dynamic multinomial sampler) on ``z`` with ``theta = mean + chol z``,
     extended by ``n_draws`` at a time, at the warm-up's step size, while the split R-hat of a
-    weight exceeds 1.01 and fewer than ``max_draws`` draws a chain are held. Returns
+    weight exceeds 1.01, fewer than ``max_draws`` draws a chain are held and (where given)
+    fewer than ``max_gradients`` gradients have been taken. Returns
     ``(theta[chains, draws, K], statistics of every main draw, n_gradients)``."""
     import mici
 
@@ -357,6 +359,7 @@ def _run_chains(value_and_grad, mean, chol, *, n_chains, n_warmup, n_draws, max_
     stats = {k: np.asarray(stats[k]) for k in ("accept_stat", "diverging", "step_size")}
     step_size = float(np.mean(stats["step_size"][:, -1]))
     while (z.shape[1] + n_draws <= max_draws
+           and (max_gradients is None or counter[0] < max_gradients)
            and max(split_rhat(z[:, :, k]) for k in range(K)) > 1.01):
         logger.info("extending the chains by %d draws (max R-hat above 1.01)", n_draws)
         states, more, more_stats = mici.sample_hmc_chains(
@@ -471,11 +474,12 @@ def sample_posterior(
 
 
 def _draw(value_and_grad, map_theta, prior_precision, n_samples, *, method, rng, n_chains,
-          n_warmup, n_draws, max_draws, step, laplace=None
+          n_warmup, n_draws, max_draws, step, laplace=None, max_gradients=None
           ) -> tuple[np.ndarray, Diagnostics, np.ndarray]:
     """``n_samples`` draws round the mode ``map_theta`` of ``value_and_grad``: ``(theta,
     diagnostics, Laplace covariance)``. ``laplace``: the mode's
-    :func:`_laplace_covariance`, when already computed."""
+    :func:`_laplace_covariance`, when already computed; ``max_gradients``: the chains are not
+    extended past it (:func:`_run_chains`)."""
     cov, clipped, n_grad = laplace or _laplace_covariance(value_and_grad, map_theta,
                                                           prior_precision, step)
     chol = np.linalg.cholesky(cov)
@@ -487,7 +491,7 @@ def _draw(value_and_grad, map_theta, prior_precision, n_samples, *, method, rng,
             n_gradients=n_grad, hessian_clipped=clipped), cov
     chains, stats, n_chain_grad = _run_chains(
         value_and_grad, map_theta, chol, n_chains=n_chains, n_warmup=n_warmup,
-        n_draws=n_draws, max_draws=max_draws, rng=rng)
+        n_draws=n_draws, max_draws=max_draws, rng=rng, max_gradients=max_gradients)
     diagnostics = Diagnostics(
         r_hat=np.array([split_rhat(chains[:, :, k]) for k in range(map_theta.size)]),
         ess=np.array([effective_sample_size(chains[:, :, k]) for k in range(map_theta.size)]),
@@ -530,16 +534,17 @@ IMPORTANCE_PROPOSALS = 20
 #: are heavier than a Gaussian's.
 _PROPOSAL_DOF = 5.0
 
-#: Rounds of adaptation of a reading's importance proposal (population Monte Carlo) where its
-#: pilot, or all its proposals, fall short (see :func:`_importance_draws`). Fixed before any
-#: reading was measured: the first round moves the proposal to where the weight lies, from
-#: weights whose effective sample size may be a handful (the covariance then stays mostly the
-#: Laplace one); the second re-estimates centre and covariance from draws that now overlap the
-#: posterior. For a posterior of the Student-t family's shape two rounds of moment matching
-#: suffice; one they do not cover is skewed or has more than one mode, and further rounds of
-#: the same would not cover it either. Each round costs at most the proposals again, and is
-#: begun only where the attempt would still cost fewer evaluations than chains.
-IMPORTANCE_ADAPTATIONS = 2
+#: Rounds of adaptation, at most, of a reading's importance proposal (population Monte Carlo)
+#: where its pilot, or all its proposals, fall short (see :func:`_importance_draws`). The first
+#: round moves the proposal to where the weight lies, from weights whose effective sample size
+#: may be a handful (the covariance then stays mostly the Laplace one); the next ones
+#: re-estimate centre and covariance from draws that overlap the posterior more each time. A
+#: posterior far from its Laplace approximation can take several: on a reading of 62 samples
+#: of a `hard` demo (seed 7802, docs/performance.md) two rounds left the Pareto k at 0.69-0.86
+#: and four brought it to 0.41. What bounds the rounds is their cost: each costs at most the
+#: proposals again, and is begun only where the attempt would still cost fewer evaluations
+#: than chains; this cap only bounds the variates drawn beforehand.
+IMPORTANCE_ADAPTATIONS = 8
 
 
 def _resampled_ess(weights_ess: float, n: int) -> float:
@@ -584,7 +589,12 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     where the proposal misses part of the density, and ``k`` sees that tail. The resampling
     then draws from the Pareto-smoothed weights (the largest replaced by the fitted Pareto's
     expected order statistics), whose noise in the few weights that decide which proposals are
-    repeated is lower, at a bias the test on ``k`` keeps small. A pilot of a quarter of the
+    repeated is lower, at a bias the test on ``k`` keeps small. Where a whole set fails on
+    ``k`` alone, below 0.7, the same proposal first draws more, up to the fewest proposals
+    whose threshold is above that ``k`` (:func:`_psis_draws_for`; at most
+    :data:`_PSIS_CAP_DRAWS` in all), and the grown set is tested again: the remedy of
+    Vehtari et al. for ``1 - 1 / log10(S) <= k < 0.7``, where the estimate is reliable with
+    more draws. A pilot of a quarter of the
     proposals comes first, and the rest are weighed only where its ESS, times 4, reaches ``n``
     (its ``k`` is logged, not tested: from a quarter of the draws the fit of the tail is
     noisier, and the threshold is set for the set that is resampled). Where the pilot or all
@@ -602,7 +612,7 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     k)`` where the last proposal tried falls short too (the ESS returned is then its pilot's,
     times 4, or its weights', and ``k`` that of the weights it was from): it then misses too
     much of the posterior to stand for chains. The generator's draws are the same whatever the
-    outcome (every proposal's variates are drawn first)."""
+    outcome (every proposal's variates, its extension's included, are drawn first)."""
     K = mode.size
     nu = _PROPOSAL_DOF
     pilot = max(1, n_proposals // 4)
@@ -614,6 +624,10 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     offset = rng.random()  # of the systematic resampling, drawn whether or not it is used
     more = rng.standard_normal((IMPORTANCE_ADAPTATIONS, n_proposals, K))
     more *= np.sqrt(nu / rng.chisquare(nu, (IMPORTANCE_ADAPTATIONS, n_proposals)))[:, :, None]
+    # each proposal's own extension, where its set is smaller than the PSIS threshold's cap
+    grown = max(_PSIS_CAP_DRAWS - n_proposals, 0)
+    extra = rng.standard_normal((1 + IMPORTANCE_ADAPTATIONS, grown, K))
+    extra *= np.sqrt(nu / rng.chisquare(nu, (1 + IMPORTANCE_ADAPTATIONS, grown)))[:, :, None]
 
     def log_q(v):  # up to a constant of the proposal: -(nu + K) / 2 log(1 + |v|^2 / nu)
         return -0.5 * (nu + K) * np.log1p(np.sum(v * v, axis=1) / nu)
@@ -647,6 +661,23 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
                         "Pareto k %.2f (at most %.2f)", r, ess, n_proposals, n, k, k_max)
             if ess >= n and k < k_max:
                 break
+            size = _psis_draws_for(k)
+            if ess >= n and n_proposals < size <= n_proposals + grown \
+                    and (budget is None or n_weighed + size - n_proposals < budget):
+                # only k fails, and below 0.7: the same proposal's set grown to the size whose
+                # threshold k is under (PSIS's remedy for 1 - 1 / log10(S) <= k < 0.7)
+                rest, log_w_rest = proposed(centre, chol, extra[r, :size - n_proposals])
+                n_weighed += size - n_proposals
+                theta = np.vstack([theta, rest])
+                log_w = np.concatenate([log_w, log_w_rest])
+                w, ess = _normalized(log_w)
+                smoothed, k = _pareto_smoothed(log_w)
+                found = ess
+                logger.info("importance proposal %d: ESS %.1f of all %d proposals, grown for "
+                            "its Pareto k, for %d samples, Pareto k %.2f (at most %.2f)", r,
+                            ess, size, n, k, psis_khat_threshold(size))
+                if ess >= n and k < psis_khat_threshold(size):
+                    break
         if r == IMPORTANCE_ADAPTATIONS or ess == 0 \
                 or (budget is not None and n_weighed + n_proposals >= budget):
             return None, found, n_weighed, k
@@ -661,6 +692,19 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
     cum /= cum[-1]
     picks = np.searchsorted(cum, (offset + np.arange(n)) / n, side="right")
     return theta[np.minimum(picks, np.flatnonzero(smoothed)[-1])], ess, n_weighed, k
+
+
+#: The number of importance draws from which PSIS's threshold on ``k``, ``1 - 1 /
+#: log10(S)``, reaches its cap of 0.7: ``10^(1 / 0.3)``, rounded up.
+_PSIS_CAP_DRAWS = 2155
+
+
+def _psis_draws_for(k: float) -> int:
+    """The fewest importance draws whose PSIS threshold is above ``k``: ``S > 10^(1 / (1 -
+    k))`` for ``k`` below 0.7; more than :data:`_PSIS_CAP_DRAWS` (none suffices) from 0.7 on."""
+    if not k < 0.7:
+        return _PSIS_CAP_DRAWS + 1
+    return max(int(np.floor(10.0 ** (1.0 / (1.0 - k)))) + 1, 2)
 
 
 def _pareto_smoothed(log_w: np.ndarray) -> tuple[np.ndarray | None, float]:
@@ -691,9 +735,12 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
     Each reading gives its share of the samples (:func:`_apportion`). With ``"mcmc"``, a
     reading's chains first run ``n_draws`` scaled by its share, so that its samples are
     thinned from as many draws each as the plain posterior's, and are extended by as many at
-    a time while they disagree (R-hat), up to ``max_draws`` as without a swap; a reading that
-    holds every sample is drawn exactly as without a swap. The readings of least
-    weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
+    a time while they disagree (R-hat), up to ``max_draws`` as without a swap and, for a
+    reading other than the heaviest, while their gradients number fewer than the heaviest
+    reading's chains took: no lighter reading costs more than the heaviest, which costs
+    about what the plain posterior does (a reading's error enters the mixture times its
+    weight); a reading that holds every sample is drawn exactly as without a swap. The readings
+    of least weight, together at most :data:`LAPLACE_SHARE` of it, are drawn from their Laplace
     approximation (the Gaussian whose evidence gave their weight) instead of by chains of
     their own, each of which would cost a warm-up as long as the main reading's. The heaviest
     reading's chains run first; every other reading that would get chains is first drawn by
@@ -751,10 +798,9 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
             resampled, ess, weighed, k = _importance_draws(
                 value, theta_z, laplace[0], n, IMPORTANCE_PROPOSALS * n, draw["rng"],
                 budget=chain_cost)
-            logger.info("reading swapped %s: importance weights' ESS %.0f, Pareto k %.2f (at "
-                        "most %.2f; %d proposals weighed) for %d samples%s",
-                        list(fitted[i][0]), ess, k,
-                        psis_khat_threshold(IMPORTANCE_PROPOSALS * n), weighed, n,
+            logger.info("reading swapped %s: importance weights' ESS %.0f, Pareto k %.2f (%d "
+                        "proposals weighed in all) for %d samples%s",
+                        list(fitted[i][0]), ess, k, weighed, n,
                         "" if resampled is not None else ": chains instead")
         if resampled is not None:  # counted as the Gaussian draws are: sizes and costs
             thetas[i] = resampled
@@ -769,7 +815,8 @@ def _draw_swap_readings(estimator, demos, map_theta, prior_precision, n_samples,
         else:  # the first draws per chain scaled by the reading's share, extended by as
             # many at a time while the chains disagree, up to max_draws as without a swap
             scaled = max(-(-draw["n_draws"] * n // n_samples), 4)
-            opts = {**draw, "n_draws": scaled, "max_draws": max(scaled, draw["max_draws"])}
+            opts = {**draw, "n_draws": scaled, "max_draws": max(scaled, draw["max_draws"]),
+                    "max_gradients": chain_cost}  # None for the heaviest
         thetas[i], diag, _ = _draw(value_and_grad, theta_z, prior_precision, n,
                                    laplace=laplace, **opts)
         diag = replace(diag, n_gradients=diag.n_gradients + weighed)  # a proposal that failed

@@ -369,6 +369,69 @@ def test_a_proposal_with_too_light_tails_is_refused_by_pareto_k_where_kish_ess_p
     assert len(whole) == 1 and f"Pareto k {k:.2f} (at most 0.70)" in whole[0]
 
 
+def _student_t(nu):
+    """A 2-D Student-t of ``nu`` degrees of freedom round 0, unit scale, up to a constant."""
+    return lambda t: -0.5 * (nu + 2) * np.log1p(t @ t / nu)
+
+
+def test_a_set_that_fails_on_k_alone_below_07_is_grown_to_the_size_its_k_needs(
+        monkeypatch, caplog):
+    """PSIS's remedy where ``1 - 1 / log10(S) <= k < 0.7``: more draws. On this seed the t(3)
+    target's first 400 proposals (a t(5) proposal: lighter tails) reach the samples' ESS but
+    their k is above 400 draws' threshold, 0.62; the same proposal then draws up to the
+    fewest proposals whose threshold is above that k, and the grown set passes. Without room
+    to grow (the cap at 400), the same draws are refused."""
+    from irl import posterior
+    from irl.posterior import _psis_draws_for
+
+    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    with caplog.at_level("INFO", logger="irl.posterior"):
+        theta, ess, weighed, k = posterior._importance_draws(
+            _student_t(3.0), np.zeros(2), np.eye(2), 20, 400, np.random.default_rng(5))
+    first = [r.getMessage() for r in caplog.records if "of all 400 proposals" in r.getMessage()]
+    grown = [r.getMessage() for r in caplog.records if "grown for its Pareto k" in r.getMessage()]
+    assert len(first) == len(grown) == 1
+    k_first = float(first[0].split("Pareto k ")[1].split()[0])
+    assert psis_khat_threshold(400) <= k_first + 0.005 and k_first <= 0.7  # to 2 decimals
+    assert theta is not None and theta.shape == (20, 2) and ess >= 20
+    assert 400 < weighed <= 2155 and k < psis_khat_threshold(weighed)
+    # the fewest proposals whose threshold is above the first set's k (as logged)
+    assert _psis_draws_for(k_first - 0.005) <= weighed <= _psis_draws_for(k_first + 0.005)
+    monkeypatch.setattr(posterior, "_PSIS_CAP_DRAWS", 400)
+    refused = posterior._importance_draws(
+        _student_t(3.0), np.zeros(2), np.eye(2), 20, 400, np.random.default_rng(5))
+    assert refused[0] is None and refused[2] == 400
+
+
+def test_psis_draws_for_k_is_the_fewest_whose_threshold_is_above_it():
+    from irl.posterior import _PSIS_CAP_DRAWS, _psis_draws_for
+
+    for k in (-0.3, 0.0, 0.5, 0.6, 2 / 3, 0.69, 0.6999):
+        S = _psis_draws_for(k)
+        assert psis_khat_threshold(S) > k and not psis_khat_threshold(S - 1) > k
+    assert _psis_draws_for(0.6999) <= _PSIS_CAP_DRAWS
+    assert psis_khat_threshold(_PSIS_CAP_DRAWS) == 0.7 > psis_khat_threshold(_PSIS_CAP_DRAWS - 1)
+    for k in (0.7, 0.9, float("inf")):  # no size suffices
+        assert _psis_draws_for(k) > _PSIS_CAP_DRAWS
+
+
+def test_chains_are_not_extended_past_their_gradient_budget():
+    """A lighter reading's chains stop extending once they have taken the heaviest reading's
+    gradients (``max_gradients``), though their R-hat is still above 1.01; without it they
+    are extended while it is."""
+    from irl.posterior import _run_chains
+
+    def value_and_grad(theta):  # a standard normal
+        return -0.5 * float(theta @ theta), -theta
+
+    kw = {"n_chains": 4, "n_warmup": 20, "n_draws": 4, "max_draws": 200}
+    free = _run_chains(value_and_grad, np.zeros(2), np.eye(2), rng=np.random.default_rng(0), **kw)
+    assert free[0].shape[1] > 4  # 4 draws a chain: R-hat above 1.01, extended
+    capped = _run_chains(value_and_grad, np.zeros(2), np.eye(2), rng=np.random.default_rng(0),
+                         max_gradients=1, **kw)
+    assert capped[0].shape[:2] == (4, 4) and 1 < capped[2] < free[2]
+
+
 def test_pareto_smoothing_equals_arviz():
     """The smoothed log weights and the Pareto shape k equal ``arviz.psislw``'s (relative
     efficiency 1), on bounded weights (a Gaussian proposal wider than its target: k < 0), heavy
