@@ -423,7 +423,8 @@ def sample_posterior(
     without the swap on the demonstrations so read, weighted by its prior probability times
     its Laplace evidence, and drawn from as above in proportion to its weight
     (:attr:`Posterior.components`), its chains' ``n_draws`` scaled by its share of the
-    samples (and extended up to ``max_draws`` while they disagree); the lightest readings,
+    samples (and extended up to ``max_draws`` while they disagree, a reading other than the
+    heaviest while its gradients are fewer than the heaviest's); the lightest readings,
     together at most :data:`LAPLACE_SHARE` of the weight, are drawn from their Laplace
     approximation, and the others but the heaviest by importance resampling from it (adapted
     where it misses) where that is cheaper than chains and its effective sample size suffices
