@@ -637,6 +637,12 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
         theta = centre + v @ chol.T
         return theta, np.array([log_density(t) for t in theta], dtype=float) - log_q(v)
 
+    def joined(theta, log_w, v):  # a set and more of the current proposal's, weighed
+        rest, log_w_rest = proposed(centre, chol, v)
+        log_w = np.concatenate([log_w, log_w_rest])
+        return (np.vstack([theta, rest]), log_w, *_normalized(log_w),
+                *_pareto_smoothed(log_w))
+
     laplace_chol = np.linalg.cholesky(cov)
     centre, chol = mode, laplace_chol
     n_weighed = 0
@@ -651,12 +657,8 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
                     "of a pilot of %d (Pareto k %.2f), projected %.0f for %d samples", r,
                     moved, ess, pilot, k, found, n)
         if found >= n:  # the pilot suffices: the rest of this proposal's draws
-            rest, log_w_rest = proposed(centre, chol, v[pilot:])
+            theta, log_w, w, ess, smoothed, k = joined(theta, log_w, v[pilot:])
             n_weighed += n_proposals - pilot
-            theta = np.vstack([theta, rest])
-            log_w = np.concatenate([log_w, log_w_rest])
-            w, ess = _normalized(log_w)
-            smoothed, k = _pareto_smoothed(log_w)
             found = ess
             logger.info("importance proposal %d: ESS %.1f of all %d proposals for %d samples, "
                         "Pareto k %.2f (at most %.2f)", r, ess, n_proposals, n, k, k_max)
@@ -667,12 +669,9 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
                     and (budget is None or n_weighed + size - n_proposals < budget):
                 # only k fails, and below 0.7: the same proposal's set grown to the size whose
                 # threshold k is under (PSIS's remedy for 1 - 1 / log10(S) <= k < 0.7)
-                rest, log_w_rest = proposed(centre, chol, extra[r, :size - n_proposals])
+                theta, log_w, w, ess, smoothed, k = joined(
+                    theta, log_w, extra[r, :size - n_proposals])
                 n_weighed += size - n_proposals
-                theta = np.vstack([theta, rest])
-                log_w = np.concatenate([log_w, log_w_rest])
-                w, ess = _normalized(log_w)
-                smoothed, k = _pareto_smoothed(log_w)
                 found = ess
                 logger.info("importance proposal %d: ESS %.1f of all %d proposals, grown for "
                             "its Pareto k, for %d samples, Pareto k %.2f (at most %.2f)", r,
