@@ -3,7 +3,7 @@
 A session is *read backwards* when more than half of its reads of the onion's class are the
 other class (:func:`onionsort.stages.calibrate.session_swaps`). Those reads come from the
 sorter's inspection views, fused as they come
-(:func:`state_abstraction.perceive.track_predictions`). This script perceives a dataset three
+(:func:`state_abstraction.perceive.track_predictions`). This script perceives a dataset four
 ways, the state classifier and the fusion unchanged, and prints, for each, the prediction
 factor and the sessions read backwards:
 

@@ -50,6 +50,7 @@ from irl.learners.birl import MAPBIRL, MMAPBIRL
 from irl.mdp import TabularMDP
 from irl.solvers import OptimalQSolver, solve_policy_derivatives
 from irl.stats import (
+    PSIS_KHAT_MAX,
     effective_sample_size,
     pareto_smoothed,
     psis_khat_threshold,
@@ -665,7 +666,7 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
             if ess >= n and k < k_max:
                 break
             size = _psis_draws_for(k)
-            if ess >= n and n_proposals < size <= n_proposals + grown \
+            if ess >= n and n_proposals < size <= _PSIS_CAP_DRAWS \
                     and (budget is None or n_weighed + size - n_proposals < budget):
                 # only k fails, and below 0.7: the same proposal's set grown to the size whose
                 # threshold k is under (PSIS's remedy for 1 - 1 / log10(S) <= k < 0.7)
@@ -695,14 +696,16 @@ def _importance_draws(log_density, mode, cov, n, n_proposals, rng, budget=None):
 
 
 #: The number of importance draws from which PSIS's threshold on ``k``, ``1 - 1 /
-#: log10(S)``, reaches its cap of 0.7: ``10^(1 / 0.3)``, rounded up.
-_PSIS_CAP_DRAWS = 2155
+#: log10(S)``, reaches its cap :data:`~irl.stats.PSIS_KHAT_MAX`: ``10^(1 / (1 - 0.7))``,
+#: rounded up (2,155).
+_PSIS_CAP_DRAWS = int(np.ceil(10.0 ** (1.0 / (1.0 - PSIS_KHAT_MAX))))
 
 
 def _psis_draws_for(k: float) -> int:
     """The fewest importance draws whose PSIS threshold is above ``k``: ``S > 10^(1 / (1 -
-    k))`` for ``k`` below 0.7; more than :data:`_PSIS_CAP_DRAWS` (none suffices) from 0.7 on."""
-    if not k < 0.7:
+    k))`` for ``k`` below the cap 0.7; more than :data:`_PSIS_CAP_DRAWS` (none suffices) from
+    the cap on."""
+    if not k < PSIS_KHAT_MAX:
         return _PSIS_CAP_DRAWS + 1
     return max(int(np.floor(10.0 ** (1.0 / (1.0 - k)))) + 1, 2)
 

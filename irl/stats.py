@@ -22,8 +22,8 @@ from scipy import fft, special, stats
 from irl._random import check_random_state
 from irl._validation import check_int
 
-__all__ = ["bootstrap_ci", "effective_sample_size", "pareto_smoothed", "psis_khat_threshold",
-           "split_rhat"]
+__all__ = ["PSIS_KHAT_MAX", "bootstrap_ci", "effective_sample_size", "pareto_smoothed",
+           "psis_khat_threshold", "split_rhat"]
 
 
 def bootstrap_ci(
@@ -178,13 +178,18 @@ def effective_sample_size(draws) -> float:
     return _ess(_z_scale(_split_chains(_check_draws(draws))))
 
 
+#: The Pareto shape ``k`` above which no practical number of importance draws gives a
+#: reliable estimate (Vehtari et al. 2024): :func:`psis_khat_threshold`'s cap.
+PSIS_KHAT_MAX = 0.7
+
+
 def psis_khat_threshold(n_draws: int) -> float:
     """The largest Pareto shape ``k`` for which ``n_draws`` importance draws give a reliable
     estimate: ``min(1 - 1 / log10(S), 0.7)`` (Vehtari et al. 2024: below it the estimate's error
     falls as for a finite variance within ``S`` draws; above 0.7 no practical ``S``
     suffices). At most 0 for fewer than 10 draws, which no ``k`` passes."""
     S = check_int(n_draws, "n_draws", low=1)
-    return min(1.0 - 1.0 / np.log10(S), 0.7) if S > 1 else float("-inf")
+    return min(1.0 - 1.0 / np.log10(S), PSIS_KHAT_MAX) if S > 1 else float("-inf")
 
 
 def _gpd_fit(x: np.ndarray) -> tuple[float, float]:
