@@ -294,7 +294,7 @@ def test_the_parsers_repeated_choices_are_the_libraries():
     from irl.experiments import METHODS
     from irl.inference import BACKENDS
     from onionsort.configs import common as _args
-    from onionsort.stages.base import DEVICES
+    from onionsort.configs.common import DEVICES
     from onionsort.stages.export import EXPORT_FORMATS, ROS2_STORAGES
     from onionsort.stages.label import IMPORT_FORMATS, LABEL_FORMATS
     from onionsort.stages.label_select import SELECT_FORMATS

@@ -98,7 +98,7 @@ def test_bad_workers_are_refused(bad):
 
 
 def test_default_workers_leave_a_core_to_each_thread_of_a_piece(monkeypatch, tmp_path):
-    from onionsort.stages import parallel
+    from onionsort.configs import parallel
     from onionsort.stages.calibrate import CalibrateConfig
     from onionsort.stages.perceive import PerceiveConfig
     from onionsort.stages.record import RecordConfig

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -10,7 +11,13 @@ from typing import ClassVar
 from onionsort.configs import common, option
 from onionsort.configs.parallel import TORCH_THREADS, ParallelOptions
 
-__all__ = ["CalibrateConfig", "PerceptionEvalConfig"]
+__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "check_camera_shift"]
+
+
+def check_camera_shift(seed) -> None:
+    """Refuse a ``camera_shift`` that is not a seed, an int >= 0 (numpy's ints are ints)."""
+    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"camera_shift must be a seed, an int >= 0; got {seed!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,10 +66,8 @@ class CalibrateConfig(ParallelOptions):
     piece_threads: ClassVar[int] = TORCH_THREADS
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device
-
         super().__post_init__()
-        check_device(self.device)
+        common.check_device(self.device)
         if self.smoothing < 0:
             raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
 
@@ -92,11 +97,8 @@ class PerceptionEvalConfig:
     device: str = common.device()
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device
-        from onionsort.stages.calibrate import SessionCameras
-
-        check_device(self.device)
+        common.check_device(self.device)
         if self.camera_shift is not None:
-            SessionCameras(self.camera_shift)  # checks the seed
+            check_camera_shift(self.camera_shift)
         if self.views is not None and self.views < 1:
             raise ValueError(f"views must be >= 1; got {self.views}")

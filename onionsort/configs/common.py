@@ -1,13 +1,14 @@
 """Options that several stages' configs share, declared once each: a field factory per option
-(``models: Path | None = models()``), the choices the parser offers, and the parsers of
-list-valued options.
+(``models: Path | None = models()``), the choices the parser offers, the parsers of
+list-valued options, and the checks and meanings that stages and configs share (the torch
+device, the difficulty level, the sorting threshold of the two costs).
 
-The choices are repeated here so that building the parser (every command does, at start)
-imports neither ``irl`` (and scipy), torch, the robot's world nor the stages; tests check that
-each tuple is the library's: :data:`onionsort.stages.base.DEVICES`,
-:data:`irl.inference.BACKENDS`, :data:`irl.experiments.METHODS`,
-:data:`robot.difficulty.DIFFICULTY_LEVELS`, :data:`robot.inspection_poses.INSPECTION_VIEWS`,
-:data:`perception.fusion.FUSION_RULES`, :data:`onionsort.stages.inspection.INSPECTION_CAMERAS`,
+The choices of the libraries are repeated here so that building the parser (every command
+does, at start) imports neither ``irl`` (and scipy), torch, the robot's world nor the stages;
+tests check that each tuple is the library's: :data:`irl.inference.BACKENDS`,
+:data:`irl.experiments.METHODS`, :data:`robot.difficulty.DIFFICULTY_LEVELS`,
+:data:`robot.inspection_poses.INSPECTION_VIEWS`, :data:`perception.fusion.FUSION_RULES`,
+:data:`onionsort.stages.inspection.INSPECTION_CAMERAS`,
 :data:`onionsort.stages.label.LABEL_FORMATS` and
 :data:`onionsort.stages.label_select.SELECT_FORMATS`.
 """
@@ -22,6 +23,7 @@ from onionsort.configs import option
 from onionsort.configs.export import EXPORT_FORMATS as EXPORT_FORMATS
 from onionsort.configs.export import ROS2_STORAGES as ROS2_STORAGES
 
+#: Where torch runs: ``auto`` takes CUDA when a device is present, else the CPU.
 DEVICES = ("auto", "cpu", "cuda")
 BACKENDS = ("numpy", "numba")
 METHODS = ("mmap-birl", "map-birl", "hidden-data-em", "maxent", "bc", "bc-em")
@@ -105,6 +107,19 @@ def waste_cost():
                              "waste / (waste + miss)")
 
 
+def sorting_threshold(miss: float | None = None, waste: float | None = None) -> float:
+    """The probability of a blemish from which the robot bins an onion: the cost threshold
+    (:func:`perception.fusion.cost_threshold`) of ``miss`` (a blemished onion left on the line)
+    and ``waste`` (a good onion in the bin), each by default the sorting task's own, from its
+    true reward (:func:`irl.domains.onion_sorting.misplacement_costs`)."""
+    from irl.domains.onion_sorting import misplacement_costs
+    from perception.fusion import cost_threshold
+
+    task_miss, task_waste = misplacement_costs()
+    return cost_threshold(task_miss if miss is None else miss,
+                          task_waste if waste is None else waste)
+
+
 def fusion(help: str = "how the views are fused (default: the inspection classifier's own "
                        "rule)"):
     """``--fusion``: how the inspection's views are fused."""
@@ -142,6 +157,23 @@ def defer_below(needs: str):
                        f"action is right: the learned policy's confidence in it ({needs}), "
                        "weighed over what an inspected onion may be by the inspection's "
                        "P(blemished); the onion goes to a check tray, counted apart")
+
+
+def check_device(device: str) -> str:
+    """``device`` if it is one of :data:`DEVICES`; a ``ValueError`` naming them otherwise."""
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {', '.join(DEVICES)}; got {device!r}")
+    return device
+
+
+def check_difficulty(level: str) -> str:
+    """Refuse a name that is not a level of :data:`robot.difficulty.DIFFICULTY_LEVELS`."""
+    from robot.difficulty import resolve_difficulty
+
+    if not isinstance(level, str):
+        raise TypeError(f"difficulty must be a level name; got {type(level).__name__}")
+    resolve_difficulty(level)
+    return level
 
 
 def check_session_files(sessions) -> None:

@@ -86,12 +86,10 @@ class DatasetConfig(ParallelOptions):
     cli_help: ClassVar[dict[str, str]] = {"pieces": "sessions and line-ups"}
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_difficulty
-
         super().__post_init__()
         object.__setattr__(self, "out", Path(self.out))
         for level in self.levels:
-            check_difficulty(level)
+            common.check_difficulty(level)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.robot_onions < 0:

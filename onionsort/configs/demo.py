@@ -80,7 +80,6 @@ class DemoConfig(ParallelOptions):
         from irl.experiments import METHODS as LEARNERS
         from irl.inference import check_backend
         from irl.posterior import METHODS as POSTERIOR_METHODS
-        from onionsort.stages.base import check_difficulty
 
         super().__post_init__()
         methods = (self.methods,) if isinstance(self.methods, str) else tuple(self.methods)
@@ -106,7 +105,7 @@ class DemoConfig(ParallelOptions):
             raise ValueError(f"repeats must be >= 1; got {self.repeats}")
         if self.sessions is not None and self.sessions < 1:
             raise ValueError(f"sessions must be >= 1; got {self.sessions}")
-        check_difficulty(self.difficulty)
+        common.check_difficulty(self.difficulty)
         if self.connect is not None:
             from recordings.rerun.common import check_viewer_url
 

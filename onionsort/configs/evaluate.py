@@ -94,12 +94,11 @@ class EvaluateConfig:
     device: str = common.device()
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device, check_difficulty
         from perception.fusion import FUSION_RULES
         from robot.inspection_poses import INSPECTION_VIEWS
 
-        check_difficulty(self.difficulty)
-        check_device(self.device)
+        common.check_difficulty(self.difficulty)
+        common.check_device(self.device)
         if self.policy not in POLICIES:
             raise ValueError(f"policy must be one of {', '.join(POLICIES)}; got "
                              f"{self.policy!r}")
@@ -146,6 +145,4 @@ class EvaluateConfig:
     @property
     def threshold(self) -> float:
         """The fused probability of a blemish from which the robot bins an onion."""
-        from onionsort.stages.models import sorting_threshold
-
-        return sorting_threshold(self.miss_cost, self.waste_cost)
+        return common.sorting_threshold(self.miss_cost, self.waste_cost)

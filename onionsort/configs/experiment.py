@@ -9,10 +9,23 @@ from typing import ClassVar
 from onionsort.configs import common, option
 from onionsort.configs.parallel import ParallelOptions
 
-__all__ = ["DOMAINS", "ExperimentConfig"]
+__all__ = ["DOMAINS", "PAPER_POINTS", "QUICK_POINTS", "ExperimentConfig"]
 
-#: The sweeps' domains (:data:`onionsort.stages.experiment.PAPER_POINTS`)
-DOMAINS = ("forestworld", "sorting")
+#: The paper's sweeps: (occlusion, noise) points per domain.
+PAPER_POINTS = {
+    # Fig. 1b: occlusion 10-40% at noise 0 and 30%; Fig. 1c: noise 20-45% without occlusion.
+    "forestworld": [(o, n) for n in (0.0, 0.3) for o in (0.1, 0.2, 0.3, 0.4)]
+    + [(0.0, n) for n in (0.2, 0.25, 0.3, 0.35, 0.4, 0.45)],
+    # Fig. 3a-b: occlusion at the estimated 30% noise.
+    "sorting": [(o, 0.3) for o in (0.0, 0.1, 0.2, 0.3, 0.4)],
+}
+#: The small sweeps of ``quick``, that take seconds.
+QUICK_POINTS = {
+    "forestworld": [(0.1, 0.3), (0.3, 0.3), (0.0, 0.2), (0.0, 0.4)],
+    "sorting": [(0.1, 0.3), (0.3, 0.3)],
+}
+#: The sweeps' domains
+DOMAINS = tuple(PAPER_POINTS)
 
 
 @dataclass(frozen=True)
@@ -82,7 +95,6 @@ class ExperimentConfig(ParallelOptions):
     def sweep(self):
         """The :class:`irl.experiments.SweepConfig` this resolves to."""
         from irl.experiments import SweepConfig
-        from onionsort.stages.experiment import PAPER_POINTS, QUICK_POINTS
 
         if self.occlusion is not None or self.noise is not None:
             occ = self.occlusion if self.occlusion is not None else (0.0,)

@@ -115,14 +115,12 @@ class FusionCalibrationConfig:
     device: str = common.device()
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device
-
         data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
         if not data:
             raise ValueError("data must name at least one dataset folder; got none")
         object.__setattr__(self, "data", tuple(Path(d) for d in data))
         object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
+        common.check_device(self.device)
         if self.split not in ("train", "val", "test", "all"):
             raise ValueError(f"split must be train, val, test or all; got {self.split!r}")
         if self.views is not None and (isinstance(self.views, bool)

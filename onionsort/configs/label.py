@@ -137,11 +137,9 @@ class LabelSelectConfig:
     device: str = common.device()
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device
-
         object.__setattr__(self, "sessions", tuple(Path(p) for p in self.sessions))
         object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
+        common.check_device(self.device)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.format not in SELECT_FORMATS:

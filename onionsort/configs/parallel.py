@@ -3,17 +3,44 @@ config inherits (:mod:`onionsort.stages.parallel` runs them)."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import ClassVar
 
 from onionsort.configs import option
 
-__all__ = ["EXECUTORS", "TORCH_THREADS", "ParallelOptions"]
+__all__ = ["EXECUTORS", "TORCH_THREADS", "ParallelOptions", "default_workers",
+           "machine_cores"]
 
 #: Where the pieces of a stage can run.
 EXECUTORS = ("local", "ray")
 #: Threads a stage runs torch on in the command (1 in a worker).
 TORCH_THREADS = 2
+
+
+def machine_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # no affinity on this system (macOS, Windows)
+        return max(os.cpu_count() or 1, 1)
+
+
+def default_workers(piece_threads: int = 1, cores: int | None = None) -> int:
+    """Workers of a stage whose ``workers`` is not given: ``cores // min(piece_threads,
+    cores)``, at least 1 (and never more than the pieces:
+    :func:`~onionsort.stages.parallel.run_pieces` starts at most one worker per piece).
+
+    A worker runs a piece on one thread (:func:`~onionsort.stages.parallel.worker_threads`);
+    in the command it would run on ``piece_threads``. Where one piece already keeps all the
+    cores busy (perceiving on two cores: torch's two threads), a second worker only adds its
+    start-up (importing torch, loading the models) and makes two processes fight for the
+    cores, so the stage runs its pieces in the command, one after another; a stage whose
+    pieces run on one thread (recording, rendering, evaluating, learning) gets a worker per
+    core. On 16 cores, perceiving gets 8.
+    """
+    cores = machine_cores() if cores is None else cores
+    return max(1, cores // max(1, min(piece_threads, cores)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -28,7 +55,7 @@ class ParallelOptions:
     workers : int or None
         Local worker processes, or the CPUs of a new local Ray instance (None: as many as the
         machine's cores take pieces of this stage,
-        :func:`~onionsort.stages.parallel.default_workers`). 1 runs the pieces in this
+        :func:`default_workers`). 1 runs the pieces in this
         process, one after another.
     ray_address : str or None
         The Ray cluster to join with ``executor="ray"`` (None: ``RAY_ADDRESS``, else a new local
@@ -72,10 +99,8 @@ class ParallelOptions:
 
     @property
     def n_workers(self) -> int:
-        """``workers``, or :func:`~onionsort.stages.parallel.default_workers` for this stage's
+        """``workers``, or :func:`default_workers` for this stage's
         ``piece_threads``."""
-        from onionsort.stages.parallel import default_workers
-
         return self.workers if self.workers is not None else default_workers(self.piece_threads)
 
     def parallel_options(self) -> ParallelOptions:

@@ -46,10 +46,8 @@ class PerceiveConfig(ParallelOptions):
     piece_threads: ClassVar[int] = TORCH_THREADS
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device
-
         super().__post_init__()
-        check_device(self.device)
+        common.check_device(self.device)
         common.check_session_files(self.sessions)
         if self.batch_size < 1:
             raise ValueError(f"batch_size must be >= 1; got {self.batch_size}")

@@ -66,10 +66,8 @@ class RecordConfig(ParallelOptions):
     cli_help: ClassVar[dict[str, str]] = {"pieces": "sessions"}
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_difficulty
-
         super().__post_init__()
-        check_difficulty(self.difficulty)
+        common.check_difficulty(self.difficulty)
         if self.resume and self.overwrite:
             raise ValueError("resume keeps the complete sessions in --out and overwrite "
                              "replaces them all; give --resume or --overwrite, not both")

@@ -73,11 +73,21 @@ class TrainOptions:
     device: str = common.device()
 
     def __post_init__(self) -> None:
-        from onionsort.stages.base import check_device, pool_datasets
-
-        pool_datasets(self)
+        data = (self.data,) if isinstance(self.data, str | Path) else tuple(self.data)
+        if not data:
+            raise ValueError("data must name at least one dataset folder; got none")
+        weights = tuple(self.data_weights) or (1,) * len(data)
+        if len(weights) != len(data):
+            raise ValueError(f"data_weights must give one weight per dataset ({len(data)}); "
+                             f"got {len(weights)}: {','.join(map(str, weights))}")
+        for w in weights:
+            if isinstance(w, bool) or not float(w).is_integer() or w < 1:
+                raise ValueError("data_weights must be positive integers (how many times each "
+                                 f"dataset's training frames count); got {w}")
+        object.__setattr__(self, "data", tuple(Path(d) for d in data))
+        object.__setattr__(self, "data_weights", tuple(int(w) for w in weights))
         object.__setattr__(self, "out", Path(self.out))
-        check_device(self.device)
+        common.check_device(self.device)
         _check_positive(self, "epochs", "batch_size")
 
 

@@ -17,12 +17,10 @@ import logging
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["DEVICES", "check_device", "check_difficulty", "check_output_folder", "log_config",
-           "output_folder", "pool_datasets", "refuse_existing", "resolve_device", "write_json",
-           "write_text"]
+from onionsort.configs.common import check_device
 
-#: Where torch runs: ``auto`` takes CUDA when a device is present, else the CPU.
-DEVICES = ("auto", "cpu", "cuda")
+__all__ = ["check_output_folder", "log_config", "output_folder", "refuse_existing",
+           "resolve_device", "write_json", "write_text"]
 
 logger = logging.getLogger(__name__)
 
@@ -61,25 +59,6 @@ def write_text(path: Path, text: str) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return path
-
-
-def pool_datasets(config) -> None:
-    """Normalise a training config's ``data`` (one dataset folder or several, pooled) and
-    ``data_weights`` (how many times each dataset's training frames count: positive
-    integers, one per dataset; 1 each where not given), in place on the frozen ``config``."""
-    data = (config.data,) if isinstance(config.data, str | Path) else tuple(config.data)
-    if not data:
-        raise ValueError("data must name at least one dataset folder; got none")
-    weights = tuple(config.data_weights) or (1,) * len(data)
-    if len(weights) != len(data):
-        raise ValueError(f"data_weights must give one weight per dataset ({len(data)}); got "
-                         f"{len(weights)}: {','.join(map(str, weights))}")
-    for w in weights:
-        if isinstance(w, bool) or not float(w).is_integer() or w < 1:
-            raise ValueError("data_weights must be positive integers (how many times each "
-                             f"dataset's training frames count); got {w}")
-    object.__setattr__(config, "data", tuple(Path(d) for d in data))
-    object.__setattr__(config, "data_weights", tuple(int(w) for w in weights))
 
 
 def check_output_folder(folder: Path, what: str = "--out") -> Path:
@@ -128,23 +107,6 @@ def refuse_existing(path: Path, overwrite: bool) -> None:
                               "or allow overwriting (--overwrite)")
 
 
-def check_difficulty(level: str) -> str:
-    """Refuse a name that is not a level of :data:`robot.difficulty.DIFFICULTY_LEVELS`."""
-    from robot.difficulty import resolve_difficulty
-
-    if not isinstance(level, str):
-        raise TypeError(f"difficulty must be a level name; got {type(level).__name__}")
-    resolve_difficulty(level)
-    return level
-
-
-def check_device(device: str) -> str:
-    """``device`` if it is one of :data:`DEVICES`; a ``ValueError`` naming them otherwise."""
-    if device not in DEVICES:
-        raise ValueError(f"device must be one of {', '.join(DEVICES)}; got {device!r}")
-    return device
-
-
 def resolve_device(device: str = "auto"):
     """The ``torch.device`` that ``device`` names: ``auto`` is CUDA when
     ``torch.cuda.is_available()``, else the CPU.
@@ -152,8 +114,8 @@ def resolve_device(device: str = "auto"):
     Raises
     ------
     ValueError
-        If ``device`` is not one of :data:`DEVICES`, or is ``cuda`` where no CUDA device is
-        available.
+        If ``device`` is not one of :data:`onionsort.configs.common.DEVICES`, or is ``cuda``
+        where no CUDA device is available.
     """
     import torch
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onionsort.configs.calibrate import CalibrateConfig, PerceptionEvalConfig
+from onionsort.configs.calibrate import CalibrateConfig, PerceptionEvalConfig, check_camera_shift
 from onionsort.stages.base import (
     check_output_folder,
     log_config,
@@ -302,9 +302,7 @@ class SessionCameras:
     seed: int
 
     def __post_init__(self) -> None:
-        if (not isinstance(self.seed, int | np.integer) or isinstance(self.seed, bool)
-                or self.seed < 0):
-            raise ValueError(f"camera_shift must be a seed, an int >= 0; got {self.seed!r}")
+        check_camera_shift(self.seed)
 
     def camera(self, record: dict):
         """The camera of the session or line-up ``record`` belongs to."""

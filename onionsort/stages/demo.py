@@ -51,13 +51,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from onionsort.configs.common import sorting_threshold
 from onionsort.configs.demo import DemoConfig
 from onionsort.stages.base import check_output_folder, log_config, write_json
 from onionsort.stages.calibrate import CalibrateConfig, calibrate
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
 from onionsort.stages.learn import BAYESIAN_METHODS, SWAP_METHOD, LearnConfig, learn
-from onionsort.stages.models import PerceptionModels, sorting_threshold
+from onionsort.stages.models import PerceptionModels
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record

@@ -50,18 +50,6 @@ __all__ = ["CSV_COLUMNS", "ExperimentConfig", "format_table", "parse_list",
 
 logger = logging.getLogger(__name__)
 
-#: The paper's sweeps: (occlusion, noise) points per domain.
-PAPER_POINTS = {
-    # Fig. 1b: occlusion 10-40% at noise 0 and 30%; Fig. 1c: noise 20-45% without occlusion.
-    "forestworld": [(o, n) for n in (0.0, 0.3) for o in (0.1, 0.2, 0.3, 0.4)]
-    + [(0.0, n) for n in (0.2, 0.25, 0.3, 0.35, 0.4, 0.45)],
-    # Fig. 3a-b: occlusion at the estimated 30% noise.
-    "sorting": [(o, 0.3) for o in (0.0, 0.1, 0.2, 0.3, 0.4)],
-}
-QUICK_POINTS = {
-    "forestworld": [(0.1, 0.3), (0.3, 0.3), (0.0, 0.2), (0.0, 0.4)],
-    "sorting": [(0.1, 0.3), (0.3, 0.3)],
-}
 CSV_COLUMNS = ["method", "occlusion", "noise", "trajectories", "length", "learner",
                "learner_beta", "batch", "ile", "seconds", "normalized_ile", "exact_policy",
                "n_iter", "converged", "backend"]

@@ -465,7 +465,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     and the points of the precision-recall curve. ``image_map`` changes each view as it is
     read (:func:`inspection_views`).
     """
-    from onionsort.stages.models import sorting_threshold
+    from onionsort.configs.common import sorting_threshold
     from perception.fusion import (
         FUSION_RULES,
         chance_calibration_error,

@@ -18,6 +18,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from onionsort.configs.common import sorting_threshold
+
 __all__ = [
     "CALIBRATION_FILE",
     "DEFAULT_MODELS",
@@ -209,7 +211,7 @@ class PerceptionModels:
         (:meth:`inspection_for`): the detector finds the onion, the inspection classifier
         reads it, views are fused by ``rule`` (the classifier's own by default) and an onion
         called blemished from ``threshold`` (the task's cost threshold by default,
-        :func:`sorting_threshold`)."""
+        :func:`~onionsort.configs.common.sorting_threshold`)."""
         from irl.domains.onion_sorting import SORTING_TASK
         from perception.inspection import Inspector
 
@@ -261,19 +263,6 @@ def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float]]:
         raise ValueError(f"{path} names unknown fusion rules {unknown}; the rules are "
                          f"{FUSION_RULES}")
     return out
-
-
-def sorting_threshold(miss: float | None = None, waste: float | None = None) -> float:
-    """The probability of a blemish from which the robot bins an onion: the cost threshold
-    (:func:`perception.fusion.cost_threshold`) of ``miss`` (a blemished onion left on the line)
-    and ``waste`` (a good onion in the bin), each by default the sorting task's own, from its
-    true reward (:func:`irl.domains.onion_sorting.misplacement_costs`)."""
-    from irl.domains.onion_sorting import misplacement_costs
-    from perception.fusion import cost_threshold
-
-    task_miss, task_waste = misplacement_costs()
-    return cost_threshold(task_miss if miss is None else miss,
-                          task_waste if waste is None else waste)
 
 
 def model_mismatch(a: dict | None, b: dict | None) -> list[str]:

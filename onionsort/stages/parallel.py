@@ -53,7 +53,6 @@ __all__ = [
     "ParallelOptions",
     "RayExecutor",
     "WorkerLost",
-    "default_workers",
     "run_pieces",
     "torch_threads",
     "worker_threads",
@@ -71,30 +70,6 @@ P = TypeVar("P")
 R = TypeVar("R")
 
 
-def machine_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system has one)."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except AttributeError:  # no affinity on this system (macOS, Windows)
-        return max(os.cpu_count() or 1, 1)
-
-
-def default_workers(piece_threads: int = 1, cores: int | None = None) -> int:
-    """Workers of a stage whose ``workers`` is not given: ``cores // min(piece_threads,
-    cores)``, at least 1 (and never more than the pieces: :func:`run_pieces` starts at most
-    one worker per piece).
-
-    A worker runs a piece on one thread (:func:`worker_threads`); in the command it would run
-    on ``piece_threads``. Where one piece already keeps all the cores busy (perceiving on two
-    cores: torch's two threads), a second worker only adds its start-up (importing torch,
-    loading the models) and makes two processes fight for the cores, so the stage runs its
-    pieces in the command, one after another; a stage whose pieces run on one thread (recording,
-    rendering, evaluating, learning) gets a worker per core. On 16 cores, perceiving gets 8.
-    """
-    cores = machine_cores() if cores is None else cores
-    return max(1, cores // max(1, min(piece_threads, cores)))
-
-
 def worker_threads() -> int | None:
     """Threads a library may use in this process: 1 in a worker of :func:`run_pieces`, else
     None (its own default)."""
@@ -105,7 +80,8 @@ def torch_threads(default: int = TORCH_THREADS) -> int:
     """Threads a stage runs torch on: 1 in a worker of :func:`run_pieces`, else ``default``.
 
     A pool has at most as many workers as the machine has cores (or fewer, with fewer pieces,
-    or where each piece would use more than one core: :func:`default_workers`), so one
+    or where each piece would use more than one core:
+    :func:`~onionsort.configs.parallel.default_workers`), so one
     thread each keeps them from oversubscribing the cores: two torch pools of two threads each
     on two cores wait on each other's spinning threads and run several times slower."""
     return worker_threads() or default

@@ -99,7 +99,7 @@ def test_the_threshold_follows_the_costs():
 
 def test_the_default_threshold_comes_from_the_tasks_reward():
     from irl.domains.onion_sorting import TRUE_THETA, misplacement_costs
-    from onionsort.stages.models import sorting_threshold
+    from onionsort.configs.common import sorting_threshold
 
     assert misplacement_costs() == (8.0, 8.0)
     assert sorting_threshold() == 0.5 and sorting_threshold(miss=3, waste=1) == 0.25
