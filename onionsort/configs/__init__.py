@@ -4,16 +4,20 @@ their fields into command-line options.
 Each option is declared once, on a config field, with :func:`option`: its default, its help,
 and where the command line differs from the field (the flag's name, a positional argument, a
 metavar, choices). :func:`add_config_arguments` adds a config's options to an argparse parser
-and :func:`config_from_args` builds the config from the parsed arguments. The modules of this
-package import nothing but the standard library (a config's checks import what they need when
-a config is made), so that building the parser (every command does, at start) loads neither
-torch, ``irl`` (and scipy), the robot's world nor the stages; each stage module re-exports its
-config from here. Options several stages share are field factories in
+and :func:`config_from_args` builds the config from the parsed arguments; :func:`documented`
+writes the config's ``Attributes`` from the same help, which is each option's only text (a
+field that is no option has a ``#:`` comment instead). The modules of this package import
+nothing but the standard library (a config's checks import what they need when a config is
+made) and nothing from the stages (a constant or a check that a config and its stage share
+lives here, and the stage imports it), so that building the parser (every command does, at
+start) loads neither torch, ``irl`` (and scipy), the robot's world nor the stages; each stage
+module re-exports its config from here. Options several stages share are field factories in
 :mod:`onionsort.configs.common`; where a stage's pieces run, the fields of
 :class:`onionsort.configs.parallel.ParallelOptions`.
 
 Example::
 
+    @documented
     @dataclass(frozen=True, kw_only=True)
     class SuggestConfig:
         run: Path = option(positional=True, metavar="RUN_DIR", help="a folder of ...")
@@ -27,14 +31,17 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import inspect
+import textwrap
 import types
 import typing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import PurePath
 from typing import Any
 
 __all__ = ["Option", "add_config_arguments", "config_from_args", "config_options",
-           "config_values", "option"]
+           "config_values", "documented", "option"]
 
 #: the metadata key of a field's :class:`Option`
 _KEY = "onionsort.option"
@@ -68,6 +75,11 @@ class Option:
         negated = "no-" if default is True and self.action is None else ""
         return ["--" + negated + name.replace("_", "-")]
 
+    def text(self, words: dict[str, str]) -> str | None:
+        """The help with each ``{name}`` replaced by ``words[name]`` (a config's
+        ``cli_help``)."""
+        return self.help.format(**words) if self.help and "{" in self.help else self.help
+
 
 def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = None,
            positional: bool = False, choices: Sequence[str] | None = None,
@@ -84,7 +96,7 @@ def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = 
         the field required (a positional argument when ``positional``, else a required
         option).
     help
-        The option's help (also the field's documentation).
+        The option's help, and the field's documentation (:func:`documented`).
     flag
         The option string where it is not ``--`` and the field's name with dashes.
     positional, choices, metavar
@@ -168,8 +180,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
         default = _default(f)
         required = default is dataclasses.MISSING
         default = None if required else default
-        help_ = opt.help.format(**words) if opt.help and "{" in opt.help else opt.help
-        kwargs: dict[str, Any] = {"help": help_}
+        kwargs: dict[str, Any] = {"help": opt.text(words)}
         if not opt.positional:
             kwargs["dest"] = f.name
         if opt.action is None and opt.type is None and _text_type(annotation) is bool:
@@ -214,3 +225,31 @@ def config_from_args(config_cls, args: argparse.Namespace, **overrides):
     """``config_cls`` built from the parsed ``args`` of its :func:`option` fields, with
     ``overrides`` (the fields that are not options, or whose value the command works out)."""
     return config_cls(**{**config_values(config_cls, args), **overrides})
+
+
+def documented(config_cls):
+    """``config_cls`` with a numpydoc ``Attributes`` section appended to its docstring: each
+    :func:`option` field, in the order the command lists it, with its type (its choices where
+    it has some), its default and its help, after its flag where that is not the field's name
+    (the help is the option's only text; a field that is no option has a ``#:`` comment)."""
+    if config_cls.__doc__ is None:  # docstrings stripped (python -OO)
+        return config_cls
+    words = getattr(config_cls, "cli_help", {})
+    lines = ["Attributes", "----------"]
+    for f, opt, _ in config_options(config_cls):
+        kind = f.type if isinstance(f.type, str) else inspect.formatannotation(f.type)
+        if opt.choices is not None:
+            kind = ("{" + ", ".join(map(repr, opt.choices)) + "}"
+                    + (" or None" if "None" in kind else ""))
+        default = _default(f)
+        if default is not dataclasses.MISSING:
+            shown = str(default) if isinstance(default, PurePath) else repr(default)
+            kind += f", default {shown}"
+        lines.append(f"{f.name} : {kind}")
+        text = (opt.text(words) or "").replace("%%", "%")
+        flag = opt.flags(f.name, default)[0]
+        if not opt.positional and flag != "--" + f.name.replace("_", "-"):
+            text = f"``{flag}``: {text}"
+        lines += textwrap.wrap(text, 92, initial_indent="    ", subsequent_indent="    ")
+    config_cls.__doc__ = inspect.cleandoc(config_cls.__doc__) + "\n\n" + "\n".join(lines)
+    return config_cls

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import TORCH_THREADS, ParallelOptions
 
 __all__ = ["CalibrateConfig", "PerceptionEvalConfig", "check_camera_shift"]
@@ -20,33 +20,14 @@ def check_camera_shift(seed) -> None:
         raise ValueError(f"camera_shift must be a seed, an int >= 0; got {seed!r}")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class CalibrateConfig(ParallelOptions):
     """Where to measure perception and where to write the calibration.
 
-    Attributes
-    ----------
-    data : Path
-        A labelled dataset from ``onionsort dataset`` (held out: not trained on).
-    split : str
-        ``train``, ``val``, ``test`` or ``all``.
-    out : Path
-        Folder for ``calibration.json``, ``observation_model.npz`` and ``confusion.png``.
-    smoothing : float
-        Additive smoothing of the confusion counts.
-    depth : bool
-        Measure with depth (RGB-D) or colour alone.
-    inspection : bool
-        Measure with the inspection view or without it.
-    overwrite : bool
-        Replace a ``calibration.json`` already in ``out``.
-    models : Path or None
-        Perception models folder (None: the shipped models).
-    device : str
-        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
-    executor, workers, ray_address
-        Where the dataset's sessions are perceived
-        (:class:`~onionsort.configs.parallel.ParallelOptions`): each is a piece.
+    ``data`` is a labelled dataset from ``onionsort dataset``, held out (not trained on);
+    ``out`` gets ``calibration.json``, ``observation_model.npz`` and ``confusion.png``. Each of
+    the dataset's sessions is a piece.
     """
 
     data: Path = option(help="labelled dataset folder")
@@ -72,14 +53,12 @@ class CalibrateConfig(ParallelOptions):
             raise ValueError(f"smoothing must be >= 0; got {self.smoothing}")
 
 
+@documented
 @dataclass(frozen=True)
 class PerceptionEvalConfig:
     """A dataset split to measure the perception models on: the detector, the state
-    classifier and the inspection. ``views`` fuses the robot's first ``views`` views of each
-    onion (all the dataset holds: None); ``plots`` is a folder for the inspection's
-    precision-recall curves (None: none drawn); ``camera_shift`` a seed (an int >= 0) of
-    other cameras to measure through as well
-    (:class:`~onionsort.stages.calibrate.SessionCameras`; None: none)."""
+    classifier and the inspection; ``camera_shift`` draws the other cameras
+    (:class:`~onionsort.stages.calibrate.SessionCameras`)."""
 
     data: Path = option(help="labelled dataset folder")
     split: str = option("test", help="split to evaluate on: train, val, test or all (test)")

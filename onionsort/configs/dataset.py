@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import ParallelOptions
 
 __all__ = ["DatasetConfig", "levels"]
@@ -23,42 +23,16 @@ def levels(text: str) -> str:
     return ",".join(x.strip() for x in text.split(","))
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class DatasetConfig(ParallelOptions):
-    """What to render.
+    """What to render; an existing dataset in ``out`` is never overwritten.
 
-    Attributes
-    ----------
-    frames : int
-        Camera frames in all.
-    out : Path
-        A new dataset folder (an existing dataset is never overwritten).
-    seed : int
-    occlusion : float
-        Probability that the passer-by occludes a step (0.3: the classifier must see many).
-    steps_per_session, frames_per_step : int
-    val, test : float
-        Shares of sessions for the val and test splits.
-    robot_onions : int
-        Onions the Sawyer holds up to its inspection camera, in line-ups of 10 split like the
-        sessions; 0 for none.
-    robot_views : int
-        Views of each of them (:func:`robot.station.inspection_poses`).
-    rot_labels : bool
-        Measure the rot each inspection view shows (the inspection classifier's labels; one
-        more render of each view). Calibration needs none.
-    difficulty : str
-        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's world), or several joined by commas (``clean,realistic,paper,hard``): a mix,
-        whose sessions and robot line-ups take the levels in turn.
-    randomize_look : bool
-        Each session and line-up draws its look from its seed (:mod:`robot.look`: light,
-        surface colours, the cameras' exposure and white balance): training data that spans
-        cameras. The levels stay as they are; the look is a knob beside them.
-    executor, workers, ray_address
-        Where the sessions and the line-ups are rendered
-        (:class:`~onionsort.configs.parallel.ParallelOptions`): each is a piece, rendered from
-        its own seed into images named after it (``s0003_0012.png``, ``l0001_0004.png``).
+    ``occlusion`` is 0.3 by default: the classifier must see many occluded steps. A mix of
+    ``difficulty`` levels has its sessions and robot line-ups take them in turn;
+    ``randomize_look`` (:mod:`robot.look`) is a knob beside the levels, which stay as they
+    are. The sessions and the line-ups are the pieces, each rendered from its own seed into
+    images named after it (``s0003_0012.png``, ``l0001_0004.png``).
     """
 
     frames: int = option(3000, help="frames in all (3000)")
@@ -82,6 +56,8 @@ class DatasetConfig(ParallelOptions):
                                               "surface colours and camera exposure and white "
                                               "balance from its seed (training data across "
                                               "cameras; default: today's look)")
+    #: Measure the rot each inspection view shows (the inspection classifier's labels; one more
+    #: render of each view). Calibration needs none.
     rot_labels: bool = True
     cli_help: ClassVar[dict[str, str]] = {"pieces": "sessions and line-ups"}
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.evaluate import EvaluateConfig
 from onionsort.configs.parallel import ParallelOptions
 
@@ -16,35 +16,21 @@ __all__ = ["METHODS", "DemoConfig"]
 METHODS = ("mmap-birl", "map-birl", "hidden-data-em")
 
 
+@documented
 @dataclass(frozen=True)
 class DemoConfig(ParallelOptions):
     """The demo's run folder, seed, size, repeats, perception difficulty and models.
 
-    ``sessions`` None takes the size's default (12, quick 4). With ``repeats`` above 1 each
-    repeat gets its own folder ``repeat_K``. ``difficulty`` names a level of
-    :data:`robot.difficulty.DIFFICULTY_LEVELS`: the recorded sessions, the held-out frames the
-    calibration is measured on, and the robot's inspection at evaluation all face it.
-    ``connect`` is a Rerun viewer's gRPC URL (``rerun+http://HOST:9876/proxy``) that the
-    recordings also stream to; ``resume`` continues the interrupted demo in ``out``.
-    ``backend`` picks MMAP-BIRL's forward-backward kernels (``irl.inference.BACKENDS``: numpy,
-    or numba from the ``fast`` extra, equal to rounding); a demo may be resumed with the other
+    With ``repeats`` above 1 each repeat gets its own folder ``repeat_K``. The recorded
+    sessions, the held-out frames the calibration is measured on, and the robot's inspection
+    at evaluation all face ``difficulty``. A demo may be resumed with the other ``backend``
     (each repeat's result names the backend its model was learned with, ``backends`` all).
-    ``inspection_views``, ``miss_cost``, ``waste_cost`` and ``fusion`` set the robot's
-    inspection (:class:`~onionsort.configs.evaluate.EvaluateConfig`); ``device`` where torch
-    runs the perception models. ``executor``, ``workers`` and ``ray_address``
-    (:class:`~onionsort.configs.parallel.ParallelOptions`) run the held-out frames' rendering,
-    the repeats' recordings, and then every (repeat, method)'s learning and sorting, as
-    pieces; with fewer repeats than workers the recording and perception of a repeat run their
-    sessions in parallel instead.
-    ``defer_below`` (a probability) has the Bayesian learners (MMAP-BIRL, MAP-BIRL) also sample
-    the posterior (``posterior_method``) and sort the same line-up a second time deferring
-    where the robot is less sure than it that its next action is right
-    (:class:`~onionsort.configs.evaluate.EvaluateConfig`'s ``defer_below``); both results are
-    reported.
-    ``session_swaps`` has MMAP-BIRL doubt how each whole session was read
-    (:class:`~onionsort.configs.learn.LearnConfig`'s ``session_swaps``).
-    ``methods`` are the learners whose policies the Sawyer sorts with (:data:`METHODS` by
-    default; any of :data:`irl.experiments.METHODS`).
+    ``inspection_views``, ``miss_cost``, ``waste_cost``, ``fusion`` and ``defer_below`` are
+    :class:`~onionsort.configs.evaluate.EvaluateConfig`'s, ``session_swaps``
+    :class:`~onionsort.configs.learn.LearnConfig`'s; with ``defer_below``, both sortings are
+    reported. The pieces are the held-out frames' rendering, the repeats' recordings, and
+    then every (repeat, method)'s learning and sorting; with fewer repeats than workers the
+    recording and perception of a repeat run their sessions in parallel instead.
     """
 
     seed: int = common.seed()

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 
 __all__ = ["POLICIES", "EvaluateConfig"]
 
@@ -13,60 +13,21 @@ __all__ = ["POLICIES", "EvaluateConfig"]
 POLICIES = ("learned", "expert")
 
 
+@documented
 @dataclass(frozen=True)
 class EvaluateConfig:
     """Which policy to evaluate, on how many onions, inspected how.
 
-    Attributes
-    ----------
-    run : Path or None
-        A folder written by ``learn`` (the ``learned`` policy); None with ``policy="expert"``.
-    onions, blemished : int
-        Onions on the line, and how many of them are blemished.
-    seed : int
-    models : Path or None
-        Perception models folder (None: the shipped models).
-    ground_truth_inspection : bool
-        Perfect inspection instead of the detector (for comparison).
-    rerun : bool
-        Write ``evaluation.rrd``.
-    mcap : bool
-        Write ``evaluation.mcap``, the run as a session (Foxglove, ``rerun mcap convert``,
-        :func:`recordings.open_session`).
-    difficulty : str
-        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's station).
-    connect : str or None
-        Also stream the Rerun recording to a viewer at this gRPC URL
-        (``rerun+http://HOST:PORT/proxy``).
-    policy : {"learned", "expert"}
-        The learning run's greedy policy, or the task's true one (no run needed: measures the
-        robot's perception alone).
-    out : Path or None
-        Folder for the outputs (None: ``run``; required with ``policy="expert"``).
-    inspection_views : int
-        Views the Sawyer takes of every onion (:func:`robot.station.inspection_poses`), at most:
-        it stops showing an onion once its call is settled (no further view could change it).
-    every_view : bool
-        Take all ``inspection_views`` views of every onion, settled or not: each onion's call is
-        the one its settled views gave, but the views after draw their image noise otherwise.
-    miss_cost, waste_cost : float or None
-        Cost of a blemished onion left on the line, and of a good onion binned (None: the
-        task's, from its reward); the robot bins from ``P(blemished) >= waste / (waste +
-        miss)``.
-    fusion : str or None
-        How views are fused (:data:`perception.fusion.FUSION_RULES`; None: the inspection
-        classifier's own rule).
-    device : str
-        Where torch runs the models: ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
-    defer_below : float or None
-        Defer to a person where the robot is less sure than this that its next action is right
-        (:func:`robot.evaluation.confidence_in`: the confidence of ``policy_confidence.json``,
-        from ``onionsort learn --posterior``, weighed over what an inspected onion may be): the
-        onion goes to a check tray and is counted apart. None never defers.
+    The Sawyer takes ``inspection_views`` views of an onion at most: it stops showing it once
+    its call is settled (no further view could change it). ``mcap`` writes the run as a
+    session (Foxglove, ``rerun mcap convert``, :func:`recordings.open_session`).
+    ``defer_below`` reads the confidence of the run's ``policy_confidence.json``
+    (:func:`robot.evaluation.confidence_in`); None never defers.
     """
 
-    run: Path | None = None  # the command's option takes several (commands/evaluate.py)
+    #: A folder written by ``learn`` (the ``learned`` policy's); None with ``policy="expert"``
+    #: (the command's option takes several: commands/evaluate.py).
+    run: Path | None = None
     policy: str = option("learned", choices=POLICIES,
                          help="the run's learned policy (default), or the task's own: the "
                               "robot's perception measured apart from learning")

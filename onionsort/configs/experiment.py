@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import ParallelOptions
 
 __all__ = ["DOMAINS", "PAPER_POINTS", "QUICK_POINTS", "ExperimentConfig"]
@@ -28,39 +28,14 @@ QUICK_POINTS = {
 DOMAINS = tuple(PAPER_POINTS)
 
 
+@documented
 @dataclass(frozen=True)
 class ExperimentConfig(ParallelOptions):
     """A sweep as asked for; None fields take the paper's (or the quick) defaults.
 
-    Attributes
-    ----------
-    domain : str
-        ``forestworld`` or ``sorting``.
-    occlusion, noise : tuple of float or None
-        The grid; both None: the paper's points for the domain.
-    batches : int or None
-        Batches per point.
-    trajectories, length : int, tuple of int, or None
-        Demonstrations per batch, steps per demonstration; several values sweep them.
-    learner_beta : tuple of str or None
-        Learner settings (``irl.experiments.parse_learner_setting``): betas, factors of the
-        domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
-    methods : tuple of str
-        Learners of :data:`irl.learners.LEARNERS`; by default the four reward learners (the
-        behaviour-cloning baselines ``bc`` and ``bc-em`` are asked for by name; a cloned
-        policy is scored by its own actions).
-    seed : int
-    quick : bool
-        A small sweep that takes seconds.
-    out : Path or None
-        Run folder (default ``runs/experiment-DOMAIN``).
-    resume : bool
-        Keep the rows of ``results.csv.partial`` (an interrupted run of this same sweep in
-        this folder) and run only the missing trials.
-    backend : str
-        Forward-backward kernels of the learners that run it (``irl.inference.BACKENDS``):
-        ``numpy`` or ``numba`` (the ``fast`` extra). Not part of the sweep's identity: a sweep
-        may be resumed with the other backend.
+    ``occlusion`` and ``noise`` are the grid; both None: the domain's :data:`PAPER_POINTS`
+    (:data:`QUICK_POINTS` with ``quick``). ``backend`` is not part of the sweep's identity: a
+    sweep may be resumed with the other.
     """
 
     domain: str = option(positional=True, choices=DOMAINS, help=None)
@@ -69,9 +44,16 @@ class ExperimentConfig(ParallelOptions):
     noise: tuple[float, ...] | None = option(None, type=common.floats,
                                              help="observation-noise levels, e.g. 0,0.3")
     batches: int | None = option(None, help="batches per point (default 10; quick 3)")
+    #: Demonstrations per batch; several values sweep them.
     trajectories: int | tuple[int, ...] | None = None
+    #: Steps per demonstration; several values sweep them.
     length: int | tuple[int, ...] | None = None
+    #: Learner settings (``irl.experiments.parse_learner_setting``): betas, factors of the
+    #: domain's beta (``x0.5``) or ``paper``; None: the domain's true beta.
     learner_beta: tuple[str, ...] | None = None
+    #: Learners of :data:`irl.learners.LEARNERS`; by default the four reward learners (the
+    #: behaviour-cloning baselines ``bc`` and ``bc-em`` are asked for by name; a cloned policy
+    #: is scored by its own actions).
     methods: tuple[str, ...] = common.IRL_METHODS
     seed: int = common.seed(help=None)
     quick: bool = option(False, help="a small sweep that takes seconds")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import option
+from onionsort.configs import documented, option
 
 __all__ = ["EXPORT_FORMATS", "ROS2_STORAGES", "ExportConfig"]
 
@@ -16,10 +16,10 @@ EXPORT_FORMATS = ("ros2",)
 ROS2_STORAGES = ("mcap", "sqlite3")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class ExportConfig:
-    """Which session, as what, and where (each field's help says what it is); an existing
-    ``out`` is refused."""
+    """Which session, as what, and where; an existing ``out`` is refused."""
 
     session: Path = option(positional=True, metavar="SESSION", help="a session file (.mcap)")
     format: str = option("ros2", choices=EXPORT_FORMATS,

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 
 __all__ = ["ImportConfig"]
 
@@ -14,50 +14,18 @@ __all__ = ["ImportConfig"]
 BAG = "a bag"
 
 
+@documented
 @dataclass(frozen=True)
 class ImportConfig:
     """Where the frames come from, how they are cut into steps, and where the session goes.
 
-    Attributes
-    ----------
-    out : Path
-        The session file to create (``.mcap``); an existing file is refused.
-    video : Path or None
-        A video file (any container and codec OpenCV reads), or a ROS 2 or ROS 1 bag (a rosbag2
-        folder, one of its files, a ``.bag``; :mod:`recordings.bags`): the stage tells them
-        apart by what the path is (:func:`recordings.bags.is_bag`).
-    camera : int or None
-        A camera index for ``cv2.VideoCapture``; exactly one of ``video`` and ``camera``.
-    step_seconds : float or None
-        Fixed clock: a step every so many seconds. None: segment by perceived changes.
-    debounce : int
-        Windows a new perceived reading must hold before it starts a step.
-    frames_per_step : int
-        Frames kept per step (the state classifier reads 3).
-    intrinsics : Path or None
-        JSON intrinsics (``{"K": 3x3}`` or ``{"fx", "fy", "cx", "cy"}``).
-    max_seconds : float
-        How long to record from a camera.
-    inspection : Path or None
-        A video of the inspection spot, frame for frame with ``video``.
-    inspection_intrinsics : Path or None
-        Its intrinsics JSON (default: a 60-degree horizontal view).
-    color_topic : str or None
-        The bag's colour images (None: its one usable colour topic).
-    depth_topic : str or None
-        The bag's depth images (``16UC1`` millimetres or ``32FC1`` metres), optional.
-    camera_info_topic : str or None
-        The colour camera's ``CameraInfo`` (None: the one beside ``color_topic``, if any; then
-        ``intrinsics``; then the default).
-    inspection_topic : str or None
-        The bag's inspection view, optional.
-    step_topic : str or None
-        A topic whose messages mark step starts (instead of ``step_seconds`` or perceived
-        changes).
-    sync_tolerance : float
-        Seconds within which depth and the inspection view are matched to a colour frame.
-    models : Path or None
-        Perception models for the perceived-change segmentation (None: the shipped ones).
+    The source is exactly one of ``video`` and ``camera`` (an index for
+    ``cv2.VideoCapture``). ``video`` is a video file (any container and codec OpenCV reads)
+    or a ROS 2 or ROS 1 bag (a rosbag2 folder, one of its files, a ``.bag``;
+    :mod:`recordings.bags`), told apart by what the path is
+    (:func:`recordings.bags.is_bag`). ``intrinsics`` is JSON, ``{"K": 3x3}`` or ``{"fx",
+    "fy", "cx", "cy"}``; ``models`` segment the steps by perceived changes; the state
+    classifier reads 3 frames a step. An existing ``out`` is refused.
     """
 
     out: Path = option(required=False, after="camera", help="the session file to write")
@@ -76,6 +44,7 @@ class ImportConfig:
                                      help="a video of the inspection spot, frame for frame "
                                           "with VIDEO")
     max_seconds: float = option(60.0, help="how long to record from --camera (60)")
+    #: The intrinsics JSON of ``inspection`` (None: a 60-degree horizontal view).
     inspection_intrinsics: Path | None = None
     color_topic: str | None = option(None, metavar="TOPIC", group=BAG,
                                      help="the colour images (default: the bag's one colour "

@@ -7,7 +7,7 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option, train
+from onionsort.configs import common, documented, option, train
 from onionsort.configs.common import INSPECTION_CAMERAS
 
 __all__ = ["INSPECTION_CAMERAS", "FusionCalibrationConfig", "InspectionTrainStageConfig",
@@ -33,26 +33,16 @@ def level_weights(text: str) -> dict[str, float]:
     return out
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class InspectionTrainStageConfig(train.TrainOptions):
-    """``onionsort train inspection``: dataset folders (one or several: their splits are
-    pooled), run folder, hyperparameters.
+    """``onionsort train inspection``: dataset folders (their splits pooled), run folder,
+    hyperparameters.
 
-    ``detector`` is the folder of the detector that finds the onion in the validation views
-    (None: the shipped one); ``level_weights`` weighs difficulty levels (``{"clean": 2.0}``
-    counts clean views twice); ``device`` where torch trains (``auto``, ``cpu``, ``cuda``);
-    ``fusion`` fixes the classifier's fusion rule (None: the rule of lower log-loss on the
-    validation onions); ``visibility`` fixes the chance that a view of a blemished onion shows
-    its rot, as ``noisy-or`` fusion assumes it (None: the share measured on the training
-    views). ``camera`` is whose views it learns from: ``"both"`` the sorter's and the
-    robot's (:data:`~onionsort.stages.models.INSPECTION_FILE`, which both read), ``"robot"``
-    the Sawyer's only (:data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`, which the
-    Sawyer's inspection then reads instead). ``augment``: each training crop also seen through
-    a camera of its own (:class:`perception.photometric.PhotometricAugment`), never at
-    validation. ``data_weights``: how many times each dataset's training views count
-    (positive integers, 1 each by default), times the level weights; ``init``: an inspection
-    classifier to fine-tune instead of training from scratch; ``lr``: the peak learning rate (a
-    smaller one suits fine-tuning from ``init``).
+    A training view counts its dataset's ``data_weights`` times its level's weight.
+    ``camera`` ``"both"`` writes :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
+    :data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`; a smaller ``lr`` suits
+    fine-tuning from ``init``.
     """
 
     epochs: int = option(30, help=None)
@@ -94,13 +84,12 @@ class InspectionTrainStageConfig(train.TrainOptions):
                 raise ValueError(f"level weight of {level!r} must be > 0; got {weight}")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class FusionCalibrationConfig:
-    """``onionsort train robot-fusion``: held-out dataset folders whose robot onions fit the
-    calibration (pooled), their ``split``, the ``models`` folder whose robot inspection
-    classifier fuses them (None: the shipped one), the first ``views`` of each onion (None:
-    the robot's :data:`~robot.inspection_poses.INSPECTION_VIEWS`), the ``out`` folder, the
-    torch ``device``."""
+    """``onionsort train robot-fusion``: the held-out robot onions whose fused P(blemished) fit
+    the calibration, and where it goes (``views`` None: the robot's
+    :data:`~robot.inspection_poses.INSPECTION_VIEWS`)."""
 
     data: Path | tuple[Path, ...] = train.data("held-out dataset folder with robot onions "
                                                "(repeat it to pool several); never the data "

@@ -7,7 +7,7 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.common import IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS
 
 __all__ = ["IMPORT_FORMATS", "LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig",
@@ -32,6 +32,7 @@ def classes(text: str) -> dict[str, str]:
     return out
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class LabelExportConfig:
     """``onionsort label export``: the dataset folder, the output folder (new) and the
@@ -48,36 +49,17 @@ class LabelExportConfig:
         check_format(self.format)
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class LabelImportConfig:
     """``onionsort label import``: what to read and where to write it.
 
-    Attributes
-    ----------
-    source : Path
-        The labelled image set (COCO or YOLO layout, see :mod:`recordings.coco`,
-        :mod:`recordings.yolo`; or Label Studio's JSON export beside the images, its state
-        choices as the state labels, :func:`recordings.labelstudio.read_export`).
-    out : Path
-        A new dataset folder.
-    format : str
-        ``coco``, ``yolo`` or ``labelstudio``.
-    states : Path or None
-        The state labels (:mod:`recordings.states_csv`); None: ``source/states.csv`` where
-        there is one. Frames without a row are box-only.
-    depth : Path or None
-        16-bit PNG depth images in millimetres, matched by file name (``depth/<split>/NAME.png``
-        or ``depth/NAME.png`` for the image ``NAME.*``); None: ``source/depth`` where there
-        is one. Frames without depth are read by the colour-only models.
-    inspection : Path or None
-        The inspection views, a second set in the same format (its own ``states.csv``);
-        None: ``source/inspection`` where there is one.
-    classes : dict
-        The dataset's class (``good``, ``blemished``) -> the set's name for it; a class not
-        named keeps its own name.
-    val, test : float
-        Shares of sessions for val and test when the set has no splits (as ``onionsort
-        dataset`` splits its sessions).
+    ``source`` is in COCO or YOLO layout (:mod:`recordings.coco`, :mod:`recordings.yolo`), or
+    Label Studio's JSON export beside the images, its state choices the state labels
+    (:func:`recordings.labelstudio.read_export`); ``states``: :mod:`recordings.states_csv`.
+    A depth image matches the image ``NAME.*`` as ``depth/<split>/NAME.png`` or
+    ``depth/NAME.png``; frames without depth are read by the colour-only models. A class
+    that ``classes`` does not name keeps its own name.
     """
 
     source: Path = option(positional=True, metavar="DIR", help="the labelled image set")
@@ -100,7 +82,10 @@ class LabelImportConfig:
                            help="the set's names of the dataset's classes (default: good, "
                                 "blemished)")
     out: Path = option(help="a new dataset folder")
+    #: Share of sessions for val where the set has no splits (as ``onionsort dataset`` splits
+    #: its sessions).
     val: float = 0.15
+    #: Share of sessions for test, likewise.
     test: float = 0.15
 
     def __post_init__(self) -> None:
@@ -117,6 +102,7 @@ class LabelImportConfig:
         object.__setattr__(self, "classes", dict(self.classes))
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class LabelSelectConfig:
     """``onionsort label select``: the sessions, how many frames, the output folder (new),

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 
 __all__ = ["BAYESIAN_METHODS", "SWAP_METHOD", "LearnConfig"]
 
@@ -15,53 +15,23 @@ BAYESIAN_METHODS = ("mmap-birl", "map-birl")
 SWAP_METHOD = "mmap-birl"
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class LearnConfig:
-    """What to learn from, with which learner, into which run folder.
+    """What to learn from (perceived session files), with which learner, into which run folder.
 
-    Attributes
-    ----------
-    sessions : tuple of Path
-        Perceived session files.
-    calibration : Path
-        ``calibration.json`` from ``onionsort calibrate``.
-    out : Path
-        Run folder.
-    method : str
-        A learner of :data:`irl.experiments.METHODS`.
-    seed : int
-    allow_model_mismatch : bool
-        Learn even when the sessions were perceived by other models, or in another sensor
-        mode, than the calibration was measured with (logged, and noted in ``model.json``).
-    rerun : bool
-        Write ``learn.rrd``.
-    overwrite : bool
-        Replace an earlier run's ``model.json`` in ``out``.
-    connect : str or None
-        Also stream the Rerun recording to the viewer at this gRPC URL
-        (``rerun+http://HOST:9876/proxy``), in addition to ``learn.rrd``.
-    backend : str
-        Forward-backward kernels (``irl.inference.BACKENDS``): ``numpy`` or ``numba`` (the
-        ``fast`` extra), equal to rounding; used by the methods that run forward-backward
-        (``mmap-birl``, ``bc-em``), recorded in ``model.json`` for every method.
-    posterior : bool
-        Also sample the posterior over reward weights (``mmap-birl`` and ``map-birl`` only).
-    samples : int
-        Posterior samples (1000).
-    posterior_method : str
-        ``mcmc`` (HMC chains, the default) or ``laplace`` (a Gaussian at the MAP, fast); see
-        :mod:`irl.posterior`.
-    session_swaps : bool
-        ``mmap-birl`` only: let each session's reads of the onion's class have been backwards
-        as a whole, at the rate the calibration measured on its held-out sessions
-        (:meth:`state_abstraction.calibration.Calibration.session_swap`; the learner's
-        ``session_swap``). Each session's posterior probability of having been swapped is
-        written to ``model.json``.
+    A mismatch of models allowed by ``allow_model_mismatch`` is logged and noted in
+    ``model.json``, as is the ``backend`` (for every method) and, with ``session_swaps``
+    (:meth:`state_abstraction.calibration.Calibration.session_swap`), each session's
+    posterior probability of having been swapped. ``posterior_method``: see
+    :mod:`irl.posterior`.
     """
 
     sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION.mcap",
                                         help=None)
-    method: str = "mmap-birl"  # the command's option takes several (commands/learn.py)
+    #: A learner of :data:`irl.experiments.METHODS` (the command's option takes several:
+    #: commands/learn.py).
+    method: str = "mmap-birl"
     calibration: Path = option(flag="--observation-model", metavar="FILE",
                                help="calibration.json written by `onionsort calibrate`")
     out: Path = option(help="run folder")
@@ -78,6 +48,7 @@ class LearnConfig:
     session_swaps: bool = common.session_swaps()
     backend: str = common.backend()
     connect: str | None = common.connect("the learning run (learn.rrd)")
+    #: Write ``learn.rrd``.
     rerun: bool = True
 
     def __post_init__(self) -> None:

@@ -7,7 +7,7 @@ import os
 from dataclasses import dataclass
 from typing import ClassVar
 
-from onionsort.configs import option
+from onionsort.configs import documented, option
 
 __all__ = ["EXECUTORS", "TORCH_THREADS", "ParallelOptions", "default_workers",
            "machine_cores"]
@@ -43,24 +43,11 @@ def default_workers(piece_threads: int = 1, cores: int | None = None) -> int:
     return max(1, cores // max(1, min(piece_threads, cores)))
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class ParallelOptions:
     """Where a stage's independent pieces run; every parallel stage's config has these fields.
-
-    Attributes
-    ----------
-    executor : str
-        ``local`` (worker processes on this machine) or ``ray`` (a Ray cluster, or a local
-        Ray instance).
-    workers : int or None
-        Local worker processes, or the CPUs of a new local Ray instance (None: as many as the
-        machine's cores take pieces of this stage,
-        :func:`default_workers`). 1 runs the pieces in this
-        process, one after another.
-    ray_address : str or None
-        The Ray cluster to join with ``executor="ray"`` (None: ``RAY_ADDRESS``, else a new local
-        instance).
-    """
+    ``workers`` None is :func:`default_workers` for the stage's ``piece_threads``."""
 
     executor: str = option("local", choices=EXECUTORS, group="parallel",
                            help="run the {pieces} on local worker processes (default) or as "

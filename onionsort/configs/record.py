@@ -6,44 +6,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import ParallelOptions
 
 __all__ = ["RecordConfig"]
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class RecordConfig(ParallelOptions):
     """How many sessions to simulate, how, and where to write them.
 
-    Attributes
-    ----------
-    sessions : int
-    out : Path
-        Folder for the ``.mcap`` files.
-    seed : int
-        Root seed; sessions are reproducible from it.
-    occlusion : float
-        Probability that the passer-by occludes a step.
-    steps_per_session, frames_per_step : int
-    width, height : int
-        Main camera resolution.
-    overwrite : bool
-        Replace existing session files in ``out``.
-    resume : bool
-        Keep the complete sessions already in ``out`` and record the others (see
-        :mod:`onionsort.stages.record`).
-    rerun : Path, str or None
-        Also log every session to Rerun: an ``.rrd`` path, ``"spawn"``, or a viewer URL.
-    connect : str or None
-        Also stream the Rerun recording to the viewer at this gRPC URL
-        (``rerun+http://HOST:9876/proxy``), in addition to the ``rerun`` file.
-    difficulty : str
-        Perception difficulty, a level of ``robot.difficulty.DIFFICULTY_LEVELS`` (``clean``:
-        today's world).
-    executor, workers, ray_address
-        Where the sessions are recorded (:class:`~onionsort.configs.parallel.ParallelOptions`):
-        each is a piece, simulated from its own seed.
+    Each session is a piece, simulated from its own seed (drawn from ``seed``): the sessions
+    are the same whatever runs them. ``rerun`` is an ``.rrd`` path, ``"spawn"`` (a local
+    viewer) or a viewer URL; ``resume``: see :mod:`onionsort.stages.record`.
     """
 
     sessions: int = option(12, help="sessions to record (12)")

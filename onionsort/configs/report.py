@@ -5,11 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import option
+from onionsort.configs import documented, option
 
 __all__ = ["ReportConfig"]
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class ReportConfig:
     """Which run folder to report on: ``report.md`` (and ``report_pr.png`` where there are

@@ -5,14 +5,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import option
+from onionsort.configs import documented, option
 
 __all__ = ["SuggestConfig"]
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class SuggestConfig:
-    """Which learning run, and how many states to list (each field's help says what it is)."""
+    """Which learning run, and how many states to list."""
 
     run: Path = option(positional=True, metavar="RUN_DIR",
                        help="a folder of `onionsort learn --posterior`")

@@ -8,7 +8,7 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from onionsort.configs import common, option
+from onionsort.configs import common, documented, option
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment", "data",
            "data_weights", "init", "weights"]
@@ -54,14 +54,12 @@ def init(what: str):
                   help=f"{what} to fine-tune instead of training from scratch")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class TrainOptions:
-    """What training any model takes: ``data``, one dataset folder or several, whose splits
-    are pooled, each dataset's training samples counted ``data_weights`` times (1 each by
-    default); the run folder ``out``; ``epochs`` and ``batch_size`` (each model's config
-    gives its defaults); ``seed``; ``augment``: each training sample seen through a camera of
-    its own (:class:`perception.photometric.PhotometricAugment`), never at evaluation; and
-    where torch trains, ``device``."""
+    """What training any model takes: its datasets (their splits pooled), its run folder and
+    hyperparameters (each model's config gives the defaults of ``epochs`` and
+    ``batch_size``); ``augment`` is :class:`perception.photometric.PhotometricAugment`."""
 
     data: Path | tuple[Path, ...] = data()
     data_weights: tuple[int, ...] = data_weights()
@@ -108,19 +106,12 @@ def _check_positive(config, *names: str) -> None:
             raise ValueError(f"{name} must be >= 1; got {getattr(config, name)}")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class ClassifierTrainConfig(TrainOptions):
-    """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters.
-
-    ``data`` is one dataset folder or several, whose splits are pooled, each dataset's
-    training steps counted ``data_weights`` times (1 each by default); ``depth_dropout``:
-    probability that a training step's depth is zeroed
-    (:class:`state_abstraction.classifier.ClassifierConfig`); ``init``: a classifier
-    checkpoint to fine-tune instead of training from scratch; ``augment``: each training
-    step's frames seen through a camera of their own
-    (:class:`perception.photometric.PhotometricAugment`), never at evaluation; ``lr``: the
-    peak learning rate (a smaller one suits fine-tuning from ``init``).
-    """
+    """``onionsort train state-classifier``: dataset folders, run folder, hyperparameters
+    (``depth_dropout``: :class:`state_abstraction.classifier.ClassifierConfig`'s); a smaller
+    ``lr`` suits fine-tuning from ``init``."""
 
     epochs: int = option(12, help=None)
     batch_size: int = option(32, help=None)
@@ -137,14 +128,11 @@ class ClassifierTrainConfig(TrainOptions):
             raise ValueError(f"depth_dropout must be in [0, 1]; got {self.depth_dropout}")
 
 
+@documented
 @dataclass(frozen=True, kw_only=True)
 class DetectorTrainConfig(TrainOptions):
-    """``onionsort train detector``: dataset folders (as :class:`ClassifierTrainConfig`'s
-    ``data`` and ``data_weights``), run folder, hyperparameters, ``resume`` (continue the run
-    in ``out`` from its last checkpoint), ``init`` (a detector checkpoint to fine-tune instead
-    of training from scratch), the peak learning rate ``lr`` and ``augment`` (each training
-    image seen through a camera of its own, :class:`perception.photometric.PhotometricAugment`;
-    never at evaluation)."""
+    """``onionsort train detector``: dataset folders, run folder, hyperparameters; a smaller
+    ``lr`` suits fine-tuning from ``init``."""
 
     epochs: int = option(24, help=None)
     batch_size: int = option(16, help=None)
