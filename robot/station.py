@@ -39,7 +39,9 @@ from irl.domains.onion_sorting import (
     Prediction,
     SortAction,
     SortingState,
+    encode_state,
     next_state,
+    onion_sorting,
 )
 from robot.assets import sawyer_urdf
 from robot.belt import Belt, LineUpOnion, in_world, make_lineup
@@ -212,12 +214,10 @@ class SawyerStation:
     last_labels : list of list of InspectionLabel
         With ``label_blemishes``, the ground truth of each of them.
     lighting : Lighting
-    arm : robot.sawyer.Sawyer
-    gate : robot.scene.StopGate
-    belt : robot.belt.Belt
-        The line-up's onions in the world.
-    cameras : robot.station_cameras.StationCameras
-    motions : robot.primitives.MotionPrimitives
+    arm, gate, belt, cameras, motions
+        Its parts, once entered: :class:`~robot.sawyer.Sawyer`, :class:`~robot.scene.StopGate`,
+        :class:`~robot.belt.Belt`, :class:`~robot.station_cameras.StationCameras`,
+        :class:`~robot.primitives.MotionPrimitives`.
     """
 
     def __init__(
@@ -516,8 +516,6 @@ def robot_inspection_views(n_onions: int, seed: int | np.random.SeedSequence,
     labels :class:`InspectionLabel` with the rot each view shows; ``difficulty`` and
     ``randomize_look`` as for :class:`SawyerStation`.
     """
-    from irl.domains.onion_sorting import encode_state, onion_sorting
-
     actions = onion_sorting().expert_policy().argmax(axis=1)
     with SawyerStation(GROUND_TRUTH, n_onions=n_onions, n_blemished=n_onions // 2, seed=seed,
                        difficulty=difficulty, inspection=camera,
