@@ -73,7 +73,8 @@ def target_errors(arm: Sawyer) -> dict[Location, tuple[float, float]]:
 class MotionPrimitives:
     """The Sawyer's motions for each action, on the onions of ``belt``.
 
-    Each primitive returns the largest final flange position errors (m) of its arm motions.
+    PICK, INSPECT and the PLACEs return the final flange position error (m) of each of their
+    arm motions.
 
     Parameters
     ----------
