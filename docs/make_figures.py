@@ -429,7 +429,9 @@ def _station_stills(size: tuple[int, int], seed: int, quick: bool
     camera after CLAIM, PICK and INSPECT, and the inspection view that shows the most rot."""
     from irl.domains.onion_sorting import SortAction
     from robot.camera import render
-    from robot.station import GROUND_TRUTH, ROBOT_INSPECTION_CAMERA, SawyerStation
+    from robot.classifier import GROUND_TRUTH
+    from robot.station import SawyerStation
+    from robot.station_cameras import ROBOT_INSPECTION_CAMERA
 
     width, height = size
     inspection = dataclasses.replace(ROBOT_INSPECTION_CAMERA, width=width, height=height)

@@ -47,15 +47,10 @@ from irl.domains.onion_sorting import (
     SortingState,
     encode_state,
 )
+from robot.classifier import Classifier
 from robot.difficulty import Difficulty
 from robot.labels import OnionLabel
-from robot.station import (
-    INSPECTION_VIEWS,
-    STEP_DURATION_S,
-    Classifier,
-    SawyerStation,
-    StationStep,
-)
+from robot.station import INSPECTION_VIEWS, STEP_DURATION_S, SawyerStation, StationStep
 from robot.world import WorldState
 
 __all__ = [
@@ -356,7 +351,7 @@ def evaluate_policy(
         ``classify``).
     classify : callable or "ground-truth"
         ``classify(views) -> Prediction or Verdict`` on the onion's inspection views (each
-        (h, w, 3) uint8; :data:`robot.station.Classifier`), or ``"ground-truth"`` for perfect
+        (h, w, 3) uint8; :data:`robot.classifier.Classifier`), or ``"ground-truth"`` for perfect
         perception.
     max_steps_per_onion : int
         The episode's step budget is ``n_onions * max_steps_per_onion`` actions.

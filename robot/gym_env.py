@@ -60,9 +60,10 @@ from irl.domains.onion_sorting import (
     onion_sorting,
 )
 from robot.camera import CameraSpec
+from robot.classifier import GROUND_TRUTH, Classifier, check_classifier
 from robot.difficulty import Difficulty, resolve_difficulty
 from robot.evaluation import SortingTally
-from robot.station import GROUND_TRUTH, INSPECTION_VIEWS, Classifier, SawyerStation
+from robot.station import INSPECTION_VIEWS, SawyerStation
 
 __all__ = ["SortingEnv", "sorting_reward"]
 
@@ -138,7 +139,7 @@ class SortingEnv(gymnasium.Env):
         50 and 30).
     classify : callable or "ground-truth"
         ``classify(views) -> Prediction or Verdict`` on the onion's inspection views
-        (:data:`robot.station.Classifier`), or perfect perception.
+        (:data:`robot.classifier.Classifier`), or perfect perception.
     difficulty : Difficulty or str
         Perception difficulty of the station (:mod:`robot.difficulty`).
     max_steps_per_onion : int
@@ -179,12 +180,7 @@ class SortingEnv(gymnasium.Env):
                              f"{n_blemished}")
         self.max_steps_per_onion = _check_int("max_steps_per_onion", max_steps_per_onion, 1)
         self.move_steps = _check_int("move_steps", move_steps, 2)
-        if isinstance(classify, str) and classify != GROUND_TRUTH:
-            raise ValueError(f"classify must be a callable views -> Prediction or "
-                             f"{GROUND_TRUTH!r}; got {classify!r}")
-        if not isinstance(classify, str) and not callable(classify):
-            raise TypeError(f"classify must be a callable views -> Prediction or "
-                            f"{GROUND_TRUTH!r}; got {type(classify).__name__}")
+        check_classifier(classify)
         if camera is not None and not isinstance(camera, CameraSpec):
             raise TypeError(f"camera must be a CameraSpec or None; got {type(camera).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -281,7 +277,7 @@ class SortingEnv(gymnasium.Env):
     def _first_image(self, station_seed: int) -> np.ndarray:
         """The main camera before the first action, its image noise drawn from a stream of its
         own so that the station's own draws (and so its inspections) are left as they are."""
-        effects = self._station.effects
+        effects = self._station.cameras.effects
         own = effects.rng
         seq = np.random.SeedSequence(station_seed, spawn_key=(_PREVIEW_TAG,))
         effects.rng = np.random.default_rng(seq)

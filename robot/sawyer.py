@@ -18,14 +18,24 @@ import pybullet as p
 
 from robot.assets import sawyer_urdf
 
-__all__ = ["Sawyer"]
+__all__ = ["Sawyer", "flange_down"]
 
 logger = logging.getLogger(__name__)
 
 #: A comfortable configuration: elbow up, flange pointing down.
 HOME = np.array([0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161])
 _DOWN = p.getQuaternionFromEuler([np.pi, 0.0, 0.0])
-_FLANGE = np.array([0.0, 0.0, 0.0])
+_SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions after a reach
+
+
+def flange_down(yaw: float, tilt: float = 0.0) -> tuple[float, ...]:
+    """Quaternion (x, y, z, w) of the flange pointing down, turned by ``yaw`` about z, then
+    tilted by ``tilt`` about x so that what hangs from it swings towards -y."""
+    down = p.getQuaternionFromEuler([np.pi, 0.0, -yaw])
+    if not tilt:
+        return tuple(down)
+    turn = p.getQuaternionFromEuler([-tilt, 0.0, 0.0])
+    return tuple(p.multiplyTransforms([0, 0, 0], turn, [0, 0, 0], down)[1])
 
 
 class Sawyer:
@@ -44,6 +54,11 @@ class Sawyer:
     ------
     robot.assets.AssetNotFoundError
         If the robosuite asset package (and with it the URDF) is not installed.
+
+    Attributes
+    ----------
+    rest : ndarray of shape (7,)
+        The configuration :meth:`solve` starts its IK from (:data:`HOME` until set).
     """
 
     def __init__(self, client: int, base_position=(0.0, 0.0, 0.0), base_yaw: float = 0.0):
@@ -66,6 +81,7 @@ class Sawyer:
         self._grasp: int | None = None
         self._carried: tuple[list[float], list[float]] | None = None  # flange -> body pose
         self.grasped: int | None = None
+        self.rest = HOME
         self.reset(HOME)
 
     def reset(self, q: np.ndarray) -> None:
@@ -112,6 +128,41 @@ class Sawyer:
                            err, np.round(position, 3).tolist(), max_iter)
         self.reset(start)
         return q
+
+    def solve(self, position, orientation=None, seed: np.ndarray | None = None) -> np.ndarray:
+        """Joint positions (7,) putting the flange at ``position`` (3,), pointing down (turned by
+        the quaternion ``orientation`` if given).
+
+        The IK starts from ``seed`` (7,), by default :attr:`rest`, so the answer does not depend
+        on where the arm happens to be (IK started from a folded or turned wrist can stall at a
+        joint limit). The arm ends where it was.
+        """
+        start = self.q
+        self.reset(self.rest if seed is None else seed)
+        q = self.inverse_kinematics(np.asarray(position, float),
+                                    flange_down(0.0) if orientation is None else orientation)
+        self.reset(start)
+        return q
+
+    def reach(self, position, steps: int, *, orientation=None,
+              seed: np.ndarray | None = None) -> float:
+        """Move the flange to ``position`` (3,) in ``steps`` physics steps, then let it settle
+        (short corrective motions, at most :data:`_MAX_SETTLE`) to within :data:`_SETTLE_TOL`;
+        returns the final position error (m), and warns past 2 cm. ``orientation`` and ``seed``
+        as in :meth:`solve`."""
+        position = np.asarray(position, float)
+        q = self.solve(position, orientation, seed)
+        self.move_to_joints(q, steps=steps)
+        err = float(np.linalg.norm(self.end_effector()[0] - position))
+        for _ in range(_MAX_SETTLE):
+            if err <= _SETTLE_TOL:
+                break
+            self.move_to_joints(q, steps=_SETTLE_STEPS)
+            err = float(np.linalg.norm(self.end_effector()[0] - position))
+        if err > 0.02:
+            logger.warning("the Sawyer stopped %.3f m from %s", err,
+                           np.round(position, 3).tolist())
+        return err
 
     def move_to(self, position, orientation=_DOWN, *, steps: int = 240) -> float:
         """Drive the arm to a pose under position control, stepping the physics ``steps`` times.

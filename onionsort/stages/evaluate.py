@@ -126,7 +126,8 @@ def evaluate(config: EvaluateConfig, models=None):
     from onionsort.stages.parallel import torch_threads
     from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
-    from robot.station import ROBOT_INSPECTION_CAMERA, station_robot
+    from robot.station import station_robot
+    from robot.station_cameras import ROBOT_INSPECTION_CAMERA
     from robot.world import camera_pose
 
     torch.set_num_threads(torch_threads())

@@ -234,7 +234,7 @@ def test_recording_the_start_changes_no_later_render(expert_pi):
 
 
 class _SequentialByImage:
-    """A sequential classifier (:class:`robot.station.SequentialClassifier`) whose view
+    """A sequential classifier (:class:`robot.classifier.SequentialClassifier`) whose view
     probability is drawn from the view's pixels: deterministic, and different from view to
     view; calls by ``noisy-or`` at 0.5."""
 
@@ -266,7 +266,7 @@ def test_the_robot_stops_showing_an_onion_once_its_call_is_settled(expert_pi):
     """It takes views until the call is settled (:func:`perception.fusion.settled`: no later
     view could change it), and every view without stopping."""
     from perception.fusion import settled as is_settled
-    from robot.station import SequentialClassifier
+    from robot.classifier import SequentialClassifier
 
     classify = _SequentialByImage()
     assert isinstance(classify, SequentialClassifier)

@@ -11,19 +11,15 @@ import pybullet as p
 import pytest
 
 from irl.domains.onion_sorting import Location, Prediction, SortAction, SortingState, next_state
+from robot.belt import make_lineup
 from robot.camera import boxes_from_segmentation
+from robot.classifier import GROUND_TRUTH
+from robot.inspection_poses import INSPECTION_VIEWS, inspection_poses
+from robot.primitives import ROBOT_TARGETS, target_errors
+from robot.sawyer import flange_down
 from robot.scene import GATE_X
 from robot.state_map import PICK_SPOT, hand_location, in_bin, on_belt
-from robot.station import (
-    GROUND_TRUTH,
-    INSPECTION_VIEWS,
-    ROBOT_TARGETS,
-    START_STATE,
-    SawyerStation,
-    _down,
-    inspection_poses,
-    make_lineup,
-)
+from robot.station import START_STATE, SawyerStation
 
 C, P, I, PC, PB = SortAction  # CLAIM, PICK, INSPECT, PLACE_ON_CONVEYOR, PLACE_IN_BIN
 
@@ -95,7 +91,7 @@ def test_the_station_starts_in_the_mdps_initial_state(station):
 
 @pytest.mark.parametrize("loc", list(Location))
 def test_every_flange_target_is_reached_exactly_with_the_flange_down(station, loc):
-    position_error, angle_error = station.target_errors()[loc]
+    position_error, angle_error = target_errors(station.arm)[loc]
     assert position_error < 1e-3 and angle_error < 0.02
     assert hand_location(ROBOT_TARGETS[loc], ROBOT_TARGETS) == loc
 
@@ -156,8 +152,8 @@ def test_the_inspection_view_shows_the_held_onion_large_and_centred():
     with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=1) as st:
         done = [st.step(a) for a in (C, P, I)][-1]
         assert done.inspection.shape == (st.inspection.height, st.inspection.width, 3)
-        seg = st.render_inspection().seg
-        body = st._onions[st.focus].body
+        body = st.belt.onions[st.focus].body
+        seg = st.cameras.render_inspection(body).seg
         x0, y0, x1, y1, n = boxes_from_segmentation(seg, [body])[body]
         h, w = seg.shape
         assert n > 0.1 * h * w  # large: a tenth of the view or more
@@ -187,7 +183,7 @@ def test_the_views_show_the_onion_from_every_side_and_from_below():
     with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=1,
                        inspection_views=4) as st:
         done = [st.step(a) for a in (C, P, I)][-1]
-        body = st._onions[st.focus].body
+        body = st.belt.onions[st.focus].body
         assert len(st.last_views) == 4
         for image in st.last_views:
             x0, y0, x1, y1, n = boxes_from_segmentation(image.seg, [body])[body]
@@ -239,7 +235,7 @@ def test_labelled_views_count_the_rot_each_one_shows():
         for a in (C, P, I, PB if st.blemished[0] else PC, C, P, I):
             done = st.step(a)
             if done.views:
-                held = st._onions[st.focus]
+                held = st.belt.onions[st.focus]
                 labels = [max(labels, key=lambda lb: lb.visible_pixels)
                           for labels in st.last_labels]
                 assert all(lb.blemished == held.appearance.blemished for lb in labels)
@@ -320,8 +316,8 @@ def test_leaving_out_the_links_the_camera_cannot_see_changes_no_pixel():
         assert culled, "the inspection camera sees all of the arm?"
         for pose, (yaw, tilt) in enumerate(st.poses):  # each inspection pose of the wrist
             centre = st.position(st.focus)
-            turn = _down(yaw, tilt)
-            st._move(st.arm.flange_holding_at(centre, turn) if pose else ROBOT_TARGETS[
+            turn = flange_down(yaw, tilt)
+            st.motions.move(st.arm.flange_holding_at(centre, turn) if pose else ROBOT_TARGETS[
                 Location.FACE], orientation=turn)
             full = render(st.client, st.inspection, st.lighting)
             lean = render(st.client, st.inspection, st.lighting, cull=(st.arm.body,))
