@@ -19,19 +19,11 @@ needed. The policy and the emissions come in as log-probabilities, so a Boltzman
 any temperature is represented exactly (``log_softmax``, never ``exp`` then ``log``). A
 10,000-step demonstration neither underflows nor overflows.
 
-Modules:
-
-- :mod:`~irl.inference.packing`: demonstrations packed into batches, padded where their
-  lengths differ, and their observations' shifted likelihoods;
-- :mod:`~irl.inference.api`: the entry points, which hand each batch to a pass;
-- :mod:`~irl.inference.scaled`: the scaled pass (Rabiner scaling), exact to rounding while its
-  messages stay within a float's range, which it checks;
-- :mod:`~irl.inference.blocked`: the scaled pass by blocks of states, for a separable model
-  under a stationary policy on a sparse MDP;
-- :mod:`~irl.inference.logspace`: the log-space pass, exact at any dynamic range at about three
-  times the cost, which takes a batch the scaled pass refuses;
-- :mod:`~irl.inference.compiled`: the numba backend of the scaled pass;
-- :mod:`~irl.inference.workspace`: scratch arrays kept between passes.
+Modules: ``packing`` (demonstrations in padded batches), ``api`` (the entry points, which hand
+each batch to a pass), ``scaled`` (the scaled pass, exact to rounding within a float's range,
+which it checks), ``blocked`` (the scaled pass by blocks of states), ``logspace`` (the log-space
+pass, exact at any range at about three times the cost), ``compiled`` (the numba backend),
+``workspace`` (scratch arrays kept between passes).
 """
 
 from irl.inference.api import forward_backward, log_forward_backward, posterior_stats

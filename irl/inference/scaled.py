@@ -77,28 +77,11 @@ def _chunks(length: int, per_step: int) -> list[tuple[int, int]]:
 
 @dataclass(frozen=True, eq=False)
 class _Batch:
-    """What the scaled pass knows of a batch before it runs.
-
-    Attributes
-    ----------
-    n_demos, length, S, A : int
-    F : float
-        :func:`_scaled_floor` of the MDP.
-    log_pi_min : float
-        The smallest finite log-probability of the policy.
-    pi : ndarray of shape (A, S) or (T, A, S)
-        The policy, action-major.
-    stationary : bool
-        Whether the policy is stationary (then folded into T's pair rows).
-    chunks : list of (int, int)
-        The steps ``t0..t1-1`` whose local factors are formed at once.
-    lengths : ndarray of int, shape (N,)
-    ragged : bool
-        Whether some demonstration is shorter than the batch.
-    separable : bool
-        Whether the local factors come as a state part and an action part (computed chunk by
-        chunk from a model whose likelihoods factor that way).
-    """
+    """What the scaled pass knows of a batch before it runs: its sizes, ``F``
+    (:func:`_scaled_floor`), the policy's smallest finite log-probability and the policy
+    action-major, ``pi[a, s]`` or ``pi[t, a, s]`` (stationary: folded into T's pair rows), the
+    chunks of steps whose local factors are formed at once, the lengths (ragged: some shorter
+    than the batch), and whether the factors come as a state and an action part (separable)."""
 
     n_demos: int
     length: int
@@ -208,24 +191,11 @@ def _times_local(E, i: int, pi_t: np.ndarray, vec: np.ndarray, out: np.ndarray,
 
 @dataclass(frozen=True, eq=False)
 class _Products:
-    """The products of a pass with ``T``, and the scratch of the forward pass's steps.
-
-    Attributes
-    ----------
-    push, expect : callable
-        :meth:`TabularMDP.column_products` on whole messages, with the policy folded in where
-        it is stationary; or, where the pass goes by blocks of states, the blocks' products
-        (:meth:`TabularMDP.state_block_products`).
-    blocks : _Blocks or None
-        The blocks, where the pass goes by them.
-    alpha : ndarray of shape (A, S, N) or None
-        The forward message (None where the pass goes by blocks).
-    pair_weights : ndarray of shape (A S,) or None
-        ``alpha``'s sum is ``pair_weights @ alpha``: the policy where it is folded into T,
-        else ones.
-    u : ndarray of shape (S, N) or None
-        ``e_t pred_t`` of a separable model.
-    """
+    """The products of a pass with ``T`` and the forward pass's scratch: ``push`` and
+    ``expect`` of :meth:`TabularMDP.column_products` on whole messages (the policy folded in
+    where stationary; then ``alpha``'s sum is ``pair_weights @ alpha``, else ones), or of
+    :meth:`TabularMDP.state_block_products` where the pass goes by ``blocks`` (then no
+    ``alpha``); ``u[s, n]`` holds ``e_t pred_t`` of separable factors."""
 
     push: object
     expect: object
