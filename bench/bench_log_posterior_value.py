@@ -4,12 +4,12 @@ Onion sorting at noise 0.3 (``irl.domains.onion_sorting(noise=0.3)``), ``--demos
 demonstrations (12) of ``--length`` steps (20) at occlusion 0.2 (seed 0), MMAP-BIRL with the
 domain's beta and prior, on each backend installed. The two prepared functions,
 ``est.log_posterior_value_function(demos)`` (what the importance proposals of
-:func:`irl.posterior._importance_draws` call) and ``est.log_posterior_function(demos)`` (what
-the chains call), are evaluated at the same ``--points`` thetas (200), the Laplace
-approximation's draws (``sample_posterior(est, demos, method="laplace")``, round which a
-reading's importance proposals are drawn), in rounds that alternate which goes first
-(``--rounds``, 5); the bench prints the median seconds per evaluation of each, their ratio, and
-the largest difference of their values.
+:func:`irl.posterior.importance._importance_draws` call) and
+``est.log_posterior_function(demos)`` (what the chains call), are evaluated at the same
+``--points`` thetas (200), the Laplace approximation's draws (``sample_posterior(est, demos,
+method="laplace")``, round which a reading's importance proposals are drawn), in rounds that
+alternate which goes first (``--rounds``, 5); the bench prints the median seconds per
+evaluation of each, their ratio, and the largest difference of their values.
 
 Example
 -------

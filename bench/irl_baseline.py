@@ -1,5 +1,7 @@
-"""The forward-backward and MMAP-BIRL gradient path of irl as of commit cfdfae2, frozen as the
-baseline of bench/bench_irl.py (not part of the library; do not import it elsewhere).
+"""FROZEN COPY, not library code: the forward-backward, planning kernels and MMAP-BIRL
+gradient assembly of irl as of commit cfdfae2 (2026-11-23), the baseline that
+bench/bench_irl.py times the library against in the same run. Do not edit it to follow the
+library, and do not import it elsewhere.
 
 The planning kernels (``OptimalQSolver`` and its helpers, unchanged from cfdfae2 to e77f9cd)
 and the gradient's assembly are frozen here too, so that later work on the library's solver
@@ -9,6 +11,23 @@ It takes the dense emission table ``log E[o, s, a]`` (``observation_model.log_em
 the demonstrations at every call and runs one pass per group of equal lengths. Only the names it
 shares with the library changed; the kernels are the ones of that commit (the flat-operator
 products are inlined as they were).
+
+Why a copy and not a checkout of cfdfae2 (``git worktree``) that the bench imports in a child
+process: cfdfae2's code does run on today's numpy and scipy, but
+
+- the baseline is not cfdfae2's learner as a whole: :class:`BaselineMMAPBIRL` is today's
+  ``MMAPBIRL`` (its optimizer loop, checks and prior) with cfdfae2's kernels in place of
+  today's, so that the bench's speed-ups measure the kernels. A checkout would time cfdfae2's
+  own optimizer loop and checks as well: other figures than the ones the docs quote;
+- the inputs would not be identical without rebuilding them: the bench hands both paths the
+  same estimator objects, prepared data and observation models in one process (the same-theta
+  check of [1], the gradient timings on one prepared batch), and section [3] runs the frozen
+  path on today's grid (``irl.domains.grid_mdp``) and 100-block state sensor through its dense
+  table; cfdfae2 has neither a grid domain nor any observation model but the dense one, so a
+  child would need every input serialized and rebuilt in its classes, and its peak memory
+  traced there;
+- a checkout needs the repository's history where the bench runs, which a source distribution
+  or a shallow clone lacks.
 """
 
 from __future__ import annotations

@@ -2,13 +2,13 @@
 
 :mod:`irl` imports without numba: this module imports it only when the kernel is first called
 (and compiles the kernel then, or loads it from numba's cache), and :func:`available` says
-whether it can be. The kernel computes what :func:`irl.inference._scaled_forward_backward`
+whether it can be. The kernel computes what :func:`irl.inference.scaled._scaled_forward_backward`
 computes for a stationary policy and one batch, the same products in the same order up to the
 order of a few sums, so the results agree to rounding (about 1e-15 relative). It runs one
 demonstration at a time, single-threaded, each step in one or two sweeps over the transition
 operator, where the numpy pass makes a dozen array operations on the whole batch per step.
 
-Layouts (action-major, as in :mod:`irl.inference`; ``r = a * S + s`` indexes a pair):
+Layouts (action-major, as in :mod:`irl.inference.scaled`; ``r = a * S + s`` indexes a pair):
 
 - the transition operator as CSR arrays ``indptr, indices, data``: row ``r = a * S + s``,
   column ``s'``, value ``T[s, a, s']`` (:func:`operator_arrays` of ``mdp._action_major``);
@@ -44,7 +44,7 @@ since every ``g`` is checked finite and the rows of ``T`` sum to 1).
 Storage besides the inputs and outputs: ``pred_t`` (L, S), the normalizers, and a few
 vectors of S A.
 
-Range checks, as in the numpy pass (see :mod:`irl.inference`): ``ok`` is False when some
+Range checks, as in the numpy pass (see :mod:`irl.inference.scaled`): ``ok`` is False when some
 ``c_t`` is not positive and finite (an observation impossible given the steps before it, or
 one that no pair emits: its factor is undefined), when a positive ``pred_t`` (``p0``
 included) is below ``e^-F``, or when a ``g``, the occupancy or the initial posterior is not
@@ -307,8 +307,8 @@ def scaled_forward_backward(indptr, indices, data, pi, factor, shift, lengths, p
     p0 : ndarray of shape (S,)
         Initial state distribution.
     floor : float
-        ``F`` (:func:`irl.inference._scaled_floor`): positive predicted probabilities must stay
-        above ``e^-F``.
+        ``F`` (:func:`irl.inference.scaled._scaled_floor`): positive predicted probabilities
+        must stay above ``e^-F``.
 
     Returns
     -------

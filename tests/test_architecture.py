@@ -33,7 +33,7 @@ RULES: dict[str, set[str]] = {
 #: module -> what it may import beyond its package's rule: optional backends, imported lazily.
 OPTIONAL: dict[str, set[str]] = {
     "irl/_numba.py": {"numba"},
-    "irl/posterior.py": {"mici"},
+    "irl/posterior/chains.py": {"mici"},
     # one BLAS thread inside a large MDP's solve (a core dependency, imported when first used)
     "irl/_blas.py": {"threadpoolctl"},
 }

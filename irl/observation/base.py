@@ -46,12 +46,17 @@ class ObservationModel(abc.ABC):
     n_observations: int
     observation_names: list[str] | None
 
-    def __new__(cls, *args, **kwargs):
-        if cls is ObservationModel:
-            from irl.observation.dense import DenseObservationModel
+    #: What ``ObservationModel(...)`` builds: the implementation whose class statement says
+    #: ``default=True`` (:class:`~irl.observation.DenseObservationModel`).
+    _default: type[ObservationModel] | None = None
 
-            return super().__new__(DenseObservationModel)
-        return super().__new__(cls)
+    def __init_subclass__(cls, *, default: bool = False, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if default:
+            ObservationModel._default = cls
+
+    def __new__(cls, *args, **kwargs):
+        return super().__new__(ObservationModel._default if cls is ObservationModel else cls)
 
     # -- what every implementation provides ----------------------------------------------
 

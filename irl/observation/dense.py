@@ -16,7 +16,7 @@ from irl.observation.base import ObservationModel, check_names, check_nominal, s
 __all__ = ["DenseObservationModel"]
 
 
-class DenseObservationModel(ObservationModel):
+class DenseObservationModel(ObservationModel, default=True):
     """``O[s, a, o] = P(o | s, a)`` stored as one array (what ``ObservationModel(probs)`` builds).
 
     Parameters

@@ -94,13 +94,13 @@ def test_trials_carry_the_sweeps_backend_but_not_in_their_data(numba_present):
 def test_run_trial_fits_with_the_trials_backend(method, built, monkeypatch):
     pytest.importorskip("numba")
     seen = []
-    real = irl.inference.forward_backward
+    real = irl.inference.api.forward_backward
 
     def spying(*args, backend="numpy", **kwargs):
         seen.append(backend)
         return real(*args, backend=backend, **kwargs)
 
-    monkeypatch.setattr(irl.inference, "forward_backward", spying)
+    monkeypatch.setattr(irl.inference.api, "forward_backward", spying)
     r = run_trial(Trial("sorting", method, 0.2, 0.3, 0, 2, 6, 0, backend="numba"))
     assert r.backend == "numba"
     (est,) = built

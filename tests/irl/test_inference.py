@@ -198,7 +198,7 @@ def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatc
         return parts
 
     monkeypatch.setattr(om, "separable_likelihoods", counted)
-    monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
+    monkeypatch.setattr(irl.inference.scaled, "_CHUNK_ELEMENTS", 1)
     blocked = []
     products = mdp.state_block_products
     monkeypatch.setattr(mdp, "state_block_products", lambda *args: blocked.append(
@@ -206,8 +206,8 @@ def test_step_by_step_chunks_equal_the_whole_batch(kind, sparse, rng, monkeypatc
     # separable parts held for both passes, or computed in each; a sparse MDP's blocked pass
     # by blocks of 1, 2, 5 (then a short one of 1) and all 6 states (A = 3, one batch of 4)
     for held, block in ((1 << 24, 1), (0, 2 * 3 * 4), (1 << 24, 5 * 3 * 4), (0, 1 << 17)):
-        monkeypatch.setattr(irl.inference, "_SEPARABLE_ELEMENTS", held)
-        monkeypatch.setattr(irl.inference, "_BLOCK_ELEMENTS", block)
+        monkeypatch.setattr(irl.inference.scaled, "_SEPARABLE_ELEMENTS", held)
+        monkeypatch.setattr(irl.inference.blocked, "_BLOCK_ELEMENTS", block)
         chunked = posterior_stats(mdp, np.log(pi), demos, om)
         chunked_timed = forward_backward(mdp, np.log(pis), obs, om)
         assert any(separable) == (kind in ("factored", "state"))
@@ -298,7 +298,7 @@ def test_folded_policy_is_exact_when_rows_sum_to_one_only_to_rounding(rng, monke
     pi = rng.dirichlet(np.ones(3), size=6)
     demos = [random_demo(rng, n, om.n_observations) for n in (9, 4, 9, 6)]
     exact = posterior_stats(mdp, np.log(pi), demos, om, method="log")
-    monkeypatch.setattr(irl.inference, "_CHUNK_ELEMENTS", 1)
+    monkeypatch.setattr(irl.inference.scaled, "_CHUNK_ELEMENTS", 1)
     folded = posterior_stats(mdp, np.log(pi), demos, om)
     np.testing.assert_allclose(folded.log_likelihood, exact.log_likelihood, rtol=1e-12)
     np.testing.assert_allclose(folded.occupancy, exact.occupancy, rtol=1e-12, atol=1e-14)
@@ -311,8 +311,8 @@ def test_large_scratch_is_held_only_inside_scratch_held(monkeypatch):
     dom = irl.domains.onion_sorting(noise=0.3)
     demos, _ = dom.sample(3, 20, seed=0)
     log_pi = np.log(dom.expert_policy())
-    monkeypatch.setattr(irl.inference, "_WORKSPACE_ELEMENTS", 0)  # every array is "large"
-    ws = irl.inference._workspace
+    monkeypatch.setattr(irl.inference.workspace, "_WORKSPACE_ELEMENTS", 0)  # every array is "large"
+    ws = irl.inference.workspace._workspace
     posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
     assert ws.arrays == {}
     with irl.inference.scratch_held():
@@ -349,23 +349,23 @@ def test_a_lazily_renormalized_pass_out_of_range_is_run_again_at_every_step(monk
     demos, _ = dom.sample(4, 30, occlusion=0.2, seed=3)
     log_pi = np.log(dom.expert_policy())
     exact = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model, method="log")
-    real, seen = irl.inference._scaled_forward_backward, []
+    real, seen = irl.inference.api._scaled_forward_backward, []
 
     def lazy_out_of_range(*args, lazy=True):
         seen.append(lazy)
-        return irl.inference._RENORMALIZE if lazy else real(*args, lazy=lazy)
+        return irl.inference.scaled._RENORMALIZE if lazy else real(*args, lazy=lazy)
 
-    monkeypatch.setattr(irl.inference, "_scaled_forward_backward", lazy_out_of_range)
+    monkeypatch.setattr(irl.inference.api, "_scaled_forward_backward", lazy_out_of_range)
     again = posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
     assert seen == [True, False]
     np.testing.assert_allclose(again.log_likelihood, exact.log_likelihood, rtol=1e-12)
     np.testing.assert_allclose(again.occupancy, exact.occupancy, rtol=1e-12, atol=1e-14)
     # the pass says so itself only when it renormalized lazily; a batch too large for that
     # renormalizes at every step from the start
-    monkeypatch.setattr(irl.inference, "_scaled_forward_backward", real)
-    monkeypatch.setattr(irl.inference, "_LAZY_ELEMENTS", 0)
+    monkeypatch.setattr(irl.inference.api, "_scaled_forward_backward", real)
+    monkeypatch.setattr(irl.inference.api, "_LAZY_ELEMENTS", 0)
     calls = []
-    monkeypatch.setattr(irl.inference, "_scaled_forward_backward",
+    monkeypatch.setattr(irl.inference.api, "_scaled_forward_backward",
                         lambda *a, lazy=True: calls.append(lazy) or real(*a, lazy=lazy))
     posterior_stats(dom.mdp, log_pi, demos, dom.observation_model)
     assert calls == [False]

@@ -15,12 +15,12 @@ import irl
 from irl import _numba
 from irl.inference import (
     PosteriorStats,
-    _scaled_floor,
     forward_backward,
     observation_factors,
     pack_demonstrations,
     posterior_stats,
 )
+from irl.inference.scaled import _scaled_floor
 from irl.observation import FactoredObservationModel, StateObservationModel
 from tests.irl.conftest import OM_KINDS, random_demo, random_mdp, random_observation_model
 

@@ -10,7 +10,8 @@ import pytest
 import scipy.sparse as sp
 
 import irl
-from irl.inference import _padded_batches, pack_demonstrations, posterior_stats
+from irl.inference import pack_demonstrations, posterior_stats
+from irl.inference.packing import _padded_batches
 from irl.observation import (
     DenseObservationModel,
     FactoredObservationModel,

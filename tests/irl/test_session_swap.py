@@ -160,12 +160,13 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
     heaviest's chains took gradients and its weights' ESS reaches its samples, else by chains
     as the heaviest."""
     from irl import posterior
+    from irl.posterior import laplace, swaps
 
     _mdp, est, demos = noisy_two_state_problem(seed=0, occluded=0.2)
     est.session_swap = SessionSwap(ACTIONS_BACKWARDS, 0.2)
     demos = [est.session_swap.apply(demos[0]), demos[1]]
     runs, tries = [], []
-    real_chains, real_importance = posterior._run_chains, posterior._importance_draws
+    real_chains, real_importance = laplace._run_chains, swaps._importance_draws
 
     def spy_chains(value_and_grad, mean, chol, **kw):
         runs.append((mean.copy(), kw["n_draws"], kw["max_draws"]))
@@ -178,9 +179,9 @@ def test_chains_run_only_for_the_readings_that_carry_weight(monkeypatch):
                       got[3]))
         return got
 
-    monkeypatch.setattr(posterior, "_run_chains", spy_chains)
-    monkeypatch.setattr(posterior, "_importance_draws", spy_importance)
-    monkeypatch.setattr(posterior, "LAPLACE_SHARE", 0.2)  # so that a reading is left out here
+    monkeypatch.setattr(laplace, "_run_chains", spy_chains)
+    monkeypatch.setattr(swaps, "_importance_draws", spy_importance)
+    monkeypatch.setattr(swaps, "LAPLACE_SHARE", 0.2)  # so that a reading is left out here
     post = sample_posterior(est, demos, n_samples=400, seed=0, method="mcmc", n_draws=100,
                             n_warmup=50)
     gauss = sample_posterior(est, demos, n_samples=400, seed=0, method="laplace")
@@ -218,7 +219,8 @@ def test_importance_resampling_draws_the_density_or_refuses():
     whose scale the proposal misses by far, a refusal (ESS below the samples asked for) after
     the first pilot and one a round of adaptation, the generator's draws the same either
     way."""
-    from irl.posterior import IMPORTANCE_ADAPTATIONS, _importance_draws
+    from irl.posterior import IMPORTANCE_ADAPTATIONS
+    from irl.posterior.importance import _importance_draws
 
     mean, cov = np.array([1.0, -2.0]), np.array([[1.0, 0.3], [0.3, 0.5]])
     prec = np.linalg.inv(cov)
@@ -259,7 +261,7 @@ def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, c
     """Population Monte Carlo: where the first pilot's ESS, times 4, falls short of the samples
     (without adaptation: a refusal), the proposal moves to the pilot's weighted mean and
     covariance, and the draws of the adapted proposal have the density's moments."""
-    from irl import posterior
+    from irl.posterior import importance
 
     if case == "offset":
         centre, cov = np.array([1.0, -2.0]), np.array(target_cov)
@@ -274,13 +276,13 @@ def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, c
     else:
         centre, cov, density = np.array([-2.0, -1.0]), np.eye(2), _gamma_skewed
     n, n_proposals = 2000, 40_000
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
-    alone = posterior._importance_draws(density, centre, cov, n, n_proposals,
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 0)
+    alone = importance._importance_draws(density, centre, cov, n, n_proposals,
                                         np.random.default_rng(0))
     assert alone[0] is None and alone[1] < n and alone[2] == n_proposals // 4
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 2)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed, _ = posterior._importance_draws(
+        theta, ess, weighed, _ = importance._importance_draws(
             density, centre, cov, n, n_proposals, np.random.default_rng(0))
     lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
     pilots = [line for line in lines if "of a pilot" in line]
@@ -291,11 +293,11 @@ def test_an_adapted_proposal_draws_a_density_the_first_one_misses(monkeypatch, c
     np.testing.assert_allclose(theta.mean(axis=0), target_mean, atol=0.08)
     np.testing.assert_allclose(np.cov(theta.T), target_cov, atol=0.2)
     # a seed gives the same draws
-    again = posterior._importance_draws(density, centre, cov, n, n_proposals,
+    again = importance._importance_draws(density, centre, cov, n, n_proposals,
                                         np.random.default_rng(0))
     np.testing.assert_array_equal(again[0], theta)
     # no round begun that could take the evaluations to the budget
-    short = posterior._importance_draws(density, centre, cov, n, n_proposals,
+    short = importance._importance_draws(density, centre, cov, n, n_proposals,
                                         np.random.default_rng(0), budget=weighed)
     assert short[0] is None and short[2] == n_proposals // 4 * (len(pilots) - 1)
 
@@ -310,7 +312,7 @@ def test_a_second_mode_that_all_the_proposals_show_and_the_pilot_does_not_is_ada
     proposals' Kish ESS reaches the samples (about 2,000 for 400) but few of them fall in that
     mode, so the largest weights span orders of magnitude: their Pareto shape k is far above
     the threshold (about 2), and the draws are refused after the last round."""
-    from irl import posterior
+    from irl.posterior import importance
 
     def density(t):  # 0.8 N(0, I) + 0.2 N((5, 0), sd^2 I)
         far = t - np.array([5.0, 0.0])
@@ -318,13 +320,13 @@ def test_a_second_mode_that_all_the_proposals_show_and_the_pilot_does_not_is_ada
                             np.log(0.2) - 0.5 * far @ far / sd**2 - 2 * np.log(sd))
 
     n, n_proposals = 400, 8000
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
-    alone = posterior._importance_draws(density, np.zeros(2), np.eye(2), n, n_proposals,
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 0)
+    alone = importance._importance_draws(density, np.zeros(2), np.eye(2), n, n_proposals,
                                         np.random.default_rng(1))
     assert alone[0] is None and alone[1] < n and alone[2] == n_proposals  # all weighed
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 2)
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 2)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed, k = posterior._importance_draws(
+        theta, ess, weighed, k = importance._importance_draws(
             density, np.zeros(2), np.eye(2), n, n_proposals, np.random.default_rng(1))
     lines = [r.getMessage() for r in caplog.records if "importance proposal" in r.getMessage()]
     assert lines[0].startswith("importance proposal 0 ") and "of a pilot" in lines[0]
@@ -355,12 +357,12 @@ def test_a_proposal_with_too_light_tails_is_refused_by_pareto_k_where_kish_ess_p
     (Kish's test alone would have resampled them), but their Pareto shape k is above the
     threshold for the proposals weighed, and the draws are refused (without adaptation); the
     log line of the whole set gives both."""
-    from irl import posterior
+    from irl.posterior import importance
 
     n, n_proposals = 200, 4000
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 0)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed, k = posterior._importance_draws(
+        theta, ess, weighed, k = importance._importance_draws(
             _multivariate_cauchy, np.zeros(2), np.eye(2), n, n_proposals,
             np.random.default_rng(seed))
     assert weighed == n_proposals and ess >= n  # Kish's ESS passes
@@ -381,12 +383,12 @@ def test_a_set_that_fails_on_k_alone_below_07_is_grown_to_the_size_its_k_needs(
     their k is above 400 draws' threshold, 0.62; the same proposal then draws up to the
     fewest proposals whose threshold is above that k, and the grown set passes. Without room
     to grow (the cap at 400), the same draws are refused."""
-    from irl import posterior
-    from irl.posterior import _psis_draws_for
+    from irl.posterior import importance
+    from irl.posterior.importance import _psis_draws_for
 
-    monkeypatch.setattr(posterior, "IMPORTANCE_ADAPTATIONS", 0)
+    monkeypatch.setattr(importance, "IMPORTANCE_ADAPTATIONS", 0)
     with caplog.at_level("INFO", logger="irl.posterior"):
-        theta, ess, weighed, k = posterior._importance_draws(
+        theta, ess, weighed, k = importance._importance_draws(
             _student_t(3.0), np.zeros(2), np.eye(2), 20, 400, np.random.default_rng(5))
     first = [r.getMessage() for r in caplog.records if "of all 400 proposals" in r.getMessage()]
     grown = [r.getMessage() for r in caplog.records if "grown for its Pareto k" in r.getMessage()]
@@ -397,14 +399,14 @@ def test_a_set_that_fails_on_k_alone_below_07_is_grown_to_the_size_its_k_needs(
     assert 400 < weighed <= 2155 and k < psis_khat_threshold(weighed)
     # the fewest proposals whose threshold is above the first set's k (as logged)
     assert _psis_draws_for(k_first - 0.005) <= weighed <= _psis_draws_for(k_first + 0.005)
-    monkeypatch.setattr(posterior, "_PSIS_CAP_DRAWS", 400)
-    refused = posterior._importance_draws(
+    monkeypatch.setattr(importance, "_PSIS_CAP_DRAWS", 400)
+    refused = importance._importance_draws(
         _student_t(3.0), np.zeros(2), np.eye(2), 20, 400, np.random.default_rng(5))
     assert refused[0] is None and refused[2] == 400
 
 
 def test_psis_draws_for_k_is_the_fewest_whose_threshold_is_above_it():
-    from irl.posterior import _PSIS_CAP_DRAWS, _psis_draws_for
+    from irl.posterior.importance import _PSIS_CAP_DRAWS, _psis_draws_for
 
     for k in (-0.3, 0.0, 0.5, 0.6, 2 / 3, 0.69, 0.6999):
         S = _psis_draws_for(k)
@@ -419,7 +421,7 @@ def test_chains_are_not_extended_past_their_gradient_budget():
     """A lighter reading's chains stop extending once they have taken the heaviest reading's
     gradients (``max_gradients``), though their R-hat is still above 1.01; without it they
     are extended while it is."""
-    from irl.posterior import _run_chains
+    from irl.posterior.chains import _run_chains
 
     def value_and_grad(theta):  # a standard normal
         return -0.5 * float(theta @ theta), -theta
@@ -463,7 +465,7 @@ def test_importance_resampling_never_picks_a_proposal_of_weight_zero():
     """Systematic resampling picks proposal i for the points in [c_{i-1}, c_i) of the
     weights' running sums c: a proposal whose density is -inf (weight 0) is never drawn, even
     where the resampling's offset is 0 (the first point is then 0, which c_0 = 0 equals)."""
-    from irl.posterior import _importance_draws
+    from irl.posterior.importance import _importance_draws
 
     class OffsetZero:
         """A generator whose uniform draw (the resampling's offset) is 0."""
@@ -522,7 +524,7 @@ def test_a_reading_that_holds_every_sample_is_drawn_as_without_a_swap():
 def test_resampled_draws_count_fewer_effective_samples_than_either_the_weights_or_the_draws():
     """n draws resampled from weights of Kish ESS E are worth 1 / (1/n + 1/E) draws: below both,
     n / 2 where E = n (the reading's diagnostics said min(E, n) before, which overstated it)."""
-    from irl.posterior import _resampled_ess
+    from irl.posterior.importance import _resampled_ess
 
     assert _resampled_ess(100.0, 100) == pytest.approx(50.0)
     assert _resampled_ess(400.0, 100) == pytest.approx(80.0)
