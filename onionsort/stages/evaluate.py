@@ -149,7 +149,7 @@ def evaluate(config: EvaluateConfig, models=None):
         with contextlib.ExitStack() as stack:
             logged = config.rerun or config.connect is not None
             if logged:
-                from recordings.rerun import EvaluationLogger
+                from onionsort.stages.evaluate_rerun import EvaluationLogger
                 from recordings.rerun.common import rerun_targets
 
                 on_step.append(stack.enter_context(EvaluationLogger(

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from irl.domains.onion_sorting import SORTING_TASK
-from recordings.annotated import BadAnnotations, check_box, split_name
-from recordings.coco import CocoImage, read_coco, write_coco
-from recordings.states_csv import StatesRow, read_states, write_states
-from recordings.yolo import read_yolo, write_data_yaml, yolo_lines
+from recordings.labels.annotated import BadAnnotations, check_box, split_name
+from recordings.labels.coco import CocoImage, read_coco, write_coco
+from recordings.labels.states_csv import StatesRow, read_states, write_states
+from recordings.labels.yolo import read_yolo, write_data_yaml, yolo_lines
 
 
 def _image(path, width=40, height=30):

@@ -18,7 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from onionsort.cli import main
 from onionsort.stages import ImportConfig, import_video, list_bag
 from recordings import open_session
-from recordings.bags import BagError, is_bag
+from recordings.sources.bags import BagError, is_bag
 
 ROS2, ROS1 = get_typestore(Stores.ROS2_HUMBLE), get_typestore(Stores.ROS1_NOETIC)
 IMAGE, COMPRESSED = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"

@@ -8,7 +8,7 @@ import pytest
 from irl.domains.onion_sorting import encode_state
 from onionsort.cli import main
 from onionsort.stages.dataset import split_plan
-from recordings.dataset import SPLITS, read_split
+from recordings.labels.dataset import SPLITS, read_split
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +118,7 @@ def test_a_mix_of_levels_gives_each_session_its_level_in_turn(dataset, tmp_path,
 
 
 def test_a_session_read_alone_is_that_session_of_the_whole_read(dataset):
-    from recordings.dataset import read_steps, split_sessions
+    from recordings.labels.dataset import read_steps, split_sessions
 
     named = split_sessions(dataset, "all")
     whole = read_steps(dataset, "all", 2)

@@ -14,9 +14,9 @@ import pytest
 
 from irl.domains.onion_sorting import onion_sorting
 from recordings import SessionWriter, open_session, strip_ground_truth
-from recordings.rewrite import rewrite_session
-from recordings.schema import Topic
-from recordings.world import read_joint_states, read_transforms
+from recordings.session.rewrite import rewrite_session
+from recordings.session.schema import Topic
+from recordings.session.world import read_joint_states, read_transforms
 from tests.recordings.test_world import SCHEMAS, mcap_check, messages, robot_session
 
 SAWYER_JOINTS = [f"right_j{k}" for k in range(7)]

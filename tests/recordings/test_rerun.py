@@ -12,17 +12,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
+from onionsort.stages.evaluate_rerun import EvaluationLogger
+from onionsort.stages.learn_rerun import log_learning
 from recordings import SessionWriter, open_session
-from recordings.perception import add_perception
-from recordings.rerun import (
-    EvaluationLogger,
-    SessionLogger,
-    log_learning,
-    open_recording,
-)
-from recordings.rewrite import rewrite_session
-from recordings.schema import ROBOT_METADATA
-from recordings.urdf import UrdfJoints, viewer_urdf
+from recordings.rerun import SessionLogger, open_recording
+from recordings.session.perception import add_perception
+from recordings.session.rewrite import rewrite_session
+from recordings.session.schema import ROBOT_METADATA
+from recordings.session.urdf import UrdfJoints, viewer_urdf
 from tests.recordings.test_world import matrix, robot_session
 
 rr_chunk = pytest.importorskip("rerun.chunk")

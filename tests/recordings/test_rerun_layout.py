@@ -12,9 +12,10 @@ import shutil
 import numpy as np
 import pytest
 
+from onionsort.stages.learn_rerun import log_learning
 from recordings import open_session
-from recordings.perception import add_perception
-from recordings.rerun import SessionLogger, log_learning
+from recordings.rerun import SessionLogger
+from recordings.session.perception import add_perception
 from tests.recordings.rrd_layout import blueprint_views, entities, layout_problems, matches
 from tests.recordings.test_rerun import sensor_session, verify
 from tests.recordings.test_world import robot_session
@@ -198,7 +199,7 @@ def test_depth_beyond_the_work_cell_is_left_out(evaluation):
 
 def test_evaluation_without_views_or_pinholes_keeps_2d_out_of_3d(tmp_path):
     """An evaluation logged without intrinsics: its images stay in 2D views only."""
-    from recordings.rerun import EvaluationLogger
+    from onionsort.stages.evaluate_rerun import EvaluationLogger
     from tests.recordings.test_rerun import FakeStep
 
     out = tmp_path / "bare.rrd"

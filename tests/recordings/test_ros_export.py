@@ -12,8 +12,8 @@ import pytest
 
 from onionsort.cli import main
 from recordings import SessionWriter, open_session
-from recordings.ros_export import ROBOT_TOPIC, SESSION_TOPIC, STORAGES, export_ros2
-from recordings.schema import Topic
+from recordings.session.schema import Topic
+from recordings.sources.ros_export import ROBOT_TOPIC, SESSION_TOPIC, STORAGES, export_ros2
 from tests.recordings.test_evaluation_session import Decision
 from tests.recordings.test_world import robot_session
 
@@ -226,7 +226,7 @@ def test_bad_input_is_one_line_and_exit_2_and_writes_nothing(what, recorded, tmp
 
 
 def test_a_failure_while_writing_removes_the_partial_folder(recorded, tmp_path, monkeypatch):
-    from recordings import ros_export
+    from recordings.sources import ros_export
 
     def broken(*args, **kwargs):
         raise RuntimeError("disk on fire")

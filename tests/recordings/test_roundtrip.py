@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 from irl.demonstrations import Demonstration
 from irl.domains.onion_sorting import N_ACTIONS
 from recordings import SessionWriter, open_session, read_demonstrations
-from recordings.schema import Topic
+from recordings.session.schema import Topic
 from tests.recordings.conftest import step_tuples
 
 
@@ -82,7 +82,7 @@ def test_writer_refuses_to_overwrite(recorded):
 def test_a_format_1_session_still_opens_with_its_steps_from_ground_truth(recorded, tmp_path):
     """Version 1 had no step clock; the reader takes step and phase from /ground_truth/state."""
     from recordings import strip_ground_truth
-    from recordings.rewrite import rewrite_session
+    from recordings.session.rewrite import rewrite_session
 
     old = rewrite_session(recorded.path, tmp_path / "v1.mcap", drop_topics=(Topic.STEP_CLOCK,),
                           session_update={"format_version": "1"})

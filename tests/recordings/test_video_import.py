@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from recordings import open_session
-from recordings.segmentation import (
+from recordings.sources.importer import ImportSummary, import_video
+from recordings.sources.segmentation import (
     boundaries_from_labels,
     boundary_scores,
     fixed_clock,
@@ -19,7 +20,7 @@ from recordings.segmentation import (
     split_long_steps,
     steps_from_boundaries,
 )
-from recordings.sources import (
+from recordings.sources.video import (
     CameraNotFoundError,
     CameraSource,
     EmptyVideoError,
@@ -31,7 +32,6 @@ from recordings.sources import (
     default_intrinsics,
     load_intrinsics,
 )
-from recordings.video_import import ImportSummary, import_video
 
 W, H, FPS = 96, 64, 10.0
 #: Flat colours, RGB, distinct enough to survive mp4v compression.

@@ -15,10 +15,10 @@ import pytest
 from mcap.reader import make_reader
 
 from recordings import open_session, strip_ground_truth
-from recordings.rewrite import rewrite_session
-from recordings.schema import CLASS_COLORS, ROBOT_METADATA, Topic
-from recordings.urdf import UrdfJoints, rpy_quaternion, viewer_urdf
-from recordings.world import read_joint_states, read_scene, read_transforms
+from recordings.session.rewrite import rewrite_session
+from recordings.session.schema import CLASS_COLORS, ROBOT_METADATA, Topic
+from recordings.session.urdf import UrdfJoints, rpy_quaternion, viewer_urdf
+from recordings.session.world import read_joint_states, read_scene, read_transforms
 
 FPS = 2
 SCHEMAS = {Topic.TF: "foxglove.FrameTransforms", Topic.JOINT_STATES: "foxglove.JointStates",

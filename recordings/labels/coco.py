@@ -23,7 +23,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from recordings.annotated import AnnotatedImage, BadAnnotations, split_name
+from recordings.labels.annotated import AnnotatedImage, BadAnnotations, split_name
 
 __all__ = ["CocoImage", "read_coco", "write_coco"]
 

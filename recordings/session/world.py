@@ -37,8 +37,8 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
-from recordings.schema import CLASS_COLORS, CLASS_NAMES
-from recordings.urdf import UrdfJoints
+from recordings.session.schema import CLASS_COLORS, CLASS_NAMES
+from recordings.session.urdf import UrdfJoints
 
 __all__ = [
     "WORLD_FRAME",

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import yaml
 
-from recordings.annotated import IMAGE_SUFFIXES, AnnotatedImage, BadAnnotations
+from recordings.labels.annotated import IMAGE_SUFFIXES, AnnotatedImage, BadAnnotations
 
 __all__ = ["read_yolo", "write_data_yaml", "yolo_lines"]
 

@@ -52,9 +52,9 @@ import numpy as np
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from recordings.frames import TruthFrame
-from recordings.schema import check_task, task_of
-from recordings.steps import group_steps
+from recordings.session.frames import TruthFrame
+from recordings.session.schema import check_task, task_of
+from recordings.session.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
            "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_records",
@@ -431,8 +431,8 @@ def read_steps(root: Path | str, split: str, frames_per_step: int, *,
     ``image_map``, every colour image (frames and inspection views) changed by it as it is
     read (:func:`read_split`).
 
-    Frames are grouped by :func:`recordings.steps.group_steps`; a step cut short at the end of
-    the dataset (by its frame count) is left out.
+    Frames are grouped by :func:`recordings.session.steps.group_steps`; a step cut short at the end
+    of the dataset (by its frame count) is left out.
     """
     def wanted(record: dict) -> bool:
         return session is None or record["session"] == session

@@ -50,9 +50,9 @@ frame and step counts).
 
 ``/tf`` is there where the cameras' poses are known (a simulated session), ``/joint_states``
 (and a robot's links on ``/tf``) where the world has a robot, whose URDF the metadata record
-``onionsort.robot`` names; :mod:`recordings.world` writes and reads the three 3D topics. They are
-optional within version ``2``: a reader ignores what it does not know, and files without them
-open as before. So are the two ``/evaluation/*`` topics of a session that records a robot's own
+``onionsort.robot`` names; :mod:`recordings.session.world` writes and reads the three 3D topics.
+They are optional within version ``2``: a reader ignores what it does not know, and files without
+them open as before. So are the two ``/evaluation/*`` topics of a session that records a robot's own
 sorting run (``onionsort evaluate``; :data:`EVALUATION_JSON_SCHEMAS`), once per step (their
 ``sequence`` is the step number).
 
@@ -73,10 +73,12 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "JSON_SCHEMAS",
+    "PERCEPTION_METADATA",
     "READABLE_VERSIONS",
     "ROBOT_METADATA",
     "SENSOR_JSON_SCHEMAS",
     "SESSION_METADATA",
+    "PerceptionTopic",
     "Topic",
     "check_task",
     "json_schema_bytes",
@@ -91,6 +93,8 @@ SESSION_METADATA = "onionsort.session"
 END_METADATA = "onionsort.session.end"
 #: Metadata record of a session whose world has a robot: its name, URDF, root link, joints.
 ROBOT_METADATA = "onionsort.robot"
+#: Metadata record of a perceived session: which models wrote its perception topics.
+PERCEPTION_METADATA = "onionsort.perception"
 
 #: Class ids of onions in box annotations.
 CLASS_NAMES = {0: "good", 1: "blemished"}
@@ -112,7 +116,7 @@ class Topic:
     BOXES = "/ground_truth/boxes"
     ANNOTATIONS = "/ground_truth/annotations"
     ONIONS = "/ground_truth/onions"
-    #: The 3D side (:mod:`recordings.world`): transforms and joint states (sensor side), the
+    #: The 3D side (:mod:`recordings.session.world`): transforms and joint states (sensor side), the
     #: simulated world's bodies (ground truth).
     TF = "/tf"
     JOINT_STATES = "/joint_states"
@@ -123,6 +127,16 @@ class Topic:
     COUNTS = "/evaluation/counts"
     #: Every ground-truth topic: what stripping a session of its ground truth removes.
     GROUND_TRUTH = (STATE, ACTION, BOXES, ANNOTATIONS, ONIONS, SCENE, COUNTS)
+
+
+class PerceptionTopic:
+    """Topic names of perception output (:mod:`recordings.session.perception` writes them)."""
+
+    STATE = "/perception/state"
+    DETECTIONS = "/perception/detections"
+    ANNOTATIONS = "/perception/annotations"
+    INSPECTION = "/perception/inspection"
+    ALL = (STATE, DETECTIONS, ANNOTATIONS, INSPECTION)
 
 
 _INT = {"type": "integer"}

@@ -3,7 +3,7 @@
 :func:`rewrite_session` copies a session's messages and metadata into a new file, leaving out
 some topics, changing the session record, and letting the caller add channels and messages; the
 original is replaced only once the new file is complete, so an interrupted rewrite leaves it
-intact. :mod:`recordings.perception` adds the perception topics this way, and
+intact. :mod:`recordings.session.perception` adds the perception topics this way, and
 :func:`strip_ground_truth` turns a simulated session into what a real work cell records.
 """
 
@@ -16,7 +16,14 @@ from pathlib import Path
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from recordings.schema import END_METADATA, SESSION_METADATA, Topic
+from recordings.session.reader import open_session
+from recordings.session.schema import (
+    END_METADATA,
+    PERCEPTION_METADATA,
+    SESSION_METADATA,
+    PerceptionTopic,
+    Topic,
+)
 
 __all__ = ["rewrite_session", "strip_ground_truth"]
 
@@ -103,9 +110,6 @@ def strip_ground_truth(source: str | Path, target: str | Path) -> Path:
     FileExistsError
         If ``target`` exists.
     """
-    from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
-    from recordings.reader import open_session
-
     if Path(target).exists():
         raise FileExistsError(f"{target} exists; choose another output")
     version = str(open_session(source).metadata.get("format_version"))

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from irl.domains.task import TaskDescription
-from recordings.annotated import BadAnnotations, split_name
+from recordings.labels.annotated import BadAnnotations, split_name
 
 __all__ = [
     "StatesRow",
@@ -54,7 +54,7 @@ def states_columns(task: TaskDescription) -> list[str]:
 
 def read_states(path: Path | str, task: TaskDescription) -> list[StatesRow]:
     """The rows of a states CSV, each value checked against ``task``; a bad value is a
-    :class:`recordings.annotated.BadAnnotations` naming the file, the line and the column."""
+    :class:`recordings.labels.annotated.BadAnnotations` naming the file, the line and the column."""
     path = Path(path)
     reader = csv_reader(path, states_columns(task), "a states CSV")
     rows, seen = [], {}

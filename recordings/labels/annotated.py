@@ -1,9 +1,9 @@
 """Labelled images as annotation tools hold them, before they become a dataset.
 
-The readers of :mod:`recordings.coco` and :mod:`recordings.yolo` give :class:`AnnotatedImage`s:
-an image file, the split it belongs to (None in a set without splits), and its boxes as
-``[x_min, y_min, x_max, y_max]`` in the file's own pixels (exclusive max, as the dataset's
-records have them) with the class *names* the tool used. Mapping names to the dataset's
+The readers of :mod:`recordings.labels.coco` and :mod:`recordings.labels.yolo` give
+:class:`AnnotatedImage`s: an image file, the split it belongs to (None in a set without splits), and
+its boxes as ``[x_min, y_min, x_max, y_max]`` in the file's own pixels (exclusive max, as the
+dataset's records have them) with the class *names* the tool used. Mapping names to the dataset's
 classes, matching state labels and resizing are the importer's (``onionsort label import``).
 Splits are named as the dataset names them: Roboflow's ``valid`` is ``val``.
 """

@@ -4,7 +4,7 @@ A frame's sensor side (colour, depth where the sensor has it, calibration, the s
 the inspection view) is written by :meth:`SessionWriter.write_sensor_frame`; a simulated frame
 adds its ground truth with :meth:`SessionWriter.write_frame`. A robot's sorting run adds each
 step's decision and running counts with :meth:`SessionWriter.write_decision`. See
-:mod:`recordings.schema`.
+:mod:`recordings.session.schema`.
 
 Every frame's messages go into their own zstd chunk that is flushed to the OS before the next
 frame is rendered (:meth:`mcap.writer.Writer.flush`). A process killed outright (SIGKILL, power
@@ -42,8 +42,8 @@ from mcap_protobuf.schema import build_file_descriptor_set
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from recordings.frames import TruthFrame
-from recordings.schema import (
+from recordings.session.frames import TruthFrame
+from recordings.session.schema import (
     CLASS_COLORS,
     CLASS_NAMES,
     END_METADATA,
@@ -58,8 +58,8 @@ from recordings.schema import (
     check_task,
     json_schema_bytes,
 )
-from recordings.urdf import UrdfJoints
-from recordings.world import (
+from recordings.session.urdf import UrdfJoints
+from recordings.session.world import (
     World,
     frame_transforms,
     joint_states,
@@ -562,7 +562,7 @@ class SessionWriter:
 
     @_whole
     def write_world(self, world: World, time_ns: int, sequence: int) -> None:
-        """Write the 3D side of ``world`` at ``time_ns`` (see :mod:`recordings.world`).
+        """Write the 3D side of ``world`` at ``time_ns`` (see :mod:`recordings.session.world`).
 
         ``/tf`` (the cameras and a robot's links) and ``/joint_states`` (with a robot) always;
         ``/scene`` (the bodies, onions coloured by class) only in a session with ground truth.

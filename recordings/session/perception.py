@@ -14,7 +14,9 @@ topic                      schema                      content
 /perception/inspection     onionsort.Detections        detector boxes on the inspection view
 =========================  ==========================  ==========================================
 
-A metadata record ``onionsort.perception`` says which models produced them. The file is
+A metadata record ``onionsort.perception`` says which models produced them (the names are
+:class:`~recordings.session.schema.PerceptionTopic` and
+:data:`~recordings.session.schema.PERCEPTION_METADATA`). The file is
 rewritten into a temporary file beside it and renamed over it, so an interrupted run leaves the
 original session intact.
 """
@@ -30,26 +32,13 @@ from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from mcap.writer import Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from recordings.rewrite import rewrite_session
-from recordings.schema import json_schema_bytes
-from recordings.writer import box_annotations
+from recordings.session.rewrite import rewrite_session
+from recordings.session.schema import PERCEPTION_METADATA, PerceptionTopic, json_schema_bytes
+from recordings.session.writer import box_annotations
 
-__all__ = ["PERCEPTION_METADATA", "PerceptionTopic", "add_perception"]
+__all__ = ["add_perception"]
 
 logger = logging.getLogger(__name__)
-
-PERCEPTION_METADATA = "onionsort.perception"
-
-
-class PerceptionTopic:
-    """Topic names of perception output."""
-
-    STATE = "/perception/state"
-    DETECTIONS = "/perception/detections"
-    ANNOTATIONS = "/perception/annotations"
-    INSPECTION = "/perception/inspection"
-    ALL = (STATE, DETECTIONS, ANNOTATIONS, INSPECTION)
-
 
 _INT, _NUM, _BOOL = {"type": "integer"}, {"type": "number"}, {"type": "boolean"}
 _DETECTIONS = {

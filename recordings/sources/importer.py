@@ -1,14 +1,14 @@
 """Import a video or a camera's frames as a sensor-only session (the library side of
 ``onionsort import``).
 
-:func:`import_video` streams the frames of a source (:mod:`recordings.sources`, or any iterable
-of :class:`~recordings.sources.SourceFrame`) into one session MCAP with colour, calibration and
-a step clock, and the inspection view when a second source films it: no depth, no ground
-truth. Which step each source frame
+:func:`import_video` streams the frames of a source (:mod:`recordings.sources.video`, or any
+iterable of :class:`~recordings.sources.video.SourceFrame`) into one session MCAP with colour,
+calibration and a step clock, and the inspection view when a second source films it: no depth, no
+ground truth. Which step each source frame
 belongs to is decided beforehand and passed in (``step_of_frame``; see
-:mod:`recordings.segmentation` for a fixed clock or perceived changes), so this module needs no
-perception model. Of each step it keeps exactly ``frames_per_step`` frames
-(:func:`~recordings.segmentation.resample_steps`), written with phases
+:mod:`recordings.sources.segmentation` for a fixed clock or perceived changes), so this module needs
+no perception model. Of each step it keeps exactly ``frames_per_step`` frames
+(:func:`~recordings.sources.segmentation.resample_steps`), written with phases
 ``0 .. frames_per_step - 1`` and steps numbered ``0 .. T - 1``.
 
 The session is written to ``<out>.mcap.partial`` and renamed to ``out_path`` once complete; on
@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from recordings.segmentation import resample_steps
-from recordings.sources import SourceFrame
-from recordings.writer import SessionWriter
+from recordings.session.writer import SessionWriter
+from recordings.sources.segmentation import resample_steps
+from recordings.sources.video import SourceFrame
 
 __all__ = ["ImportSummary", "import_video"]
 
@@ -85,14 +85,14 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
     """Write the frames of ``source`` as one sensor-only session.
 
     The source is read once, frame by frame, holding no more than one frame in memory; only
-    the frames :func:`~recordings.segmentation.resample_steps` selects are written. The source
-    is not closed (the caller owns it).
+    the frames :func:`~recordings.sources.segmentation.resample_steps` selects are written. The
+    source is not closed (the caller owns it).
 
     Parameters
     ----------
     source : iterable of SourceFrame
-        A :class:`~recordings.sources.VideoFileSource`, a
-        :class:`~recordings.sources.CameraSource`, or frames already read; its ``name``
+        A :class:`~recordings.sources.video.VideoFileSource`, a
+        :class:`~recordings.sources.video.CameraSource`, or frames already read; its ``name``
         attribute (if any) names it in messages and in the session's metadata.
     out_path : path-like
         The session file to create; an existing file is refused.
@@ -100,11 +100,11 @@ def import_video(source: Iterable[SourceFrame], out_path: str | Path, *, frames_
         Frames of each written step (the state classifier reads 3).
     step_of_frame : sequence of int, shape (N,)
         The step of each of the source's N frames, non-decreasing (e.g. from
-        :func:`~recordings.segmentation.fixed_clock` or
-        :func:`~recordings.segmentation.steps_from_boundaries`). The source must give exactly
-        N frames.
+        :func:`~recordings.sources.segmentation.fixed_clock` or
+        :func:`~recordings.sources.segmentation.steps_from_boundaries`). The source must give
+        exactly N frames.
     camera_K : ndarray of shape (3, 3)
-        The camera's intrinsics (:func:`~recordings.sources.default_intrinsics` when unknown).
+        The camera's intrinsics (:func:`~recordings.sources.video.default_intrinsics` when unknown).
     metadata : dict or None
         Session description (software version, segmentation settings, ...); ``source``,
         ``source_fps`` and ``source_frames`` are added unless given.

@@ -16,8 +16,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from recordings.annotated import BadAnnotations
-from recordings.states_csv import csv_reader, read_image, read_split, write_csv
+from recordings.labels.annotated import BadAnnotations
+from recordings.labels.states_csv import csv_reader, read_image, read_split, write_csv
 
 __all__ = ["LINEUPS_COLUMNS", "LINEUPS_FILE", "LineupRow", "read_lineups", "write_lineups"]
 
@@ -40,7 +40,7 @@ class LineupRow:
 
 def read_lineups(path: Path | str) -> list[LineupRow]:
     """The rows of a line-ups CSV; a bad value is a
-    :class:`recordings.annotated.BadAnnotations` naming the file, the line and the column."""
+    :class:`recordings.labels.annotated.BadAnnotations` naming the file, the line and the column."""
     reader = csv_reader(Path(path), LINEUPS_COLUMNS, "a line-ups CSV")
     rows, seen = [], {}
     for row in reader:

@@ -30,18 +30,19 @@ from mcap.stream_reader import StreamReader
 from irl.demonstrations import Demonstration, Trajectory
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from recordings.perception import PERCEPTION_METADATA, PerceptionTopic
-from recordings.schema import (
+from recordings.session.schema import (
     END_METADATA,
     FORMAT_NAME,
+    PERCEPTION_METADATA,
     READABLE_VERSIONS,
     ROBOT_METADATA,
     SESSION_METADATA,
+    PerceptionTopic,
     Topic,
     task_of,
 )
-from recordings.steps import group_steps
-from recordings.world import (
+from recordings.session.steps import group_steps
+from recordings.session.world import (
     SceneItem,
     Transform,
     read_joint_states,
@@ -93,7 +94,7 @@ class FrameRecord:
     ``/ground_truth/boxes`` and ``/ground_truth/onions`` messages: each is None in a session
     without ground truth.
 
-    The 3D side (:mod:`recordings.world`), None where the file has none: ``transforms`` the
+    The 3D side (:mod:`recordings.session.world`), None where the file has none: ``transforms`` the
     ``/tf`` transforms by child frame, ``(parent, translation (3,), rotation (4,) xyzw)``;
     ``joints`` the ``/joint_states`` positions by joint name; ``scene`` the ``/scene``
     entities (ground truth).
@@ -171,7 +172,7 @@ class Session:
         What was wrong with a damaged file.
     perception : dict of int -> dict
         The ``/perception/state`` message of each perceived step (empty if the session was
-        not perceived; see :mod:`recordings.perception`).
+        not perceived; see :mod:`recordings.session.perception`).
     perception_models : dict or None
         The ``onionsort.perception`` record: which models perceived the session.
     task : TaskDescription

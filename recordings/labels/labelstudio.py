@@ -11,7 +11,7 @@ interface that reads it is :func:`labeling_config`.
 Label Studio's *JSON* export is the same list of tasks, each with ``annotations``: what a
 person made of it, in the same ``result`` layout. :func:`read_export` reads the last
 annotation of each task that was not cancelled (a task without one was not labelled): its
-boxes and class names as an :class:`~recordings.annotated.AnnotatedImage`, its ``choices``
+boxes and class names as an :class:`~recordings.labels.annotated.AnnotatedImage`, its ``choices``
 by name, and the task's ``data``.
 """
 
@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from recordings.annotated import AnnotatedImage, BadAnnotations
+from recordings.labels.annotated import AnnotatedImage, BadAnnotations
 
 __all__ = ["LabelStudioTask", "LabelledTask", "labeling_config", "read_export", "write_tasks"]
 
@@ -145,7 +145,7 @@ def _image_path(root: Path, ref: str) -> Path:
 def read_export(root: Path | str) -> list[LabelledTask]:
     """The labelled tasks of the Label Studio JSON export at the top of ``root`` (see the
     module docstring), in its order; a file or value that is not so is a
-    :class:`recordings.annotated.BadAnnotations` naming it."""
+    :class:`recordings.labels.annotated.BadAnnotations` naming it."""
     root = Path(root)
     if not root.is_dir():
         raise BadAnnotations(f"{root} is not a folder")

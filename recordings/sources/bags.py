@@ -4,10 +4,10 @@ A work cell records bags, not videos. :class:`Bag` opens one (a rosbag2 folder, 
 ``.mcap`` or ``.db3`` files, a bare ROS 2 MCAP file, or a ROS 1 ``.bag``; also an MCAP file of
 Foxglove protobuf images and calibrations that another tool wrote), lists its topics
 (:meth:`Bag.topics`) and reads the image topics a session is made of; :func:`import_bag` writes
-them as one sensor-only session (:mod:`recordings.schema`). Messages are read and deserialised
-by ``rosbags``, which reads both ROS generations and both rosbag2 storages without a ROS install
-and has the standard message types built in (``mcap-ros2-support`` reads only ROS 2 MCAP files,
-so it would leave sqlite3 and ROS 1 bags out).
+them as one sensor-only session (:mod:`recordings.session.schema`). Messages are read and
+deserialised by ``rosbags``, which reads both ROS generations and both rosbag2 storages without a
+ROS install and has the standard message types built in (``mcap-ros2-support`` reads only ROS 2 MCAP
+files, so it would leave sqlite3 and ROS 1 bags out).
 
 What is read, and how:
 
@@ -28,7 +28,7 @@ What is read, and how:
   :mod:`onionsort.stages.import_video`), or from a topic whose messages mark step starts
   (:func:`steps_from_marks`): every message starts a step at its time, except a
   ``std_msgs/String`` holding JSON with a ``phase`` other than 0 (so that a session's own step
-  clock, exported by :mod:`recordings.ros_export`, marks each step once).
+  clock, exported by :mod:`recordings.sources.ros_export`, marks each step once).
 
 Only the frames a step keeps (``frames_per_step`` of each) are decoded when the steps come from
 a clock or a topic; the bag is read twice (stamps first, then the kept images), so its length is
@@ -48,9 +48,9 @@ from typing import Any
 
 import numpy as np
 
-from recordings.schema import SESSION_METADATA
-from recordings.segmentation import resample_steps
-from recordings.writer import EncodedImage, SessionWriter, encode_color
+from recordings.session.schema import SESSION_METADATA
+from recordings.session.writer import EncodedImage, SessionWriter, encode_color
+from recordings.sources.segmentation import resample_steps
 
 __all__ = [
     "COLOR_ENCODINGS",

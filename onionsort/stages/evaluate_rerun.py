@@ -28,8 +28,8 @@ and base), the Sawyer's meshes under ``<root>/robot`` with its joints animated a
 from the events' ``q``; given ``camera_pose``, the camera's frustum with its image (the depth
 cloud in it hidden at first); given ``inspection_K`` and ``inspection_pose``, the inspection
 camera's frustum at its station, with the first view of the onion the Sawyer holds up; an event
-that also carries a ``world`` snapshot (:class:`recordings.world.World`) adds the work cell's
-bodies (``<root>/scene/*``: belt, bin, gate, onions in their true classes' colours).
+that also carries a ``world`` snapshot (:class:`recordings.session.world.World`) adds the work
+cell's bodies (``<root>/scene/*``: belt, bin, gate, onions in their true classes' colours).
 
 Timeline: ``step`` (the action number).
 """
@@ -60,9 +60,9 @@ from recordings.rerun.common import (
     value_labels,
 )
 from recordings.rerun.world import WorldLogger, scene_items, world_view
-from recordings.schema import CLASS_NAMES
-from recordings.world import Pose, Robot
-from recordings.writer import SortingDecision
+from recordings.session.schema import CLASS_NAMES
+from recordings.session.world import Pose, Robot
+from recordings.session.writer import SortingDecision
 
 __all__ = [
     "EVALUATE_ROOT",
@@ -87,7 +87,7 @@ _PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED = "prediction", "bad"
 class EvaluationEvent(SortingDecision, Protocol):
     """What the logger reads of one action of an evaluation
     (``robot.evaluation.EvaluationStep`` satisfies it): a
-    :class:`recordings.writer.SortingDecision` and the cameras and joints.
+    :class:`recordings.session.writer.SortingDecision` and the cameras and joints.
 
     ``state``, ``action`` and ``next_state`` are flat indices of the logger's task; ``onion`` is
     the line-up index of the onion in focus, ``blemished`` its true class, ``perceived`` the

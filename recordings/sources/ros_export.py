@@ -3,7 +3,7 @@
 
 :func:`export_ros2` writes one rosbag2 folder (``metadata.yaml`` and one storage file, MCAP by
 default, or SQLite 3) of CDR-serialised ROS 2 Humble messages, with rosbags' own writer. The
-topic mapping is a contract that the bag import (:mod:`recordings.bags`) relies on:
+topic mapping is a contract that the bag import (:mod:`recordings.sources.bags`) relies on:
 
 =======================  ==============================  =====================================
 topic                    ROS 2 type                      content
@@ -68,8 +68,8 @@ from mcap.reader import make_reader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from recordings.reader import FrameRecord, RecordingDamagedError, Session, open_session
-from recordings.schema import Topic
+from recordings.session.reader import FrameRecord, RecordingDamagedError, Session, open_session
+from recordings.session.schema import Topic
 
 __all__ = ["ROBOT_TOPIC", "SESSION_TOPIC", "STORAGES", "ExportSummary", "RosTopic",
            "export_ros2"]
