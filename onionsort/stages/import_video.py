@@ -2,8 +2,8 @@
 
 A plain video has no step clock, no depth and no ground truth. This stage gives it a step clock,
 in one of two ways, and writes one session MCAP (colour and calibration,
-:mod:`recordings.session.schema`) that ``perceive``, ``calibrate --no-depth`` and ``learn`` then use
-like any other session:
+:mod:`recordings.session.schema`) that ``perceive``, ``calibrate --no-depth`` and ``learn`` then
+use like any other session:
 
 - **fixed clock** (``step_seconds``): a new step every ``step_seconds`` seconds of video time.
   Right when the person works to a rhythm (a line's takt time), and exact for our simulator's
@@ -14,9 +14,8 @@ like any other session:
   classifier calls occluded keep the previous reading, so a passer-by does not cut steps. Steps
   nobody can see (during an occlusion, or an action that leaves the picture as it was) still
   take time, so a segment several typical steps long (the median segment) is cut into that
-  many equal steps (:func:`recordings.sources.segmentation.split_long_steps`). Measure the result
-  with
-  :func:`segmentation_scores`.
+  many equal steps (:func:`recordings.sources.segmentation.split_long_steps`). Measure the
+  result with :func:`segmentation_scores`.
 
 Each step keeps ``frames_per_step`` frames spread over it (the first one always), as the state
 classifier reads them. A second video of the inspection spot (``inspection``, frame for frame
@@ -213,8 +212,9 @@ def import_video(config: ImportConfig):
 
 def _import_bag(config: ImportConfig):
     """Import a bag (see :mod:`recordings.sources.bags`); return its
-    :class:`recordings.sources.bags.BagImport`."""
-    from recordings.sources.bags import Bag, BagError, decode_image, import_bag, steps_from_marks
+    :class:`recordings.sources.importer.ImportSummary`."""
+    from recordings.sources.bags import Bag, BagError, decode_image, steps_from_marks
+    from recordings.sources.importer import import_bag
 
     tolerance = round(config.sync_tolerance * 1e9)
     with Bag(config.video) as bag:

@@ -3,7 +3,8 @@
 The simulator (``robot/``) produces frames with their ground truth; the session and dataset
 writers consume them. Neither package imports the other: the writers state here what they read,
 and the simulator's dataclasses (``robot.labels``) satisfy these protocols structurally. The
-stage that records a session is the only place that knows both.
+stage that records a session is the only place that knows both. A frame's step is the one type
+both share, :class:`irl.demonstrations.StepTruth`.
 
 Layouts: ``color[v, u, c]`` (H, W, 3) uint8 RGB, ``depth[v, u]`` (H, W) float metres.
 """
@@ -14,22 +15,9 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["TrueOnion", "TrueStep", "TruthFrame"]
+from irl.demonstrations import StepTruth
 
-
-class TrueStep(Protocol):
-    """One abstract step: in ``state`` the sorter took ``action`` and reached ``next_state``."""
-
-    @property
-    def step(self) -> int: ...
-    @property
-    def state(self) -> int: ...
-    @property
-    def action(self) -> int: ...
-    @property
-    def next_state(self) -> int: ...
-    @property
-    def occluded(self) -> bool: ...
+__all__ = ["TrueOnion", "TruthFrame"]
 
 
 class TrueOnion(Protocol):
@@ -59,7 +47,7 @@ class TruthFrame(Protocol):
     @property
     def index(self) -> int: ...
     @property
-    def step(self) -> TrueStep: ...
+    def step(self) -> StepTruth: ...
     @property
     def phase(self) -> int: ...
     @property

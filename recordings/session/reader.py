@@ -27,7 +27,7 @@ import numpy as np
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from irl.demonstrations import Demonstration, Trajectory
+from irl.demonstrations import Demonstration, StepTruth, Trajectory
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings.session.schema import (
@@ -55,7 +55,6 @@ __all__ = [
     "NotASessionError",
     "RecordingDamagedError",
     "Session",
-    "StepTruth",
     "open_session",
     "read_demonstrations",
 ]
@@ -71,18 +70,6 @@ class NotASessionError(ValueError):
 
 class RecordingDamagedError(ValueError):
     """The file is truncated or corrupt; the message says what could be recovered."""
-
-
-@dataclass(frozen=True)
-class StepTruth:
-    """A step's ground truth: in ``state`` the sorter took ``action`` and reached
-    ``next_state``; ``occluded`` says whether the passer-by crossed the view."""
-
-    step: int
-    state: int
-    action: int
-    next_state: int
-    occluded: bool
 
 
 @dataclass(frozen=True)

@@ -3,11 +3,12 @@
 A work cell records bags, not videos. :class:`Bag` opens one (a rosbag2 folder, one of its
 ``.mcap`` or ``.db3`` files, a bare ROS 2 MCAP file, or a ROS 1 ``.bag``; also an MCAP file of
 Foxglove protobuf images and calibrations that another tool wrote), lists its topics
-(:meth:`Bag.topics`) and reads the image topics a session is made of; :func:`import_bag` writes
-them as one sensor-only session (:mod:`recordings.session.schema`). Messages are read and
-deserialised by ``rosbags``, which reads both ROS generations and both rosbag2 storages without a
-ROS install and has the standard message types built in (``mcap-ros2-support`` reads only ROS 2 MCAP
-files, so it would leave sqlite3 and ROS 1 bags out).
+(:meth:`Bag.topics`) and reads the image topics a session is made of;
+:func:`recordings.sources.importer.import_bag` writes them as one sensor-only session
+(:mod:`recordings.session.schema`). Messages are read and deserialised by ``rosbags``, which
+reads both ROS generations and both rosbag2 storages without a ROS install and has the standard
+message types built in (``mcap-ros2-support`` reads only ROS 2 MCAP files, so it would leave
+sqlite3 and ROS 1 bags out).
 
 What is read, and how:
 
@@ -49,19 +50,17 @@ from typing import Any
 import numpy as np
 
 from recordings.session.schema import SESSION_METADATA
-from recordings.session.writer import EncodedImage, SessionWriter, encode_color
-from recordings.sources.segmentation import resample_steps
+from recordings.session.writer import EncodedImage, encode_color
 
 __all__ = [
     "COLOR_ENCODINGS",
     "DEPTH_ENCODINGS",
     "Bag",
     "BagError",
-    "BagImport",
     "BagTopic",
     "ImageStream",
     "decode_image",
-    "import_bag",
+    "encoded_image",
     "is_bag",
     "mcap_kind",
     "steps_from_marks",
@@ -221,7 +220,7 @@ def decode_image(msgtype: str, msg: Any, topic: str = "the image") -> np.ndarray
     return np.ascontiguousarray(rgb)
 
 
-def _encoded(msgtype: str, msg: Any, topic: str) -> EncodedImage:
+def encoded_image(msgtype: str, msg: Any, topic: str) -> EncodedImage:
     """A colour message as the session stores it: a JPEG or PNG as it is (decoded once, to
     check it and read its size), a raw image as PNG."""
     rgb = decode_image(msgtype, msg, topic)
@@ -542,168 +541,3 @@ class _FoxgloveReader:
 def _reason(exc: BaseException) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) < 200 else text[:197] + "..."
-
-
-@dataclass(frozen=True)
-class BagImport:
-    """What :func:`import_bag` wrote.
-
-    Attributes
-    ----------
-    path : Path
-        The session file.
-    source : str
-        The bag.
-    frames_read : int
-        Colour frames the session's steps are made of (after synchronisation with depth and
-        after leaving out frames before the first step mark).
-    frames_dropped : int
-        Colour frames left out: no depth within the tolerance, or before the first step mark.
-    steps_written, frames_per_step : int
-    depth, inspection : bool
-        Whether the session has depth and inspection views.
-    """
-
-    path: Path
-    source: str
-    frames_read: int
-    frames_dropped: int
-    steps_written: int
-    frames_per_step: int
-    depth: bool
-    inspection: bool
-
-    @property
-    def frames_written(self) -> int:
-        return self.steps_written * self.frames_per_step
-
-
-def import_bag(bag: Bag, out_path: str | Path, *, color: ImageStream, frames: np.ndarray,
-               step_of_frame: Sequence[int], frames_per_step: int, camera_K: np.ndarray,
-               depth: ImageStream | None = None, depth_of_frame: np.ndarray | None = None,
-               inspection: ImageStream | None = None,
-               inspection_of_frame: np.ndarray | None = None,
-               inspection_K: np.ndarray | None = None,
-               metadata: dict[str, Any] | None = None) -> BagImport:
-    """Write the kept frames of ``bag`` as one sensor-only session at ``out_path``.
-
-    Parameters
-    ----------
-    bag : Bag
-    out_path : path-like
-        The session file; written to ``<out>.mcap.partial`` and renamed once whole (an
-        existing file is refused, a failed import leaves nothing).
-    color : ImageStream
-        The colour topic.
-    frames : ndarray of int, shape (N,)
-        The colour messages the session is made of (indices on the topic), in time order.
-    step_of_frame : sequence of int, shape (N,)
-        The step of each, non-decreasing.
-    frames_per_step : int
-    camera_K : ndarray of shape (3, 3)
-    depth, depth_of_frame : ImageStream and ndarray of int, shape (N,), or None
-        The depth topic and the depth message of each frame.
-    inspection, inspection_of_frame, inspection_K
-        The inspection topic, the view of each frame (its message, -1: none; shape (N,)), and
-        the view's intrinsics.
-    metadata : dict or None
-        Added to the session's description.
-    """
-    out_path = Path(out_path)
-    if out_path.exists():
-        raise FileExistsError(f"{out_path} exists; choose another --out or remove it")
-    selected = resample_steps(step_of_frame, frames_per_step)
-    sizes = np.bincount(np.unique(np.asarray(step_of_frame), return_inverse=True)[1])
-    if np.any(sizes < frames_per_step):
-        logger.warning("%s: %d of %d steps hold fewer than %d frames; their frames are "
-                       "repeated to make %d each", bag.name, int(np.sum(sizes < frames_per_step)),
-                       len(sizes), frames_per_step, frames_per_step)
-    times = color.stamps_ns[frames]
-    t0 = int(times.min())
-    # the session's frames in order: (step, phase, colour message, depth message, view message)
-    plan = []
-    for step, picks in enumerate(selected):
-        for phase, i in enumerate(picks):
-            plan.append((step, phase, int(frames[i]), int(times[i]) - t0,
-                         int(depth_of_frame[i]) if depth_of_frame is not None else -1,
-                         int(inspection_of_frame[i]) if inspection_of_frame is not None
-                         else -1))
-    wanted: dict[str, set[int]] = {color.topic: {p[2] for p in plan}}
-    if depth is not None:
-        wanted.setdefault(depth.topic, set()).update(p[4] for p in plan)
-    if inspection is not None:
-        wanted.setdefault(inspection.topic, set()).update(p[5] for p in plan if p[5] >= 0)
-    last_use: dict[tuple[str, int], int] = {}
-    for n, (_, _, c, _, d, v) in enumerate(plan):
-        last_use[(color.topic, c)] = n
-        if d >= 0:
-            last_use[(depth.topic, d)] = n
-        if v >= 0:
-            last_use[(inspection.topic, v)] = n
-
-    meta = {"source": bag.name, "source_frames": len(frames)}
-    meta.update(metadata or {})
-    partial = out_path.with_suffix(".mcap.partial")
-    if partial.exists():
-        logger.warning("%s: replacing a partial file left by an earlier import", partial)
-    held: dict[tuple[str, int], Any] = {}
-    written = 0
-    color_size: tuple[int, int] | None = None
-    try:
-        with SessionWriter(partial, meta, camera_K, inspection_K,
-                           frames_per_step=frames_per_step, depth=depth is not None,
-                           ground_truth=False, overwrite=True) as writer:
-            writer.report_interruption = False  # removed on failure: nothing to report
-
-            def write_ready() -> None:
-                nonlocal written, color_size
-                while written < len(plan):
-                    step, phase, c, t, d, v = plan[written]
-                    keys = [(color.topic, c)] + ([(depth.topic, d)] if d >= 0 else []) + (
-                        [(inspection.topic, v)] if v >= 0 else [])
-                    if any(k not in held for k in keys):
-                        return
-                    image = held[keys[0]]
-                    size = (image.width, image.height)
-                    color_size = color_size or size
-                    if size != color_size:
-                        raise BagError(f"{color.topic}: image {c} is {size[0]}x{size[1]}, the "
-                                       f"first {color_size[0]}x{color_size[1]}; a session's "
-                                       "frames share one size")
-                    metres = held[keys[1]] if d >= 0 else None
-                    if metres is not None and metres.shape != (size[1], size[0]):
-                        raise BagError(f"--depth-topic {depth.topic}: depth of "
-                                       f"{metres.shape[1]}x{metres.shape[0]} beside colour of "
-                                       f"{size[0]}x{size[1]}; depth must be registered to the "
-                                       "colour image, of its size")
-                    view = held[keys[-1]] if v >= 0 else None
-                    writer.write_sensor_frame(index=written, step=step, phase=phase, time_ns=t,
-                                              color=image, depth=metres, inspection=view)
-                    for k in keys:
-                        if last_use[k] == written:
-                            del held[k]
-                    written += 1
-
-            for topic, i, msgtype, msg in bag.read(list(wanted), wanted):
-                if topic == color.topic or (inspection is not None
-                                            and topic == inspection.topic):
-                    held[(topic, i)] = _encoded(msgtype, msg, topic)
-                else:
-                    held[(topic, i)] = decode_image(msgtype, msg, topic)
-                write_ready()
-            if written != len(plan):
-                raise BagError(f"{bag.name}: {len(plan) - written} of the session's frames "
-                               "could not be read back; the bag changed while it was read")
-        if out_path.exists():
-            raise FileExistsError(f"{out_path} appeared during the import; choose another "
-                                  "--out or remove it")
-        partial.rename(out_path)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        logger.info("%s: import into %s failed after %d frames; removed %s", bag.name,
-                    out_path, written, partial.name)
-        raise
-    return BagImport(path=out_path, source=bag.name, frames_read=len(frames),
-                     frames_dropped=len(color.stamps_ns) - len(frames),
-                     steps_written=len(selected), frames_per_step=frames_per_step,
-                     depth=depth is not None, inspection=inspection is not None)

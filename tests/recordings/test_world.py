@@ -65,10 +65,10 @@ def robot_session(path, n_frames: int = 4) -> RobotRun:
     world carries the robot, the work cell and the main camera."""
     import pybullet as p
 
+    from irl.demonstrations import StepTruth
     from recordings import SessionWriter
     from robot.assets import sawyer_urdf
     from robot.camera import CameraSpec, intrinsics, render
-    from robot.labels import StepLabel
     from robot.sawyer import HOME, Sawyer
     from robot.scene import StopGate, build_workcell, connect
     from robot.station import ROBOT_BASE, ROBOT_BASE_YAW
@@ -99,7 +99,7 @@ def robot_session(path, n_frames: int = 4) -> RobotRun:
                                    robot=robot_state(client, arm.body, arm.joints,
                                                      sawyer_urdf()))
                 writer.write_frame(WorldFrame(
-                    index=k, step=StepLabel(k // FPS, 0, 0, 0, False), phase=k % FPS,
+                    index=k, step=StepTruth(k // FPS, 0, 0, 0, False), phase=k % FPS,
                     time_s=0.1 * k, color=image.rgb, depth=image.depth, world=world))
     finally:
         p.disconnect(client)
