@@ -14,8 +14,8 @@ from onionsort.cli import main
 from recordings import SessionWriter, open_session
 from recordings.session.schema import Topic
 from recordings.sources.ros_export import ROBOT_TOPIC, SESSION_TOPIC, STORAGES, export_ros2
-from tests.recordings.test_evaluation_session import Decision
-from tests.recordings.test_world import robot_session
+from tests.recordings.session.test_evaluation_session import Decision
+from tests.recordings.session.test_world import robot_session
 
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 IMAGE = "sensor_msgs/msg/Image"

@@ -2,7 +2,7 @@
 evaluation; the demo's in tests/test_demo.py) opens on views that all have data, and 3D views
 that hold nothing they cannot place (no 2D entity outside a pinhole, no series, no text).
 
-The blueprints are read back from tiny ``.rrd`` files (:mod:`tests.recordings.rrd_layout`).
+The blueprints are read back from tiny ``.rrd`` files (:mod:`tests.recordings.rerun.rrd_layout`).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from onionsort.stages.learn_rerun import log_learning
 from recordings import open_session
 from recordings.rerun import SessionLogger
 from recordings.session.perception import add_perception
-from tests.recordings.rrd_layout import blueprint_views, entities, layout_problems, matches
-from tests.recordings.test_rerun import sensor_session, verify
-from tests.recordings.test_world import robot_session
+from tests.recordings.rerun.rrd_layout import blueprint_views, entities, layout_problems, matches
+from tests.recordings.rerun.test_rerun import sensor_session, verify
+from tests.recordings.session.test_world import robot_session
 
 pytest.importorskip("rerun.chunk")
 
@@ -200,7 +200,7 @@ def test_depth_beyond_the_work_cell_is_left_out(evaluation):
 def test_evaluation_without_views_or_pinholes_keeps_2d_out_of_3d(tmp_path):
     """An evaluation logged without intrinsics: its images stay in 2D views only."""
     from onionsort.stages.evaluate_rerun import EvaluationLogger
-    from tests.recordings.test_rerun import FakeStep
+    from tests.recordings.rerun.test_rerun import FakeStep
 
     out = tmp_path / "bare.rrd"
     with EvaluationLogger(out, views=3) as log:

@@ -20,7 +20,7 @@ from recordings.session.perception import add_perception
 from recordings.session.rewrite import rewrite_session
 from recordings.session.schema import ROBOT_METADATA
 from recordings.session.urdf import UrdfJoints, viewer_urdf
-from tests.recordings.test_world import matrix, robot_session
+from tests.recordings.session.test_world import matrix, robot_session
 
 rr_chunk = pytest.importorskip("rerun.chunk")
 SAWYER_LINKS = {"right_arm_base_link", *(f"right_l{k}" for k in range(7))}

@@ -17,7 +17,7 @@ from recordings import SessionWriter, open_session, strip_ground_truth
 from recordings.session.rewrite import rewrite_session
 from recordings.session.schema import Topic
 from recordings.session.world import read_joint_states, read_transforms
-from tests.recordings.test_world import SCHEMAS, mcap_check, messages, robot_session
+from tests.recordings.session.test_world import SCHEMAS, mcap_check, messages, robot_session
 
 SAWYER_JOINTS = [f"right_j{k}" for k in range(7)]
 K = np.array([[100.0, 0.0, 16.0], [0.0, 100.0, 12.0], [0.0, 0.0, 1.0]])
@@ -125,7 +125,7 @@ def test_the_evaluation_session_reads_back_step_by_step(evaluated):
 def test_each_frame_shows_the_station_before_its_action(evaluated):
     """Frame t is the station at rest before action t: its joints are those the Rerun log
     shows after action t - 1 (and the arm rests before the first claim, which moves nothing)."""
-    from tests.recordings.test_rerun import rows
+    from tests.recordings.rerun.test_rerun import rows
 
     logged = rows(evaluated.rrd, "evaluate/arm/joints", "Scalars:scalars", "step")
     after = [np.array(q) for _, q in logged]
@@ -139,7 +139,7 @@ def test_each_frame_shows_the_station_before_its_action(evaluated):
 
 
 def test_the_evaluation_rrd_has_the_sawyers_meshes_and_joint_transforms(evaluated):
-    from tests.recordings.test_rerun import assert_sawyer, summary, verify, views
+    from tests.recordings.rerun.test_rerun import assert_sawyer, summary, verify, views
 
     s = summary(evaluated.rrd)
     assert_sawyer(s, "evaluate", evaluated.n_steps)
