@@ -35,7 +35,6 @@ import logging
 import socket
 import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
-from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +50,6 @@ __all__ = [
     "check_viewer_url",
     "class_annotations",
     "close_recording",
-    "enum_labels",
     "factor_values",
     "log_camera_images",
     "log_class_annotations",
@@ -326,11 +324,6 @@ def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray |
             if far.any():
                 depth = np.where(far, 0, depth).astype(depth.dtype)
         rec.log(f"{root}/camera/depth", rr.DepthImage(depth, meter=depth_meter))
-
-
-def enum_labels(enum: type[IntEnum]) -> str:
-    """``"0=name, 1=name, ..."``: the value labels of a series of enum indices."""
-    return ", ".join(f"{m.value}={m.name.lower()}" for m in enum)
 
 
 def value_labels(names: Sequence[str]) -> str:
