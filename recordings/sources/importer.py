@@ -88,16 +88,20 @@ class ImportSummary:
 
 
 @contextmanager
-def _session_file(out_path: Path, name: str, frames_done: Callable[[], int], *args: Any,
-                  **kwargs: Any) -> Iterator[SessionWriter]:
-    """A sensor-only :class:`SessionWriter` (``args``, ``kwargs``) on ``<out>.mcap.partial``,
-    renamed to ``out_path`` once whole; on any error the partial file is removed (logged with
-    ``frames_done()``, how far the import of ``name`` got) and the error re-raised."""
+def _session_file(out_path: Path, name: str, frames_done: Callable[[], int],
+                  metadata: dict[str, Any], camera_K: np.ndarray,
+                  inspection_K: np.ndarray | None, *, frames_per_step: int,
+                  depth: bool) -> Iterator[SessionWriter]:
+    """A sensor-only :class:`SessionWriter` on ``<out>.mcap.partial``, renamed to ``out_path``
+    once whole; on any error the partial file is removed (logged with ``frames_done()``, how far
+    the import of ``name`` got) and the error re-raised."""
     partial = out_path.with_suffix(".mcap.partial")
     if partial.exists():
         logger.warning("%s: replacing a partial file left by an earlier import", partial)
     try:
-        with SessionWriter(partial, *args, ground_truth=False, overwrite=True, **kwargs) as writer:
+        with SessionWriter(partial, metadata, camera_K, inspection_K,
+                           frames_per_step=frames_per_step, depth=depth, ground_truth=False,
+                           overwrite=True) as writer:
             writer.report_interruption = False  # removed on failure: nothing to report
             yield writer
         if out_path.exists():
