@@ -168,8 +168,7 @@ def test_a_bag_imports_as_the_sessions_steps_and_frames(session, tmp_path, stora
 def perceived(tmp_path_factory) -> Path:
     """A session of 3-frame steps (as the state classifier reads them), perceived."""
     from onionsort.stages import PerceiveConfig, perceive
-
-    from .conftest import record
+    from tests.recordings.conftest import record
 
     path = tmp_path_factory.mktemp("perceived") / "original.mcap"
     record(path, n_steps=8, seed=11, frames_per_step=3)
