@@ -44,7 +44,7 @@ from onionsort.stages.calibrate import SessionCameras, measure_perception, perce
 from onionsort.stages.inspection import measure_inspection
 from onionsort.stages.models import PerceptionModels
 from perception.camera_shift import REFERENCE_TEMPERATURE_K
-from recordings.dataset import SPLITS, read_metadata, read_split
+from recordings.labels.dataset import SPLITS, read_metadata, read_split
 
 _DARK, _CLIPPED = 20, 235
 

@@ -92,7 +92,7 @@ def _score(f: dict) -> float:
 def _sessions_for_views(data: Path, views: int) -> int:
     """The fewest first train sessions (``bench/through_camera.py --train-sessions K``'s
     order) whose sorter's inspection views show ``views`` onions."""
-    from recordings.dataset import read_records
+    from recordings.labels.dataset import read_records
 
     per = dict.fromkeys(sorted({int(r["session"]) for r in read_records(data, "train")
                                 if "session" in r}), 0)
@@ -111,7 +111,7 @@ def _sessions_for_views(data: Path, views: int) -> int:
 def _first_test_sessions(src: Path, out: Path, n: int | None) -> Path:
     """``src`` with its test split cut to its first ``n`` sessions (None: ``src`` itself), as
     a new dataset folder ``out`` whose image folders link to ``src``'s."""
-    from recordings.dataset import SPLITS, read_metadata, read_records
+    from recordings.labels.dataset import SPLITS, read_metadata, read_records
 
     if n is None:
         return src

@@ -40,7 +40,7 @@ from onionsort.stages.calibrate import measure_perception
 from onionsort.stages.inspection import _held_onion
 from onionsort.stages.models import PerceptionModels
 from perception.inspection import Inspector, _digest, rot_label
-from recordings.dataset import read_split, split_names
+from recordings.labels.dataset import read_split, split_names
 
 #: what a view read from the truth says, per reader: by its rot label (1 rot, 0 none, -1 a
 #: trace) for the rot detectors, by the onion's class (0 good, 1 blemished) for the class reader

@@ -28,7 +28,7 @@ def measure(paths: list[Path], frames: int, models) -> dict:
     """The counts printed by this script (see the module docstring), as a dict."""
     from irl.domains.onion_sorting import SORTING_TASK as task
     from onionsort.stages.label_select import _choose, step_uncertainties
-    from recordings.reader import open_session
+    from recordings.session.reader import open_session
 
     wrong, what, scores = {}, {}, []
     for k, path in enumerate(paths):

@@ -32,7 +32,7 @@ from pathlib import Path
 import cv2
 
 from perception.camera_shift import CameraShift
-from recordings.dataset import SPLITS, read_metadata, read_records
+from recordings.labels.dataset import SPLITS, read_metadata, read_records
 
 _LABELS = {"camera": "labels.json", "inspection": "inspection.json"}
 

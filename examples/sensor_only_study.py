@@ -53,7 +53,7 @@ from onionsort.stages.base import write_json
 from onionsort.stages.import_video import perceived_segmentation, segmentation_scores
 from onionsort.stages.models import PerceptionModels
 from recordings import open_session
-from recordings.sources import VideoFileSource, write_video
+from recordings.sources.video import VideoFileSource, write_video
 
 FPS = 1.5  # frames per second of the videos: 3 frames per 2-second step
 

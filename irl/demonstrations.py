@@ -2,7 +2,8 @@
 
 A :class:`Demonstration` is what the learners see: one observation index per time step, or
 ``None`` where the step was occluded. A :class:`Trajectory` is the ground truth ``(s_t, a_t)``
-behind it, used only to generate data and to score, never by the learners.
+behind it, used only to generate data and to score, never by the learners; a
+:class:`StepTruth` is one step of it as a simulator produces it and a recording stores it.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from irl._validation import check_int, check_real, describe
 __all__ = [
     "OCCLUDED",
     "Demonstration",
+    "StepTruth",
     "Trajectory",
     "check_demonstrations",
     "observe",
@@ -134,6 +136,23 @@ class Trajectory:
 
     def __len__(self) -> int:
         return len(self.states)
+
+
+@dataclass(frozen=True)
+class StepTruth:
+    """One step's ground truth: at step ``step`` the demonstrator in ``state`` took ``action``
+    and reached ``next_state``; ``occluded`` says whether the observer's view was blocked.
+
+    States and actions are flat indices of the task (:mod:`irl.domains`). A simulator
+    produces these and a session stores and reads them back; a sequence of them is a
+    :class:`Trajectory` with its occlusion mask.
+    """
+
+    step: int
+    state: int
+    action: int
+    next_state: int
+    occluded: bool
 
 
 def _indices(values, name: str) -> np.ndarray:

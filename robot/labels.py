@@ -1,7 +1,8 @@
 """Ground-truth label types of a simulated session, shared by the simulator and the recordings.
 
 Pure data (numpy only): ``recordings/`` writes and reads these without importing pybullet.
-States and actions are flat indices of :mod:`irl.domains.onion_sorting`.
+States and actions are flat indices of :mod:`irl.domains.onion_sorting`; a frame's step is an
+:class:`irl.demonstrations.StepTruth`.
 """
 
 from __future__ import annotations
@@ -10,21 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Frame", "OnionLabel", "StepLabel"]
+from irl.demonstrations import StepTruth
 
-
-@dataclass(frozen=True)
-class StepLabel:
-    """One abstract step: the sorter in ``state`` took ``action`` and reached ``next_state``.
-
-    ``occluded`` says whether the passer-by walked through the camera's view during the step.
-    """
-
-    step: int
-    state: int
-    action: int
-    next_state: int
-    occluded: bool
+__all__ = ["Frame", "OnionLabel"]
 
 
 @dataclass(frozen=True)
@@ -68,9 +57,11 @@ class Frame:
     ----------
     index : int
         Frame number in the session.
-    step : StepLabel
+    step : StepTruth
         The abstract step this frame belongs to; the frame is labelled ``(step.state,
-        step.action)``. The step's first frame (``phase == 0``) shows ``step.state`` at rest.
+        step.action)``; ``step.occluded`` says whether the passer-by walked through the
+        camera's view during the step. The step's first frame (``phase == 0``) shows
+        ``step.state`` at rest.
     phase : int
         Position of the frame within its step, ``0 <= phase < frames_per_step``.
     time_s : float
@@ -90,7 +81,7 @@ class Frame:
     """
 
     index: int
-    step: StepLabel
+    step: StepTruth
     phase: int
     time_s: float
     color: np.ndarray = field(repr=False)

@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import pybullet as p
 
+from irl.demonstrations import StepTruth
 from irl.domains.onion_sorting import (
     N_ACTIONS,
     N_STATES,
@@ -43,7 +44,7 @@ from robot.difficulty import (
     difficulty_rng,
     resolve_difficulty,
 )
-from robot.labels import OnionLabel, StepLabel
+from robot.labels import OnionLabel
 from robot.look import Look, draw_look, look_rng
 from robot.occluder import PasserBy, occlusion_schedule
 from robot.scene import Onion, OnionPool, StopGate, build_workcell, connect
@@ -162,7 +163,7 @@ class SortingSession:
 
     Attributes
     ----------
-    steps : list of StepLabel
+    steps : list of StepTruth
         The steps taken so far.
     occluded : ndarray of shape (n_steps,)
         The passer-by's schedule (full crossings: the steps labelled occluded).
@@ -199,7 +200,7 @@ class SortingSession:
         if d.partial_occlusion:
             self.partial = ~self.occluded & (self._difficulty_rng.random(config.n_steps)
                                              < d.partial_occlusion)
-        self.steps: list[StepLabel] = []
+        self.steps: list[StepTruth] = []
         self.client: int | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------
@@ -309,7 +310,7 @@ class SortingSession:
             return hand[None]
         return np.stack([hand, HAND_TARGETS[s_next.end_effector]])
 
-    def _render(self, index: int, label: StepLabel, phase: int, time_s: float,
+    def _render(self, index: int, label: StepTruth, phase: int, time_s: float,
                 with_inspection: bool) -> WorldFrame:
         image = render(self.client, self.config.camera, self.lighting)
         onions = self._onion_labels(image.seg)
@@ -372,7 +373,7 @@ class SortingSession:
             if a == SortAction.CLAIM and next_state(s, a, False) != s:
                 self.focus = self._claim()
             s_next = next_state(s, a, blemished=self.focus.blemished)
-            label = StepLabel(step=t, state=s_idx, action=int(a),
+            label = StepTruth(step=t, state=s_idx, action=int(a),
                               next_state=encode_state(s_next), occluded=bool(self.occluded[t]))
             self.steps.append(label)
             waypoints = self._plan(s, a, s_next)

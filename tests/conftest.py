@@ -60,7 +60,7 @@ def perceived_sessions(tmp_path_factory):
 
     from irl.demonstrations import observe, sample_trajectory
     from irl.domains import onion_sorting
-    from recordings.perception import add_perception
+    from recordings.session.perception import add_perception
     from tests.test_bad_cli import _sensor_session
 
     folder, dom, paths = tmp_path_factory.mktemp("perceived"), onion_sorting(noise=0.3), []

@@ -26,7 +26,8 @@ RULES: dict[str, set[str]] = {
                    "cv2", "numpy", "irl", "yaml"},
     "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},
     "onionsort": {"irl", "perception", "state_abstraction", "recordings", "robot", "numpy",
-                  "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray", "threadpoolctl"},
+                  "scipy", "torch", "matplotlib", "tqdm", "pybullet", "ray", "threadpoolctl",
+                  "rerun"},
 }
 
 

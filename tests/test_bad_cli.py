@@ -47,7 +47,7 @@ def _sensor_session(path: Path, *, frames_per_step: int, steps: int = 2) -> Path
 def fx(tmp_path_factory) -> Path:
     """Files for bad input: a regular file, non-MCAP files, broken JSON, damaged sessions,
     run and dataset folders that are not what they claim."""
-    from recordings.perception import add_perception
+    from recordings.session.perception import add_perception
 
     d = tmp_path_factory.mktemp("bad")
     (d / "afile").write_text("a regular file\n")
@@ -491,7 +491,7 @@ _DYNAMIC_FLAGS = {
                                                None),
 }
 #: Flags of other programs named in messages and docs (pip).
-_FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources.py", "--list-devices")}
+_FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources/video.py", "--list-devices")}
 #: Which commands print the messages of a module of ``onionsort/commands`` or
 #: ``onionsort/stages`` (by the module's name).
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
@@ -591,7 +591,7 @@ def test_the_hint_scan_finds_the_hints_it_should():
     assert ("onionsort/stages/record.py", "--overwrite") in hints
     assert ("onionsort/stages/learn.py", "--allow-model-mismatch") in hints
     assert ("onionsort/stages/learn.py", "--no-inspection") in hints
-    assert ("recordings/perception.py", "--replace") in hints
+    assert ("recordings/session/perception.py", "--replace") in hints
     assert len(hints) > 40
 
 

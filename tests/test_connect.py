@@ -155,7 +155,7 @@ def test_record_and_learn_stream_to_the_viewer_what_they_write(viewer, tmp_path,
 
 def _perceived_from_truth(path: Path) -> Path:
     from recordings import open_session
-    from recordings.perception import add_perception
+    from recordings.session.perception import add_perception
 
     session = open_session(path)
     steps = session.step_frames()

@@ -129,7 +129,7 @@ def test_quick_demo_runs_end_to_end(quick_demo, capsys):
     assert not list(out.rglob("*.partial"))
     # each opens on views that all have data, and 3D views that hold only what they can place;
     # the sessions' recording shows what perception made of them
-    from tests.recordings.rrd_layout import blueprint_views, layout_problems
+    from tests.recordings.rerun.rrd_layout import blueprint_views, layout_problems
 
     for path in rrds:
         assert layout_problems(path) == [], path

@@ -111,7 +111,7 @@ def _run(argv: list[str], out: Path, log: Path, kill_after: int | None = None,
 
 def _session(path: Path, *, recoverable: bool) -> str:
     from recordings import open_session
-    from recordings.reader import RecordingDamagedError
+    from recordings.session.reader import RecordingDamagedError
 
     try:
         session = open_session(path)
@@ -192,7 +192,7 @@ def _check_tree(folder: Path, *, recoverable_sessions: bool = False) -> dict[str
 def _check_dataset(root: Path, frames: int) -> None:
     """A dataset folder, complete or not: every label record points at valid images; with
     dataset.json (written last) the whole dataset reads back with every frame."""
-    from recordings.dataset import SPLITS, read_metadata, read_split
+    from recordings.labels.dataset import SPLITS, read_metadata, read_split
 
     for split in SPLITS:
         for labels in ("labels.json", "inspection.json"):

@@ -5,7 +5,7 @@ import pytest
 
 from bench.finetune_camera import _first_test_sessions, _recovered, _sessions_for_views, main
 from onionsort.cli import main as onionsort
-from recordings.dataset import read_records, read_steps
+from recordings.labels.dataset import read_records, read_steps
 
 
 @pytest.fixture(scope="module")

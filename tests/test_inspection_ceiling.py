@@ -46,5 +46,5 @@ def test_a_perfect_class_reader_reads_no_session_backwards(paper):
 
 
 def paper_view(root):
-    from recordings.dataset import read_split
+    from recordings.labels.dataset import read_split
     return next(iter(read_split(root, "test", view="inspection"))).color

@@ -14,7 +14,7 @@ import pytest
 
 from onionsort.cli import main
 from recordings import open_session
-from recordings.sources import write_video
+from recordings.sources.video import write_video
 from tests.doccheck import doc_commands
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from onionsort.cli import main
-from recordings.dataset import CLASSES, SPLITS, VIEWS, read_records, read_steps, split_sessions
+from recordings.labels.dataset import (
+    CLASSES,
+    SPLITS,
+    VIEWS,
+    read_records,
+    read_steps,
+    split_sessions,
+)
 
 #: The record fields export then import keeps: boxes, classes, the state labels and the
 #: robot's line-up fields.

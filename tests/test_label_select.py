@@ -8,7 +8,7 @@ import pytest
 
 from onionsort.cli import main
 from onionsort.stages.label_select import _choose
-from recordings.dataset import read_records, split_sessions
+from recordings.labels.dataset import read_records, split_sessions
 
 
 @pytest.fixture(scope="module")
@@ -213,7 +213,7 @@ def test_zero_frames_is_one_line(sessions, tmp_path, capsys):
 def _wrong_steps(paths, models) -> dict:
     """``(session, step) -> bool``: the step's state guess is wrong (the truth, which the
     selection never reads, checks it)."""
-    from recordings.reader import open_session
+    from recordings.session.reader import open_session
 
     wrong = {}
     for k, path in enumerate(paths):

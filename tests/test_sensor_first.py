@@ -15,8 +15,8 @@ import pytest
 from onionsort.cli import main
 from onionsort.stages.models import CLASSIFIER_FILE, DEFAULT_MODELS, DETECTOR_FILE
 from recordings import open_session, strip_ground_truth
-from recordings.schema import Topic
-from recordings.sources import write_video
+from recordings.session.schema import Topic
+from recordings.sources.video import write_video
 
 pytestmark = pytest.mark.skipif(
     not (DEFAULT_MODELS / DETECTOR_FILE).exists()

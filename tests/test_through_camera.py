@@ -9,7 +9,7 @@ import pytest
 from bench.through_camera import main, through_camera
 from onionsort.cli import main as onionsort
 from perception.camera_shift import CameraShift
-from recordings.dataset import SPLITS, read_metadata, read_records, read_steps
+from recordings.labels.dataset import SPLITS, read_metadata, read_records, read_steps
 
 
 @pytest.fixture(scope="module")

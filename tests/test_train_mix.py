@@ -10,7 +10,7 @@ import torch
 from onionsort.cli import main
 from onionsort.stages.inspection import InspectionTrainStageConfig
 from onionsort.stages.train import ClassifierTrainConfig, DetectorTrainConfig
-from recordings.dataset import read_records, read_steps
+from recordings.labels.dataset import read_records, read_steps
 from tests.perception.test_inspection import _blob_crops
 from tests.state_abstraction.test_classifier import TINY, synthetic_steps
 from tests.test_label import exported, rendered  # noqa: F401  (module fixtures)

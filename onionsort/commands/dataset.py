@@ -1,7 +1,7 @@
 """``onionsort dataset``: render labelled frames (train/val/test) for perception.
 
 Frames come from whole simulated sessions, split into train, val and test by session. See
-``recordings.dataset`` for the folder layout and the label records.
+``recordings.labels.dataset`` for the folder layout and the label records.
 
 Examples
 --------

@@ -1,7 +1,7 @@
 """``onionsort record``: simulate sorting sessions and record them to MCAP.
 
 A simulated person sorts onions on a conveyor while a passer-by sometimes blocks the camera;
-each session becomes ``OUT/session_NNN.mcap`` (see ``recordings.schema`` for the topics).
+each session becomes ``OUT/session_NNN.mcap`` (see ``recordings.session.schema`` for the topics).
 ``--resume`` continues an interrupted recording: complete sessions are kept, interrupted ones
 recorded again from their own seeds. ``--connect URL`` streams the Rerun recording to a viewer
 on another machine, in addition to the ``--rerun`` file.

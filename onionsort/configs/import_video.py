@@ -67,12 +67,12 @@ class ImportConfig:
     @property
     def is_bag(self) -> bool:
         """Whether the source is a ROS bag rather than a video file or a camera."""
-        from recordings.bags import is_bag
+        from recordings.sources.bags import is_bag
 
         return self.video is not None and is_bag(self.video)
 
     def __post_init__(self) -> None:
-        from recordings.bags import mcap_kind
+        from recordings.sources.bags import mcap_kind
 
         if (self.video is None) == (self.camera is None):
             raise ValueError("give exactly one source: a video file, a bag or --camera INDEX; "

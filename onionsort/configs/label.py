@@ -89,7 +89,7 @@ class LabelImportConfig:
     test: float = 0.15
 
     def __post_init__(self) -> None:
-        from recordings.dataset import CLASSES
+        from recordings.labels.dataset import CLASSES
 
         for name in ("source", "out", "states", "depth", "inspection"):
             if getattr(self, name) is not None:

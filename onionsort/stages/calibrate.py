@@ -58,7 +58,7 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
     """Perceive every step of a dataset split and compare with the truth.
 
     ``image_map`` changes every colour image as it is read
-    (:data:`recordings.dataset.ImageMap`, e.g. :class:`SessionCameras`; picklable when the
+    (:data:`recordings.labels.dataset.ImageMap`, e.g. :class:`SessionCameras`; picklable when the
     sessions are perceived on workers).
 
     ``models`` are the loaded models, which perceive the split's sessions here, one after
@@ -74,7 +74,7 @@ def measure_perception(models: PerceptionModels | tuple, root: Path | str,
         ``accuracy`` per factor on truly unoccluded steps, ``occlusion_recall``,
         ``occlusion_precision``, ``n_steps``, ``n_occluded``, ``depth``, ``inspection``.
     """
-    from recordings.dataset import read_steps, split_sessions
+    from recordings.labels.dataset import read_steps, split_sessions
     from state_abstraction.calibration import FACTORS, calibrate
 
     if isinstance(models, tuple):  # the workers load the models: this process reads no torch
@@ -204,7 +204,7 @@ def _measure_piece(piece: tuple) -> dict:
     """:func:`_measure_session` of one session of a dataset split, read alone: ``piece`` is
     ``((folder, device), root, split name, session, frames per step, depth, inspection,
     image_map)``."""
-    from recordings.dataset import read_steps
+    from recordings.labels.dataset import read_steps
 
     (folder, device), root, name, session, frames, depth, inspection, image_map = piece
     models = PerceptionModels.load_cached(folder, device)
@@ -225,7 +225,7 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
 
     from perception.metrics import mean_average_precision
     from perception.train import EVAL_SCORE_THRESHOLD
-    from recordings.dataset import read_metadata, read_split, split_names
+    from recordings.labels.dataset import read_metadata, read_split, split_names
 
     views = read_metadata(root).get("views", ["camera"])
     gts: dict[str, list] = {}
@@ -282,7 +282,7 @@ def calibrate(config: CalibrateConfig, models: PerceptionModels | None = None):
 def dataset_identity(root: Path | str) -> dict:
     """A dataset as a calibration records it: its folder's name, seed, size and difficulty (a
     path would name a folder on one machine only)."""
-    from recordings.dataset import read_metadata
+    from recordings.labels.dataset import read_metadata
 
     meta = read_metadata(root)
     difficulty = meta.get("config", {}).get("difficulty", "clean")
@@ -297,7 +297,7 @@ class SessionCameras:
     """A dataset seen through other cameras: each session and each robot line-up through a
     camera of its own, ``CameraShift.draw((seed, kind, index))`` (kind 0 a session, 1 a
     line-up; :mod:`perception.camera_shift`), on its colour images and inspection views alike.
-    An :data:`recordings.dataset.ImageMap`."""
+    An :data:`recordings.labels.dataset.ImageMap`."""
 
     seed: int
 

@@ -4,7 +4,7 @@ Frames come from whole simulated sessions (the sorter acting on the expert's pol
 passer-by occluding the camera), split into train, val and test by session: frames of one
 session are correlated, so no session appears in two splits. With ``robot_onions`` the Sawyer
 also holds onions up to the inspection camera, so the detector learns what the robot will see.
-See :mod:`recordings.dataset` for the folder layout and the label records.
+See :mod:`recordings.labels.dataset` for the folder layout and the label records.
 
 Example::
 
@@ -56,7 +56,7 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     import numpy as np
 
     from onionsort import __version__
-    from recordings.dataset import DatasetWriter
+    from recordings.labels.dataset import DatasetWriter
 
     log_config("dataset", config)
     if (config.out / "dataset.json").exists():
@@ -110,8 +110,8 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
 
 def _render_session(piece: tuple):
     """Render one session into its split: ``piece`` is ``(root, split, index, seed,
-    session_config, blemish_rate, frames)``; its :class:`recordings.dataset.DatasetPart`."""
-    from recordings.dataset import DatasetPart
+    session_config, blemish_rate, frames)``; its :class:`recordings.labels.dataset.DatasetPart`."""
+    from recordings.labels.dataset import DatasetPart
     from robot.simulation import SortingSession, expert_model
 
     root, split, k, seed, session_config, blemish_rate, n_frames = piece
@@ -150,8 +150,8 @@ def _robot_views(writer, config: DatasetConfig) -> int:
 
 def _render_lineup(piece: tuple):
     """Render one line-up's inspection views: ``piece`` is ``(root, split, index, size, seed,
-    level, views, randomize_look)``; its :class:`recordings.dataset.DatasetPart`."""
-    from recordings.dataset import DatasetPart
+    level, views, randomize_look)``; its :class:`recordings.labels.dataset.DatasetPart`."""
+    from recordings.labels.dataset import DatasetPart
     from robot.station import robot_inspection_views
 
     root, split, k, size, seed, level, views, randomize_look = piece

@@ -64,7 +64,7 @@ class _SessionRecorder:
         self._view = view
 
     def on_step(self, event) -> None:
-        from robot.labels import StepLabel
+        from irl.demonstrations import StepTruth
         from robot.world import WorldFrame
 
         view, t = self._view, int(event.step)
@@ -73,7 +73,7 @@ class _SessionRecorder:
         time_ns = round(view.time_s * 1e9)
         self.writer.write_decision(event, frame=t, time_ns=time_ns)
         self.writer.write_frame(WorldFrame(
-            index=t, step=StepLabel(step=t, state=int(event.state), action=int(event.action),
+            index=t, step=StepTruth(step=t, state=int(event.state), action=int(event.action),
                                     next_state=int(event.next_state), occluded=False),
             phase=0, time_s=view.time_s, color=view.color, depth=view.depth,
             onions=view.onions, inspection=event.inspection, world=view.world))
@@ -150,7 +150,7 @@ def evaluate(config: EvaluateConfig, models=None):
         with contextlib.ExitStack() as stack:
             logged = config.rerun or config.connect is not None
             if logged:
-                from recordings.rerun import EvaluationLogger
+                from onionsort.stages.evaluate_rerun import EvaluationLogger
                 from recordings.rerun.common import rerun_targets
 
                 on_step.append(stack.enter_context(EvaluationLogger(

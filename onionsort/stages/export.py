@@ -2,8 +2,8 @@
 
 ``ros2``: a rosbag2 folder (``metadata.yaml`` and one MCAP or SQLite 3 file of CDR-serialised
 ROS 2 Humble messages) that ``ros2 bag play`` replays and the ROS tools list; the topics are
-those of :mod:`recordings.ros_export`. The folder is written under a temporary name and renamed
-once complete; an existing output is refused.
+those of :mod:`recordings.sources.ros_export`. The folder is written under a temporary name and
+renamed once complete; an existing output is refused.
 
 Example::
 
@@ -22,8 +22,8 @@ from onionsort.stages.base import check_output_folder, log_config
 __all__ = ["EXPORT_FORMATS", "ROS2_STORAGES", "ExportConfig", "export_session"]
 
 def export_session(config: ExportConfig):
-    """Export the session; return the :class:`recordings.ros_export.ExportSummary`."""
-    from recordings.ros_export import export_ros2
+    """Export the session; return the :class:`recordings.sources.ros_export.ExportSummary`."""
+    from recordings.sources.ros_export import export_ros2
 
     log_config("export", config)
     check_output_folder(Path(config.out).parent, f"the folder of --out {config.out}")

@@ -1,8 +1,9 @@
 """Stage ``import``: a video file or a camera becomes a sensor-only session.
 
 A plain video has no step clock, no depth and no ground truth. This stage gives it a step clock,
-in one of two ways, and writes one session MCAP (colour and calibration, :mod:`recordings.schema`)
-that ``perceive``, ``calibrate --no-depth`` and ``learn`` then use like any other session:
+in one of two ways, and writes one session MCAP (colour and calibration,
+:mod:`recordings.session.schema`) that ``perceive``, ``calibrate --no-depth`` and ``learn`` then
+use like any other session:
 
 - **fixed clock** (``step_seconds``): a new step every ``step_seconds`` seconds of video time.
   Right when the person works to a rhythm (a line's takt time), and exact for our simulator's
@@ -13,15 +14,15 @@ that ``perceive``, ``calibrate --no-depth`` and ``learn`` then use like any othe
   classifier calls occluded keep the previous reading, so a passer-by does not cut steps. Steps
   nobody can see (during an occlusion, or an action that leaves the picture as it was) still
   take time, so a segment several typical steps long (the median segment) is cut into that
-  many equal steps (:func:`recordings.segmentation.split_long_steps`). Measure the result with
-  :func:`segmentation_scores`.
+  many equal steps (:func:`recordings.sources.segmentation.split_long_steps`). Measure the
+  result with :func:`segmentation_scores`.
 
 Each step keeps ``frames_per_step`` frames spread over it (the first one always), as the state
 classifier reads them. A second video of the inspection spot (``inspection``, frame for frame
 with the first) gives each step its inspection view, from which perception reads the onion's
 class; without it the sorter's prediction is unobserved, and which class goes where cannot be
 learned. Intrinsics come from ``intrinsics`` (JSON) or default to a 60-degree
-horizontal field of view (:func:`recordings.sources.default_intrinsics`).
+horizontal field of view (:func:`recordings.sources.video.default_intrinsics`).
 
 Example::
 
@@ -41,7 +42,7 @@ import numpy as np
 
 from onionsort.configs.import_video import ImportConfig
 from onionsort.stages.base import check_output_folder, log_config
-from recordings.bags import is_bag
+from recordings.sources.bags import is_bag
 
 __all__ = ["ImportConfig", "import_video", "list_bag", "perceived_labels", "perceived_segmentation",
            "segmentation_scores"]
@@ -53,9 +54,9 @@ _BATCH = 32
 
 
 def list_bag(path: Path) -> list:
-    """The topics of the bag at ``path`` (:class:`recordings.bags.BagTopic`): type, count, rate
-    and what the import can use each for."""
-    from recordings.bags import Bag
+    """The topics of the bag at ``path`` (:class:`recordings.sources.bags.BagTopic`): type, count,
+    rate and what the import can use each for."""
+    from recordings.sources.bags import Bag
 
     if not is_bag(path):
         raise ValueError(f"--list lists a bag's topics; {path} is not a ROS bag (a rosbag2 "
@@ -65,7 +66,7 @@ def list_bag(path: Path) -> list:
 
 
 def _open(config: ImportConfig):
-    from recordings.sources import CameraSource, VideoFileSource
+    from recordings.sources.video import CameraSource, VideoFileSource
 
     if config.video is not None:
         return VideoFileSource(config.video)
@@ -120,7 +121,7 @@ def perceived_labels(classifier, colors: Iterable[np.ndarray]) -> list[tuple[int
 def perceived_segmentation(classifier, colors: Iterable[np.ndarray], debounce: int) -> list[int]:
     """The step of each frame from perceived changes, long segments cut at the typical step
     length (see the module docstring)."""
-    from recordings.segmentation import (
+    from recordings.sources.segmentation import (
         boundaries_from_labels,
         split_long_steps,
         steps_from_boundaries,
@@ -149,7 +150,7 @@ def _perceived(config: ImportConfig, colors: Iterable[np.ndarray]) -> list[int]:
 def _fixed_clock(times: list[int], step_seconds: float, name: str) -> list[int]:
     """Steps of ``step_seconds`` over frames at ``times``; a trailing fragment shorter than
     half a step joins the step before."""
-    from recordings.segmentation import fixed_clock
+    from recordings.sources.segmentation import fixed_clock
 
     frame_ns = (times[-1] - times[0]) / (len(times) - 1) if len(times) > 1 else 0
     lasts = (times[-1] - times[0] + frame_ns) / 1e9 if times else 0.0
@@ -166,14 +167,14 @@ def _fixed_clock(times: list[int], step_seconds: float, name: str) -> list[int]:
 
 def import_video(config: ImportConfig):
     """Import the source as one sensor-only session; return the
-    :class:`recordings.video_import.ImportSummary`.
+    :class:`recordings.sources.importer.ImportSummary`.
 
     A video file is read twice, frame by frame (once to cut it into steps, once to write
     them), so its length is not bounded by memory; a camera's frames are held until it stops
     (``max_seconds``, or Ctrl-C, which ends the recording and imports what was seen).
     """
-    from recordings import video_import
-    from recordings.sources import VideoFileSource, default_intrinsics, load_intrinsics
+    from recordings.sources import importer
+    from recordings.sources.video import VideoFileSource, default_intrinsics, load_intrinsics
 
     log_config("import", config)
     check_output_folder(Path(config.out).parent, f"the folder of --out {config.out}")
@@ -201,7 +202,7 @@ def import_video(config: ImportConfig):
             view_K = (load_intrinsics(config.inspection_intrinsics)
                       if config.inspection_intrinsics is not None
                       else default_intrinsics(views.width, views.height))
-        summary = video_import.import_video(
+        summary = importer.import_video(
             frames, config.out, frames_per_step=config.frames_per_step, step_of_frame=steps,
             camera_K=K, inspection=views, inspection_K=view_K, metadata=metadata)
     logger.info("%s: %d frames read, %d steps written", config.out, summary.frames_read,
@@ -210,9 +211,10 @@ def import_video(config: ImportConfig):
 
 
 def _import_bag(config: ImportConfig):
-    """Import a bag (see :mod:`recordings.bags`); return its
-    :class:`recordings.bags.BagImport`."""
-    from recordings.bags import Bag, BagError, decode_image, import_bag, steps_from_marks
+    """Import a bag (see :mod:`recordings.sources.bags`); return its
+    :class:`recordings.sources.importer.ImportSummary`."""
+    from recordings.sources.bags import Bag, BagError, decode_image, steps_from_marks
+    from recordings.sources.importer import import_bag
 
     tolerance = round(config.sync_tolerance * 1e9)
     with Bag(config.video) as bag:
@@ -278,8 +280,8 @@ def _bag_intrinsics(bag, info_topic: str | None, json_path: Path | None, stream,
     """A bag camera's K, and where it came from: ``info_topic``; else ``json_path``; else the
     CameraInfo beside its image topic; else the default for its size. A CameraInfo of another
     size than the images is refused."""
-    from recordings.bags import BagError
-    from recordings.sources import default_intrinsics, load_intrinsics
+    from recordings.sources.bags import BagError
+    from recordings.sources.video import default_intrinsics, load_intrinsics
 
     if info_topic is None and json_path is not None:
         return load_intrinsics(json_path), str(json_path)
@@ -308,7 +310,7 @@ def _read_camera(source) -> list:
 def segmentation_scores(predicted_step_of_frame, true_step_of_frame, tolerance: int = 1) -> dict:
     """Step-boundary precision and recall of a segmentation against the truth, within
     ``tolerance`` frames (frame 0, a boundary by definition, is not scored)."""
-    from recordings.segmentation import boundary_scores
+    from recordings.sources.segmentation import boundary_scores
 
     def starts(steps):
         return [i for i in range(1, len(steps)) if steps[i] != steps[i - 1]]

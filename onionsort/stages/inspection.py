@@ -133,7 +133,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     """
     from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
-    from recordings.dataset import read_metadata, read_split, split_names
+    from recordings.labels.dataset import read_metadata, read_split, split_names
 
     meta = read_metadata(root)
     if "inspection" not in meta.get("views", ["camera"]):

@@ -2,11 +2,11 @@
 
 :func:`export_labels` writes a dataset folder (``onionsort dataset``'s, or an imported one) in
 the COCO 2017 or the Ultralytics YOLO layout, with its state labels in ``states.csv``
-(:mod:`recordings.states_csv`): the main camera's frames at the top of the folder, the
+(:mod:`recordings.labels.states_csv`): the main camera's frames at the top of the folder, the
 inspection views in ``inspection/`` in the same layout (the robot's line-up fields in
-``inspection/lineups.csv``, :mod:`recordings.lineups_csv`), depth as 16-bit PNG in millimetres
-in ``depth/<split>/``. :func:`import_labels` reads such a folder, or what CVAT, Label Studio,
-Roboflow or Ultralytics write, into a dataset folder that ``train``, ``calibrate`` and
+``inspection/lineups.csv``, :mod:`recordings.labels.lineups_csv`), depth as 16-bit PNG in
+millimetres in ``depth/<split>/``. :func:`import_labels` reads such a folder, or what CVAT, Label
+Studio, Roboflow or Ultralytics write, into a dataset folder that ``train``, ``calibrate`` and
 ``eval-perception`` read as they read a rendered one.
 
 Import, in order: every annotation is read, every class name mapped and every state row
@@ -91,11 +91,11 @@ def export_labels(config: LabelExportConfig) -> dict:
 
     Returns ``{view: {split: images}}`` and ``"boxes"`` (per view, per class name).
     """
-    from recordings.coco import CocoImage, write_coco
-    from recordings.dataset import CLASSES, SPLITS, dataset_task, read_metadata, read_records
-    from recordings.lineups_csv import LINEUPS_FILE, LineupRow, write_lineups
-    from recordings.states_csv import StatesRow, write_states
-    from recordings.yolo import write_data_yaml, yolo_lines
+    from recordings.labels.coco import CocoImage, write_coco
+    from recordings.labels.dataset import CLASSES, SPLITS, dataset_task, read_metadata, read_records
+    from recordings.labels.lineups_csv import LINEUPS_FILE, LineupRow, write_lineups
+    from recordings.labels.states_csv import StatesRow, write_states
+    from recordings.labels.yolo import write_data_yaml, yolo_lines
 
     log_config("label export", config)
     meta = read_metadata(config.data)
@@ -167,12 +167,12 @@ def _default(given: Path | None, path: Path, *, folder: bool) -> Path | None:
 class _Item:
     """An image to import, with its split and state row once matched."""
 
-    image: object  # recordings.annotated.AnnotatedImage
+    image: object  # recordings.labels.annotated.AnnotatedImage
     view: str
     split: str | None
-    row: object = None  # recordings.states_csv.StatesRow
+    row: object = None  # recordings.labels.states_csv.StatesRow
     phase: int = 0
-    lineup: object = None  # recordings.lineups_csv.LineupRow: a robot's view
+    lineup: object = None  # recordings.labels.lineups_csv.LineupRow: a robot's view
 
 
 def import_labels(config: LabelImportConfig) -> dict:
@@ -182,10 +182,10 @@ def import_labels(config: LabelImportConfig) -> dict:
     "sessions": {split: n}}``.
     """
     from irl.domains.onion_sorting import SORTING_TASK
-    from recordings.annotated import BadAnnotations
-    from recordings.dataset import CLASSES
-    from recordings.lineups_csv import LINEUPS_FILE, read_lineups
-    from recordings.states_csv import read_states
+    from recordings.labels.annotated import BadAnnotations
+    from recordings.labels.dataset import CLASSES
+    from recordings.labels.lineups_csv import LINEUPS_FILE, read_lineups
+    from recordings.labels.states_csv import read_states
 
     log_config("label import", config)
     task = SORTING_TASK
@@ -235,9 +235,9 @@ def import_labels(config: LabelImportConfig) -> dict:
 def _read_set(folder: Path, fmt: str, task) -> tuple[list, list]:
     """The annotated images of ``folder`` in ``fmt``, and the state row each carries (None
     each, but for Label Studio's choices: :func:`_choices_row`)."""
-    from recordings.coco import read_coco
-    from recordings.labelstudio import read_export
-    from recordings.yolo import read_yolo
+    from recordings.labels.coco import read_coco
+    from recordings.labels.labelstudio import read_export
+    from recordings.labels.yolo import read_yolo
 
     if fmt != "labelstudio":
         images = (read_coco if fmt == "coco" else read_yolo)(folder)
@@ -247,12 +247,12 @@ def _read_set(folder: Path, fmt: str, task) -> tuple[list, list]:
 
 
 def _choices_row(labelled, task):
-    """The state row of a Label Studio task (:class:`recordings.labelstudio.LabelledTask`)
+    """The state row of a Label Studio task (:class:`recordings.labels.labelstudio.LabelledTask`)
     from its choices (``occluded`` yes or no, each factor and ``action`` in the task's
     words) and its data's ``session``, ``step`` and ``frame``; None where it has no state
     choice (box-only)."""
-    from recordings.annotated import BadAnnotations
-    from recordings.states_csv import StatesRow
+    from recordings.labels.annotated import BadAnnotations
+    from recordings.labels.states_csv import StatesRow
 
     names = {**{f: task.factors[f] for f in task.factor_names}, "action": task.action_names,
              "occluded": ("no", "yes")}
@@ -283,7 +283,7 @@ def _match_rows(items: list[_Item], rows: list, path: Path, attr: str = "row") -
     """Give each item its state row (``attr`` "row") or its robot's line-up row ("lineup"):
     by ``(split, image)``, or by the image alone where the row names no split (or the set has
     none). A row for no image, and a robot's view with a state, are errors."""
-    from recordings.annotated import BadAnnotations
+    from recordings.labels.annotated import BadAnnotations
 
     by_key = {(i.split, i.image.name): i for i in items}
     by_name: dict = defaultdict(list)
@@ -352,8 +352,8 @@ def _depth_file(depth: Path | None, item: _Item) -> Path | None:
 def _write(config: LabelImportConfig, items: list[_Item], task, depth: Path | None,
            frames_per_step: int, names: dict) -> dict:
     from onionsort import __version__
-    from recordings.annotated import load_image
-    from recordings.dataset import SPLITS, VIEWS, DatasetWriter
+    from recordings.labels.annotated import load_image
+    from recordings.labels.dataset import SPLITS, VIEWS, DatasetWriter
 
     def order(i: _Item):
         return (0, i.row.session, i.row.frame, "") if i.row else (1, 0, 0, i.image.name)

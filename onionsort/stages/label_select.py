@@ -158,7 +158,7 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
     from irl.domains.onion_sorting import SORTING_TASK as task
     from onionsort.stages.label import _check_new_folder
     from onionsort.stages.models import PerceptionModels
-    from recordings.reader import open_session
+    from recordings.session.reader import open_session
 
     log_config("label select", config)
     _check_new_folder(config.out)
@@ -194,10 +194,10 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
 
 def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task) -> list:
     from onionsort.stages.base import write_json
-    from recordings.coco import CocoImage, write_coco
-    from recordings.dataset import CLASSES, write_rgb_png
-    from recordings.labelstudio import LabelStudioTask, labeling_config, write_tasks
-    from recordings.states_csv import StatesRow, write_states
+    from recordings.labels.coco import CocoImage, write_coco
+    from recordings.labels.dataset import CLASSES, write_rgb_png
+    from recordings.labels.labelstudio import LabelStudioTask, labeling_config, write_tasks
+    from recordings.labels.states_csv import StatesRow, write_states
 
     def name(k: int, frame) -> str:
         return f"{config.sessions[k].stem}_{frame.index:06d}.png"

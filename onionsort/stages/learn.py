@@ -166,7 +166,7 @@ def learn(config: LearnConfig) -> dict:
         learning_curve_figure(objective_curve(history)[1], config.method,
                               out / "learning_curve.png")
         if config.rerun or config.connect is not None:
-            from recordings.rerun import log_learning
+            from onionsort.stages.learn_rerun import log_learning
             from recordings.rerun.common import rerun_targets
 
             log_learning(rerun_targets(out / "learn.rrd" if config.rerun else None,

@@ -1,9 +1,9 @@
 """Stage ``perceive``: run the perception models on recorded sessions.
 
 Reads only a session's sensor side (colour, depth where there is any, the inspection view, the
-step clock) and adds the perception topics to its file (:mod:`recordings.perception`), atomically.
-The perception record names the models (with their hashes) and whether depth was used, so
-``learn`` can check the calibration was measured for the same models and mode.
+step clock) and adds the perception topics to its file (:mod:`recordings.session.perception`),
+atomically. The perception record names the models (with their hashes) and whether depth was used,
+so ``learn`` can check the calibration was measured for the same models and mode.
 
 Example::
 
@@ -97,7 +97,7 @@ def _perceive_piece(piece: tuple, *, replace: bool, batch_size: int) -> Perceive
 def _check_sessions(config: PerceiveConfig) -> dict[Path, int]:
     """Open every session of ``config`` (raising what the reader raises for a file that is not
     a complete session); return the frames per step of each."""
-    from recordings.reader import open_session
+    from recordings.session.reader import open_session
 
     frames_per_step = {}
     for path in config.sessions:
@@ -126,8 +126,8 @@ def perceive_session(models: PerceptionModels, path: Path | str, *, replace: boo
         If the session's steps do not have the classifier's frame count, or perception finds
         no usable step (none complete, or every one called occluded).
     """
-    from recordings.perception import add_perception
-    from recordings.reader import open_session
+    from recordings.session.perception import add_perception
+    from recordings.session.reader import open_session
     from state_abstraction.perceive import perceive_steps
 
     session = open_session(path)

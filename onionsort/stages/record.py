@@ -3,7 +3,7 @@
 A simulated person sorts onions on a conveyor, acting on the expert's Boltzmann policy, while a
 passer-by sometimes walks through the camera's view. Each session is written to
 ``OUT/session_NNN.mcap`` frame by frame: its sensor side (colour, depth, calibration, the step
-clock, the inspection view) and its ground truth (see :mod:`recordings.schema`). Ctrl-C or
+clock, the inspection view) and its ground truth (see :mod:`recordings.session.schema`). Ctrl-C or
 SIGTERM finishes the open file with status ``interrupted``.
 
 ``resume`` continues an interrupted recording in ``out``: a session is kept when it is complete
@@ -92,7 +92,7 @@ def _sessions_to_record(config: RecordConfig, paths: list[Path]) -> list[int]:
     """
     import numpy as np
 
-    from recordings.reader import NotASessionError, RecordingDamagedError, open_session
+    from recordings.session.reader import NotASessionError, RecordingDamagedError, open_session
 
     seeds = np.random.SeedSequence(config.seed).spawn(config.sessions)
     todo = []

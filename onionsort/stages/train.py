@@ -58,7 +58,7 @@ class _EpochBar:
 
 
 def _metadata(root: Path) -> dict:
-    from recordings.dataset import read_metadata
+    from recordings.labels.dataset import read_metadata
 
     return read_metadata(root)
 
@@ -76,7 +76,7 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
     import torch
 
     from perception.photometric import PhotometricAugment
-    from recordings.dataset import read_steps
+    from recordings.labels.dataset import read_steps
     from state_abstraction.classifier import ClassifierConfig, train_classifier
 
     log_config("train state-classifier", config)
@@ -121,7 +121,7 @@ def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
     same triple object); ``empty_inspection_share`` of the views without one (chosen with
     ``seed``). A split without frames is an error, or empty with ``allow_empty``.
     """
-    from recordings.dataset import read_split
+    from recordings.labels.dataset import read_split
 
     root = Path(root)
     views = _metadata(root).get("views", ["camera"])

@@ -1,18 +1,20 @@
-"""All Rerun logging of onionsort, one entity root per purpose.
+"""The common Rerun logging of onionsort: sessions, their perception, the work cell in 3D.
 
 =============  ====================================  ==========================================
 root           logger                                what
 =============  ====================================  ==========================================
 ``record/``    :class:`SessionLogger`                recorded sessions: cameras, ground truth
 ``perceive/``  :class:`PerceptionLogger`             what perception made of a session
-``learn/``     :func:`log_learning`                  a learner's objective, reward and policy
-``evaluate/``  :class:`EvaluationLogger`             the Sawyer executing a policy
 =============  ====================================  ==========================================
+
+The logging of one stage lives beside that stage and builds on these pieces: ``learn/``
+(:mod:`onionsort.stages.learn_rerun`: a learner's objective, reward and policy) and
+``evaluate/`` (:mod:`onionsort.stages.evaluate_rerun`: the Sawyer executing a policy).
 
 Shared pieces (:mod:`recordings.rerun.common`): :func:`open_recording` opens a stream to an
 ``.rrd`` file, a spawned viewer or a gRPC URL with one blueprint; the onion classes' annotation
-context comes from :mod:`recordings.schema`; a camera is a static pinhole ``<root>/camera`` with
-``color`` and ``depth`` under it. The work cell in 3D (:mod:`recordings.rerun.world`): each
+context comes from :mod:`recordings.session.schema`; a camera is a static pinhole ``<root>/camera``
+with ``color`` and ``depth`` under it. The work cell in 3D (:mod:`recordings.rerun.world`): each
 blueprint has one ``Spatial3DView`` at its root, showing the pinhole cameras' frustums with their
 images, the bodies of the work cell and the Sawyer from its URDF, animated from its joint
 angles, and nothing else (no 2D entity outside a pinhole, no series, no text). Each blueprint
@@ -32,29 +34,18 @@ from recordings.rerun.common import (
     open_recording,
     send_series,
 )
-from recordings.rerun.evaluate import (
-    EvaluationEvent,
-    EvaluationLogger,
-    evaluation_blueprint,
-)
-from recordings.rerun.learn import learn_blueprint, log_learning
 from recordings.rerun.perceive import PerceptionLogger, read_detections
 from recordings.rerun.session import SessionLogger, session_blueprint
 from recordings.rerun.world import WorldLogger, world_view
 
 __all__ = [
-    "EvaluationEvent",
-    "EvaluationLogger",
     "PerceptionLogger",
     "SessionLogger",
     "WorldLogger",
     "class_annotations",
     "close_recording",
-    "evaluation_blueprint",
-    "learn_blueprint",
     "log_camera_images",
     "log_class_annotations",
-    "log_learning",
     "log_pinhole",
     "open_recording",
     "read_detections",

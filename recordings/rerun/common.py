@@ -11,9 +11,9 @@ is built (:func:`check_viewer_url`) and the viewer is reached before the work st
 the way only costs the live view (a warning), never the file.
 
 Onion classes are drawn from one annotation context built from
-:data:`recordings.schema.CLASS_NAMES` and :data:`recordings.schema.CLASS_COLORS`, logged static
-at the root so that every box of every logger (``class_ids``) gets the same name and colour.
-A camera is a static pinhole at ``<root>/camera`` with its images under it::
+:data:`recordings.session.schema.CLASS_NAMES` and :data:`recordings.session.schema.CLASS_COLORS`,
+logged static at the root so that every box of every logger (``class_ids``) gets the same name and
+colour. A camera is a static pinhole at ``<root>/camera`` with its images under it::
 
     <root>/camera          Pinhole (static): intrinsics and resolution
     <root>/camera/color    the colour image (JPEG or raw RGB)
@@ -35,7 +35,6 @@ import logging
 import socket
 import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
-from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +42,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from irl.domains.task import TaskDescription
-from recordings.schema import CLASS_COLORS, CLASS_NAMES
+from recordings.session.schema import CLASS_COLORS, CLASS_NAMES
 
 __all__ = [
     "GRPC_SCHEMES",
@@ -51,7 +50,6 @@ __all__ = [
     "check_viewer_url",
     "class_annotations",
     "close_recording",
-    "enum_labels",
     "factor_values",
     "log_camera_images",
     "log_class_annotations",
@@ -251,7 +249,7 @@ def send_layout(rec: rr.RecordingStream, blueprint: rrb.Blueprint) -> None:
 
 
 def class_annotations() -> rr.AnnotationContext:
-    """The onion classes (id, name, colour) of :mod:`recordings.schema` as an annotation
+    """The onion classes (id, name, colour) of :mod:`recordings.session.schema` as an annotation
     context."""
     return rr.AnnotationContext([(cid, name, CLASS_COLORS[cid])
                                  for cid, name in sorted(CLASS_NAMES.items())])
@@ -326,11 +324,6 @@ def log_camera_images(rec: rr.RecordingStream, root: str, *, color: np.ndarray |
             if far.any():
                 depth = np.where(far, 0, depth).astype(depth.dtype)
         rec.log(f"{root}/camera/depth", rr.DepthImage(depth, meter=depth_meter))
-
-
-def enum_labels(enum: type[IntEnum]) -> str:
-    """``"0=name, 1=name, ..."``: the value labels of a series of enum indices."""
-    return ", ".join(f"{m.value}={m.name.lower()}" for m in enum)
 
 
 def value_labels(names: Sequence[str]) -> str:

@@ -1,8 +1,8 @@
 """Log what perception made of a session to Rerun, under the entity root ``perceive/``.
 
 Reads the perception topics ``onionsort perceive`` added to a session
-(:mod:`recordings.perception`): the perceived step (``/perception/state``, kept by the reader in
-``Session.perception``) and the detector's boxes (``/perception/detections`` and
+(:mod:`recordings.session.perception`): the perceived step (``/perception/state``, kept by the
+reader in ``Session.perception``) and the detector's boxes (``/perception/detections`` and
 ``/perception/inspection``, read here from the file). Entity paths::
 
     perceive/camera                     Pinhole (static): the main camera's intrinsics
@@ -33,8 +33,6 @@ import rerun.blueprint as rrb
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from recordings.perception import PerceptionTopic
-from recordings.reader import FrameRecord, Session
 from recordings.rerun.common import (
     factor_values,
     log_pinhole,
@@ -42,7 +40,8 @@ from recordings.rerun.common import (
     send_series,
     value_labels,
 )
-from recordings.schema import CLASS_NAMES
+from recordings.session.reader import FrameRecord, Session
+from recordings.session.schema import CLASS_NAMES, PerceptionTopic
 
 __all__ = ["PERCEIVE_ROOT", "PerceptionLogger", "perception_views", "read_detections"]
 

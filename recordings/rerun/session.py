@@ -46,7 +46,6 @@ import rerun.urdf as rru
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from recordings.reader import FrameRecord, Session
 from recordings.rerun.common import (
     WORK_CELL_DEPTH_M,
     close_recording,
@@ -62,7 +61,8 @@ from recordings.rerun.common import (
 )
 from recordings.rerun.perceive import PerceptionLogger, perception_views
 from recordings.rerun.world import WorldLogger, world_view
-from recordings.world import WORLD_FRAME
+from recordings.session.reader import FrameRecord, Session
+from recordings.session.world import WORLD_FRAME
 
 __all__ = ["RECORD_ROOT", "SessionLogger", "session_blueprint"]
 

@@ -16,7 +16,7 @@ starts hidden there where the bodies or the robot are shown. :class:`WorldLogger
                                       class colours of the annotation context)
     <root>/robot/<name>/...           the robot's URDF (static): its visual meshes, loaded by
                                       Rerun's URDF loader from a copy with ``.stl`` meshes
-                                      (:func:`recordings.urdf.viewer_urdf`)
+                                      (:func:`recordings.session.urdf.viewer_urdf`)
     <root>/robot/base                 Transform3D ``tf#/<root>`` -> the URDF's root link
     <root>/robot/joints/<joint>       Transform3D of each moving joint (parent -> child link)
                                       at every frame, from ``UrdfJoint.compute_transform``
@@ -38,9 +38,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 import rerun.urdf as rru
 
-from recordings.schema import CLASS_NAMES
-from recordings.urdf import viewer_urdf
-from recordings.world import SceneItem, Shape
+from recordings.session.schema import CLASS_NAMES
+from recordings.session.urdf import viewer_urdf
+from recordings.session.world import SceneItem, Shape
 
 __all__ = ["WORK_CELL_EYE", "WorldLogger", "scene_items", "world_view"]
 
@@ -85,7 +85,7 @@ def world_view(root: str, name: str = "work cell (3D)", *,
 
 
 def scene_items(shapes: Iterable[Shape]) -> list[SceneItem]:
-    """A world snapshot's shapes as :class:`recordings.world.SceneItem` (what the reader
+    """A world snapshot's shapes as :class:`recordings.session.world.SceneItem` (what the reader
     gives back from ``/scene``)."""
     return [SceneItem(name=s.name, kind=s.kind, size=np.asarray(s.size, float),
                       position=np.asarray(s.pose.position, float),

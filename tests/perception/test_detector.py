@@ -188,7 +188,7 @@ def test_samples_of_labelled_images_share_repeats():
 
 
 def test_the_stage_reads_camera_frames_and_inspection_views(tiny_dataset, tiny_images):
-    from recordings.dataset import read_split
+    from recordings.labels.dataset import read_split
 
     camera = list(read_split(tiny_dataset, "train"))
     views = list(read_split(tiny_dataset, "train", view="inspection"))

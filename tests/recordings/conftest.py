@@ -6,22 +6,22 @@ from dataclasses import dataclass
 
 import pytest
 
+from irl.demonstrations import StepTruth
 from recordings import SessionWriter
 from robot.camera import intrinsics
-from robot.labels import Frame, StepLabel
+from robot.labels import Frame
 from robot.simulation import SessionConfig, SortingSession, expert_model
 
 
 def step_tuples(steps) -> list[tuple]:
-    """Steps as (step, state, action, next_state, occluded): the simulator's labels and the
-    reader's records are different classes with the same fields."""
+    """Steps as (step, state, action, next_state, occluded) tuples, whoever made them."""
     return [(s.step, s.state, s.action, s.next_state, s.occluded) for s in steps]
 
 
 @dataclass
 class Recorded:
     path: object
-    steps: list[StepLabel]
+    steps: list[StepTruth]
     frames: list[Frame]
     config: SessionConfig
 

@@ -14,8 +14,8 @@ from mcap.writer import CompressionType, Writer
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
 from recordings import SessionWriter, open_session
-from recordings.dataset import DatasetWriter, dataset_task, read_split
-from recordings.schema import SESSION_METADATA
+from recordings.labels.dataset import DatasetWriter, dataset_task, read_split
+from recordings.session.schema import SESSION_METADATA
 
 #: A made-up task of two factors (2 x 3 = 6 states) and two actions.
 TOY = TaskDescription("toy-room", {"light": ("off", "on"), "door": ("closed", "open", "ajar")},
@@ -35,7 +35,7 @@ class Step:
 
 @dataclass(frozen=True)
 class Frame:
-    """A tiny frame satisfying ``recordings.frames.TruthFrame`` without a simulator."""
+    """A tiny frame satisfying ``recordings.session.frames.TruthFrame`` without a simulator."""
 
     index: int
     step: Step
@@ -148,8 +148,8 @@ def test_the_writer_refuses_a_task_it_cannot_write(tmp_path):
 
 
 def test_a_session_with_a_broken_task_is_refused(tmp_path):
-    from recordings.reader import NotASessionError
-    from recordings.rewrite import rewrite_session
+    from recordings.session.reader import NotASessionError
+    from recordings.session.rewrite import rewrite_session
 
     path = write_session(tmp_path / "toy.mcap", toy_frames(), task=TOY)
     rewrite_session(path, session_update={"task": json.dumps({"name": "x"})})
@@ -191,8 +191,8 @@ def test_rerun_text_and_series_follow_the_task(tmp_path):
     pytest.importorskip("rerun")
     from types import SimpleNamespace
 
+    from onionsort.stages.evaluate_rerun import _describe
     from recordings.rerun.common import factor_values, value_labels
-    from recordings.rerun.evaluate import _describe
     from recordings.rerun.perceive import _observation_text
     from recordings.rerun.session import SessionLogger, _state_text
 

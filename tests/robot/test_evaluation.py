@@ -143,7 +143,7 @@ def _rerun_cli() -> str | None:
 
 def test_the_evaluation_logs_to_a_valid_rerun_recording(tmp_path, expert_pi):
     pytest.importorskip("rerun")
-    from recordings.rerun import EvaluationLogger
+    from onionsort.stages.evaluate_rerun import EvaluationLogger
 
     path = tmp_path / "eval.rrd"
     with EvaluationLogger(path) as log:

@@ -14,7 +14,7 @@ import torch
 import state_abstraction.classifier as classifier_module
 from irl.domains.onion_sorting import Location, Prediction
 from onionsort.cli import main
-from recordings.dataset import DatasetStep, read_steps
+from recordings.labels.dataset import DatasetStep, read_steps
 from state_abstraction.classifier import (
     ClassifierConfig,
     LabelledStep,

@@ -255,7 +255,7 @@ def test_learn_from_perceived_sessions_and_its_refusals(random_models, session, 
 def test_prediction_after_first_inspection_leaves_out_the_steps_before_it(monkeypatch):
     from types import SimpleNamespace as NS
 
-    import recordings.dataset
+    import recordings.labels.dataset
     from onionsort.stages.calibrate import measure_perception
 
     # one session: the first two steps precede any inspection and are wrong, the rest are right
@@ -267,7 +267,7 @@ def test_prediction_after_first_inspection_leaves_out_the_steps_before_it(monkey
                         "action": 0}) for t in truth]
     perceived = [NS(occluded=False, onion=0, end_effector=0, prediction=p, action=0,
                     inspected=i) for p, i in zip(seen_pred, inspected, strict=True)]
-    monkeypatch.setattr(recordings.dataset, "read_steps", lambda *a, **k: [steps])
+    monkeypatch.setattr(recordings.labels.dataset, "read_steps", lambda *a, **k: [steps])
     models = NS(frames_per_step=3, perceive=lambda _: perceived,
                 describe=lambda: {"folder": "fake"})
     _, metrics = measure_perception(models, "unused", "all")
