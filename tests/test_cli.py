@@ -294,12 +294,11 @@ def test_the_parsers_repeated_choices_are_the_libraries():
     from irl.experiments import METHODS
     from irl.inference import BACKENDS
     from onionsort.configs import common as _args
-    from onionsort.configs.common import DEVICES
     from onionsort.stages.export import EXPORT_FORMATS, ROS2_STORAGES
     from onionsort.stages.label import IMPORT_FORMATS, LABEL_FORMATS
     from onionsort.stages.label_select import SELECT_FORMATS
 
-    assert (_args.DEVICES, _args.BACKENDS, _args.METHODS) == (DEVICES, BACKENDS, METHODS)
+    assert (_args.BACKENDS, _args.METHODS) == (BACKENDS, METHODS)
     assert (_args.EXPORT_FORMATS, _args.ROS2_STORAGES) == (EXPORT_FORMATS, ROS2_STORAGES)
     assert (_args.LABEL_FORMATS, _args.SELECT_FORMATS) == (LABEL_FORMATS, SELECT_FORMATS)
     assert _args.IMPORT_FORMATS == IMPORT_FORMATS
