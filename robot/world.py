@@ -1,7 +1,7 @@
 """Snapshots of the PyBullet world for 3D logging: bodies as primitives, cameras, the robot.
 
 A :class:`WorldState` is what a session's 3D topics are written from (``/tf``, ``/joint_states``,
-``/scene``; see ``recordings.world``): every body of the work cell as a simple shape in the
+``/scene``; see ``recordings.session.world``): every body of the work cell as a simple shape in the
 world, the pose of each camera's optical frame, and the robot's joint positions where there is
 a robot. Taking one only reads the physics client (poses and visual shapes), so it changes
 nothing that is rendered or drawn from a random stream.

@@ -11,8 +11,8 @@ __all__ = ["EXPORT_FORMATS", "ROS2_STORAGES", "ExportConfig"]
 
 #: What a session can be exported as.
 EXPORT_FORMATS = ("ros2",)
-#: :data:`recordings.ros_export.STORAGES`, repeated so that building the parser does not import
-#: the recordings (a test checks they agree).
+#: :data:`recordings.sources.ros_export.STORAGES`, repeated so that building the parser does
+#: not import the recordings (a test checks they agree).
 ROS2_STORAGES = ("mcap", "sqlite3")
 
 

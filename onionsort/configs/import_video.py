@@ -22,8 +22,8 @@ class ImportConfig:
     The source is exactly one of ``video`` and ``camera`` (an index for
     ``cv2.VideoCapture``). ``video`` is a video file (any container and codec OpenCV reads)
     or a ROS 2 or ROS 1 bag (a rosbag2 folder, one of its files, a ``.bag``;
-    :mod:`recordings.bags`), told apart by what the path is
-    (:func:`recordings.bags.is_bag`). ``intrinsics`` is JSON, ``{"K": 3x3}`` or ``{"fx",
+    :mod:`recordings.sources.bags`), told apart by what the path is
+    (:func:`recordings.sources.bags.is_bag`). ``intrinsics`` is JSON, ``{"K": 3x3}`` or ``{"fx",
     "fy", "cx", "cy"}``; ``models`` segment the steps by perceived changes; the state
     classifier reads 3 frames a step. An existing ``out`` is refused.
     """

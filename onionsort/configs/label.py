@@ -54,9 +54,10 @@ class LabelExportConfig:
 class LabelImportConfig:
     """``onionsort label import``: what to read and where to write it.
 
-    ``source`` is in COCO or YOLO layout (:mod:`recordings.coco`, :mod:`recordings.yolo`), or
-    Label Studio's JSON export beside the images, its state choices the state labels
-    (:func:`recordings.labelstudio.read_export`); ``states``: :mod:`recordings.states_csv`.
+    ``source`` is in COCO or YOLO layout (:mod:`recordings.labels.coco`,
+    :mod:`recordings.labels.yolo`), or Label Studio's JSON export beside the images, its state
+    choices the state labels (:func:`recordings.labels.labelstudio.read_export`); ``states``:
+    :mod:`recordings.labels.states_csv`.
     A depth image matches the image ``NAME.*`` as ``depth/<split>/NAME.png`` or
     ``depth/NAME.png``; frames without depth are read by the colour-only models. A class
     that ``classes`` does not name keeps its own name.

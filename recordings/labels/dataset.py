@@ -160,7 +160,7 @@ class DatasetWriter:
         """Add an inspection view rendered at the robot's station (Sawyer holding an onion).
 
         ``labels`` are ``(box, blemished, visible_pixels[, rot_pixels])`` of each onion in it
-        (:class:`robot.station.InspectionLabel`); the record has ``source: "robot"``,
+        (:class:`robot.station_cameras.InspectionLabel`); the record has ``source: "robot"``,
         ``lineup``, ``index`` (the onion's place in the line-up), ``view`` (which of the
         robot's views of it) and ``difficulty``, and no state (the robot's views are for the
         detector and the inspection classifier only).
