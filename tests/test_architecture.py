@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RULES: dict[str, set[str]] = {
     "irl": {"numpy", "scipy"},
     "perception": {"torch", "torchvision", "cv2", "numpy"},
-    "state_abstraction": {"torch", "cv2", "numpy", "irl"},
+    "state_abstraction": {"torch", "cv2", "numpy", "irl", "perception"},
     "recordings": {"mcap", "mcap_protobuf", "foxglove_schemas_protobuf", "rosbags", "rerun",
                    "cv2", "numpy", "irl", "yaml"},
     "robot": {"pybullet", "cv2", "gymnasium", "numpy", "irl"},

@@ -145,13 +145,13 @@ def train_detector(config: DetectorTrainConfig) -> dict:
     Returns
     -------
     dict
-        The metrics of :func:`perception.train.train_detector` (``val``, ``test`` mAP,
+        The metrics of :func:`perception.train_detector.train_detector` (``val``, ``test`` mAP,
         ``history``, ...); the checkpoint is ``config.out / "detector.pt"``.
     """
     import torch
 
-    from perception.train import TrainConfig
-    from perception.train import train_detector as train
+    from perception.train_detector import TrainConfig
+    from perception.train_detector import train_detector as train
 
     log_config("train detector", config)
     if config.resume and not (config.out / "detector_last.pt").is_file():
