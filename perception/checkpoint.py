@@ -1,11 +1,6 @@
-"""Checkpoint files of every model here: written whole or not at all, read with a clear error.
-
-A checkpoint is a ``torch.save`` of a dict; each model names its own entries (its configuration
-under ``config``, every one, so that :func:`onionsort.stages.models.checkpoint_config` reads it
-without torch). Files are written to ``NAME.partial`` and renamed when complete, so a process
-killed on the way never leaves a truncated ``NAME``; they are read with ``weights_only`` (no code
-of the file's choosing runs).
-"""
+"""Checkpoint files of every model here: a ``torch.save`` of a dict whose entries each model
+names (its configuration under ``config``), written to ``NAME.partial`` and renamed when whole,
+read onto the CPU with ``weights_only`` (no code of the file's choosing runs)."""
 
 from __future__ import annotations
 
@@ -25,9 +20,8 @@ T = TypeVar("T")
 
 @contextmanager
 def _replacing(path: Path | str) -> Iterator[Path]:
-    """A temporary name to write ``path``'s content to; renamed to ``path`` on success."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
+    """A temporary name to write ``path`` to, renamed to ``path`` when the block succeeds."""
+    tmp = Path(path).with_name(Path(path).name + ".partial")
     try:
         yield tmp
         tmp.replace(path)
@@ -36,8 +30,7 @@ def _replacing(path: Path | str) -> Iterator[Path]:
 
 
 def save_checkpoint(path: Path | str, **entries: Any) -> Path:
-    """Write ``entries`` to ``path`` through a temporary name; a module among them is written
-    as its state dict on the CPU."""
+    """Write ``entries`` to ``path``; a module among them as its state dict on the CPU."""
     doc = {k: ({n: t.detach().cpu() for n, t in v.state_dict().items()}
                if isinstance(v, nn.Module) else v) for k, v in entries.items()}
     with _replacing(path) as tmp:
@@ -47,16 +40,9 @@ def save_checkpoint(path: Path | str, **entries: Any) -> Path:
 
 def load_checkpoint(path: Path | str, what: str,
                     build: Callable[[dict], T] = lambda doc: doc) -> T:
-    """``build`` of the checkpoint dict at ``path``, read onto the CPU.
-
-    Raises
-    ------
-    FileNotFoundError
-        ``no {what} at {path}`` where there is no file.
-    ValueError
-        ``{path} is not a {what} (...)`` where the file is no checkpoint, is truncated, or
-        ``build`` fails on it (another model's weights).
-    """
+    """``build`` of the checkpoint at ``path``: FileNotFoundError ``no {what} at {path}``
+    without a file, ValueError ``{path} is not a {what} (...)`` where it is no checkpoint, is
+    truncated, or ``build`` fails on it (another model's)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no {what} at {path}")
@@ -68,7 +54,7 @@ def load_checkpoint(path: Path | str, what: str,
 
 
 def write_json(path: Path | str, doc: Any) -> Path:
-    """Write ``doc`` as JSON (one-space indent) to ``path`` through a temporary name."""
+    """Write ``doc`` as JSON (indent 1) to ``path`` through a temporary name."""
     with _replacing(path) as tmp:
         tmp.write_text(json.dumps(doc, indent=1))
     return Path(path)

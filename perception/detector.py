@@ -77,7 +77,7 @@ class Detector:
 
     def save(self, path: Path | str) -> Path:
         """Write the weights and configuration (atomically)."""
-        return save_weights(self.net, path)
+        return save_checkpoint(path, config=self.config.to_dict(), model=self.net)
 
     @torch.no_grad()
     def detect(self, images: list[np.ndarray], score_threshold: float | None = None
@@ -108,7 +108,3 @@ class Detector:
             out.append(Detections(bb.astype(np.float32), s.numpy(), c.numpy().astype(np.int64)))
         return out
 
-
-def save_weights(net: DetectorNet, path: Path | str) -> Path:
-    """Write ``net``'s configuration and weights to ``path`` (atomically)."""
-    return save_checkpoint(path, config=net.config.to_dict(), model=net)

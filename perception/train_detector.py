@@ -22,7 +22,7 @@ import torch
 from perception.assign import detection_loss
 from perception.checkpoint import load_checkpoint, write_json
 from perception.data import LabelledImage, Sample, augment, to_samples
-from perception.detector import Detector, postprocess, save_weights
+from perception.detector import Detector, postprocess
 from perception.metrics import mean_average_precision
 from perception.model import DetectorConfig, DetectorNet, grid_points
 from perception.photometric import PhotometricAugment
@@ -116,13 +116,9 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     resume : bool
         Continue the run in ``out`` from ``detector_last.pt``, exactly (same images, same
         configuration).
-    on_epoch : callable, optional
-        Called after each epoch with its history record (``epoch``, ``train_loss``, val mAP),
-        e.g. to draw a progress bar; ``epoch`` counts from 0 (from the resumed epoch on
-        ``resume``).
-    device : str or torch.device
-        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
-        the CPU in float32.
+    on_epoch, device
+        As :func:`perception.trainer.fit`'s (``epoch`` counts from 0, from the resumed epoch
+        on ``resume``).
     init : path, optional
         A detector checkpoint (:meth:`perception.Detector.save`) to start from instead of
         random weights: fine-tuning (its configuration must be ``net_config``).
@@ -185,9 +181,9 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
                   lambda outputs, targets: detection_loss(*outputs, points, strides, targets)[0],
                   validate, epochs=config.epochs, device=device, clip_grad=10.0,
                   augment=PhotometricAugment().each if config.photometric else None,
-                  average=average, on_best=lambda model: save_weights(model, out / "detector.pt"),
+                  average=average, on_best=lambda m: Detector(m, device).save(out / "detector.pt"),
                   on_epoch=on_epoch, last=last, rng=rng, resume=ckpt, name="detector",
-                  meta={"config": net_config.to_dict(), "train_config": asdict(config)}).history
+                  meta={"config": net_config.to_dict(), "train_config": asdict(config)})
     best_net = Detector.load(out / "detector.pt", device=device).net
     test_samples = to_samples(test, net_config.width, net_config.height)
     result = {"val": evaluate_detector(best_net, val_samples),

@@ -151,15 +151,6 @@ def _weighted_loss(logits: torch.Tensor, labels: torch.Tensor, weights: torch.Te
     return (per * weights).sum() / weights.sum()
 
 
-@torch.no_grad()
-def _logits(net: InspectionNet, crops: np.ndarray, device: torch.device,
-            batch_size: int = 256) -> np.ndarray:
-    net.eval()
-    out = [net(to_tensor(crops[i:i + batch_size]).to(device)).float().cpu().numpy()
-           for i in range(0, len(crops), batch_size)]
-    return np.concatenate(out)
-
-
 def _nll(logits: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> float:
     per = np.logaddexp(0.0, logits) - labels * logits
     return float(np.sum(per * weights) / np.sum(weights))
@@ -189,10 +180,10 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
 
     Crops whose label is unclear (-1) are left out of the loss, the choice of epoch and the
     temperature; Platt's scaling to the onion's class uses every validation crop, its classes
-    weighted equally (so ``train_prior`` is 0.5). On CUDA the forward and backward passes run
-    in mixed precision (float16 autocast with a gradient scaler); on the CPU in float32.
-    ``init`` is an inspection classifier (:meth:`InspectionClassifier.save`) whose network to
-    start from instead of random weights (fine-tuning; its network must be ``net_config``).
+    weighted equally (so ``train_prior`` is 0.5). ``on_epoch`` and ``device`` are
+    :func:`perception.trainer.fit`'s. ``init`` is an inspection classifier
+    (:meth:`InspectionClassifier.save`) whose network to start from instead of random weights
+    (fine-tuning; its network must be ``net_config``).
 
     Returns
     -------
@@ -243,19 +234,19 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
                    (torch.from_numpy(labels[idx]).to(device), w), float(w.sum()))
 
     def validate(model: InspectionNet) -> tuple[float, dict]:
-        z = _logits(model, np.asarray(val.crops)[val_known], device)
+        z = InspectionClassifier(model, device=device).logits(np.asarray(val.crops)[val_known])
         val_loss = _nll(z, val_y, val_w)
         return -val_loss, {"val_loss": val_loss, "val_accuracy": _accuracy(z, val_y, val_w)}
 
     best = {}
-    fitted = fit(net, opt, sched, batches, lambda logits, yw: _weighted_loss(logits, *yw),
-                 validate, epochs=config.epochs, device=device,
-                 augment=PhotometricAugment().each if config.photometric else None,
-                 on_best=lambda model: best.update(copy.deepcopy(model.state_dict())),
-                 on_epoch=on_epoch, name="inspection classifier")
-    history, best_epoch = fitted.history, fitted.best_epoch
+    history = fit(net, opt, sched, batches, lambda logits, yw: _weighted_loss(logits, *yw),
+                  validate, epochs=config.epochs, device=device,
+                  augment=PhotometricAugment().each if config.photometric else None,
+                  on_best=lambda model: best.update(copy.deepcopy(model.state_dict())),
+                  on_epoch=on_epoch, name="inspection classifier")
+    best_epoch = min(history, key=lambda h: h["val_loss"])["epoch"]  # the first of the least
     net.load_state_dict(best)
-    z_all = _logits(net, np.asarray(val.crops), device)
+    z_all = InspectionClassifier(net, device=device).logits(np.asarray(val.crops))
     z = z_all[val_known]
     temperature = fit_temperature(z, val_y, val_w)
     classes = np.asarray(val.classes, float)

@@ -365,7 +365,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
                      device: str | torch.device = "cpu",
                      photometric: Callable[[torch.Tensor], torch.Tensor] | None = None,
                      init: Path | str | None = None) -> dict:
-    """Train on ``train``, keep the best epoch on ``val``, report metrics on ``test``.
+    """Train on ``train`` (:func:`perception.trainer.fit`), keep the best epoch on ``val``,
+    report metrics on ``test``.
 
     Each training step's depth is zeroed with probability ``config.depth_dropout``. The best
     epoch is the one whose worst validation metric (accuracy of each factor, occlusion recall
@@ -378,12 +379,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     config : ClassifierConfig
     out : path
         Folder for ``state_classifier.pt`` and ``state_classifier_metrics.json`` (created).
-    on_epoch : callable, optional
-        Called after each epoch with its history record (``epoch``, ``train_loss``, val
-        metrics), e.g. to draw a progress bar.
-    device : str or torch.device
-        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
-        the CPU in float32.
+    on_epoch, device
+        As :func:`perception.trainer.fit`'s.
     photometric : callable, optional
         Photometric augmentation of the training steps alone (:func:`augment_colours`; e.g.
         ``perception.photometric.PhotometricAugment()``, which the ``train`` stage passes),
@@ -435,7 +432,7 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     history = fit(model, opt, sched, batches, _loss,
                   lambda m: _val_score(m, x_va, y_va, config.depth_dropout), epochs=config.epochs,
                   on_best=lambda m: m.save(out / "state_classifier.pt"), device=device,
-                  augment=augment, on_epoch=on_epoch, name="state classifier").history
+                  augment=augment, on_epoch=on_epoch, name="state classifier")
     model = StateClassifier.load(out / "state_classifier.pt", device=device)
     metrics: dict[str, Any] = {}
     if len(test):

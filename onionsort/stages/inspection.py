@@ -218,7 +218,7 @@ def _load_detector(folder: Path | None, device):
     return Detector.load(path, device=device)
 
 
-def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None) -> dict:
+def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     """Train the inspection classifier on ``config.data``'s train splits; choose its fusion
     rule on the validation splits' onions; write ``inspection_classifier.pt`` and
     ``inspection_metrics.json`` into ``config.out`` (with ``camera="robot"``,
@@ -237,6 +237,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     from onionsort.stages.base import resolve_device
     from onionsort.stages.models import INSPECTION_FILE
     from onionsort.stages.parallel import torch_threads
+    from onionsort.stages.train import epoch_bar
     from perception.fusion import FUSION_RULES
     from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
 
@@ -272,12 +273,13 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
         weights = weights * counts * len(weights) / (weights * counts).sum()
     train_set = CropSet(train.crops, train.labels, train.classes, weights)
     val_set = CropSet(val.crops, val.labels, val.classes, val.weights(config.level_weights))
-    classifier, metrics = train_inspection(
-        train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
-                                                  batch_size=config.batch_size,
-                                                  seed=config.seed, lr=config.lr,
-                                                  photometric=config.augment),
-        device=device, on_epoch=on_epoch, init=config.init)
+    with epoch_bar("inspection classifier", config.epochs) as on_epoch:
+        classifier, metrics = train_inspection(
+            train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
+                                                      batch_size=config.batch_size,
+                                                      seed=config.seed, lr=config.lr,
+                                                      photometric=config.augment),
+            device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
