@@ -3,8 +3,9 @@
 Each package may import the standard library, itself, and what its row of the table allows;
 ``irl`` stays a numpy/scipy library (its optional compiled backend, one module, may import
 numba inside a function: ``irl`` imports without it, tests/irl/test_numba.py checks), and the
-packages below ``onionsort`` never import each other except ``irl``. Imports inside functions
-count too.
+packages below ``onionsort`` never import each other except ``irl`` (and ``perception``'s
+training loop and checkpoint files, which ``state_abstraction`` shares). Imports inside
+functions count too.
 """
 
 from __future__ import annotations
