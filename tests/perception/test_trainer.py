@@ -9,7 +9,7 @@ import torch
 from torch import nn
 
 from perception.checkpoint import load_checkpoint, save_checkpoint
-from perception.trainer import ema, fit
+from perception.trainer import ema
 
 
 def _net() -> nn.Module:
@@ -36,24 +36,6 @@ def test_the_moving_average_ramps_its_decay_and_averages_buffers_exactly():
     for name, value in by_hand.state_dict().items():
         assert torch.equal(average.module.state_dict()[name], value), name
     assert average.module.state_dict()["1.num_batches_tracked"] == 5
-
-
-def test_fit_keeps_each_better_epoch_and_writes_the_run(tmp_path):
-    net = _net()
-    opt = torch.optim.SGD(net.parameters(), lr=0.0)
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
-    scores, seen, kept = iter([0.1, 0.5, 0.4, 0.5, 0.9]), [], []
-
-    def batches(epoch):
-        yield torch.randn(4, 3), torch.zeros(4, 1), 4
-
-    history = fit(net, opt, sched, batches, nn.functional.mse_loss,
-                  lambda model: (next(scores), {"score": 1}), epochs=5, on_epoch=seen.append,
-                  on_best=lambda model: kept.append(seen[-1]["epoch"]), last=tmp_path / "l.pt")
-    assert seen == history and [h["epoch"] for h in history] == [0, 1, 2, 3, 4]
-    assert kept == [0, 1, 4]  # 0.4 and the second 0.5 do not beat 0.5
-    run = load_checkpoint(tmp_path / "l.pt", "training checkpoint")
-    assert (run["epoch"], run["best"], run["history"]) == (4, 0.9, history)
 
 
 def test_checkpoints_are_written_whole_and_read_with_clear_errors(tmp_path):
