@@ -15,6 +15,7 @@ import torch
 from torchvision.ops import batched_nms
 
 from perception.assign import decode
+from perception.checkpoint import load_checkpoint, save_checkpoint
 from perception.data import letterbox
 from perception.model import DetectorConfig, DetectorNet, grid_points
 
@@ -66,22 +67,17 @@ class Detector:
     def load(cls, path: Path | str, device: str | torch.device = "cpu") -> Detector:
         """Load weights saved by :meth:`save` (or the ``model`` of a training checkpoint) onto
         ``device``."""
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"no detector checkpoint at {path}")
-        try:
-            ckpt = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as exc:
-            raise ValueError(f"{path} is not a detector checkpoint ({exc})") from None
-        if not isinstance(ckpt, dict) or "config" not in ckpt or "model" not in ckpt:
-            raise ValueError(f"{path} is not a detector checkpoint (no config and model)")
-        net = DetectorNet(DetectorConfig(**ckpt["config"]))
-        net.load_state_dict(ckpt["model"])
-        return cls(net, device)
+
+        def build(ckpt: dict) -> DetectorNet:
+            net = DetectorNet(DetectorConfig(**ckpt["config"]))
+            net.load_state_dict(ckpt["model"])
+            return net
+
+        return cls(load_checkpoint(path, "detector checkpoint", build), device)
 
     def save(self, path: Path | str) -> Path:
         """Write the weights and configuration (atomically)."""
-        return save_weights(self.net, path)
+        return save_checkpoint(path, config=self.config.to_dict(), model=self.net)
 
     @torch.no_grad()
     def detect(self, images: list[np.ndarray], score_threshold: float | None = None
@@ -112,11 +108,3 @@ class Detector:
             out.append(Detections(bb.astype(np.float32), s.numpy(), c.numpy().astype(np.int64)))
         return out
 
-
-def save_weights(net: DetectorNet, path: Path | str) -> Path:
-    path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
-    state = {k: v.detach().cpu() for k, v in net.state_dict().items()}
-    torch.save({"config": net.config.to_dict(), "model": state}, tmp)
-    tmp.replace(path)
-    return path

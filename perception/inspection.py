@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from perception.checkpoint import load_checkpoint, save_checkpoint
 from perception.fusion import FUSION_RULES, check_calibration, fuse, settled
 
 __all__ = [
@@ -89,14 +90,9 @@ def crop_onion(rgb: np.ndarray, box, size: int = CROP_SIZE, margin: float = CROP
 
 
 def to_tensor(crops: Sequence[np.ndarray]) -> torch.Tensor:
-    """Crops (S, S, 3) uint8 as a normalized batch ``x[n, 3, S, S]`` float32."""
+    """Crops (S, S, 3) uint8 as a batch ``x[n, 3, S, S]`` float32 in [0, 1]."""
     x = torch.from_numpy(np.stack([np.asarray(c) for c in crops])).permute(0, 3, 1, 2)
-    return normalize(x.float() / 255.0)
-
-
-def normalize(x: torch.Tensor) -> torch.Tensor:
-    """A batch ``x[n, 3, S, S]`` of values in [0, 1] as the network reads it."""
-    return (x - _MEAN) / _STD
+    return x.float() / 255.0
 
 
 @dataclass(frozen=True)
@@ -134,7 +130,7 @@ class _Residual(nn.Module):
 
 
 class InspectionNet(nn.Module):
-    """A small residual CNN: crop ``x[n, 3, S, S]`` -> logit ``[n]`` of *blemished*.
+    """A small residual CNN: crop ``x[n, 3, S, S]`` (in [0, 1]) -> logit ``[n]`` of *blemished*.
 
     A stem at full resolution (a faint rot patch is a few pixels of a crop), three stages of a
     strided convolution and a residual block, global average and max pooling (a blemish
@@ -156,7 +152,7 @@ class InspectionNet(nn.Module):
         self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * c, 1))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        f = self.features(x)
+        f = self.features((x - _MEAN) / _STD)
         pooled = torch.cat([f.mean(dim=(2, 3)), f.amax(dim=(2, 3))], dim=1)
         return self.head(pooled).squeeze(1)
 
@@ -348,38 +344,26 @@ class InspectionClassifier:
     @classmethod
     def load(cls, path: Path | str, device: str | torch.device = "cpu") -> InspectionClassifier:
         """Load a checkpoint written by :meth:`save`."""
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"no inspection classifier at {path}")
-        try:
-            ckpt = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as exc:
-            raise ValueError(f"{path} is not an inspection classifier checkpoint ({exc})") \
-                from None
-        if not isinstance(ckpt, dict) or ckpt.get("kind") != "inspection-classifier":
-            raise ValueError(f"{path} is not an inspection classifier checkpoint")
-        try:
+
+        def build(ckpt: dict) -> InspectionClassifier:
+            if ckpt.get("kind") != "inspection-classifier":
+                raise ValueError(f"its kind is {ckpt.get('kind')!r}")
             net = InspectionNet(InspectionNetConfig(**ckpt["config"]))
             net.load_state_dict(ckpt["model"])
             return cls(net, ckpt["temperature"], tuple(ckpt["platt"]), ckpt["train_prior"],
                        rot_prior=ckpt["rot_prior"], visibility=ckpt["visibility"],
                        rule=ckpt["rule"], metadata=ckpt.get("metadata", {}), device=device)
-        except (KeyError, RuntimeError, TypeError) as exc:
-            raise ValueError(f"{path} is not an inspection classifier checkpoint ({exc})") \
-                from None
+
+        return load_checkpoint(path, "inspection classifier checkpoint", build)
 
     def save(self, path: Path | str) -> Path:
         """Write the weights, configuration and calibration (atomically)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".partial")
-        state = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
-        torch.save({"kind": "inspection-classifier", "config": asdict(self.net.config),
-                    "model": state, "temperature": self.temperature,
-                    "platt": list(self.platt), "train_prior": self.train_prior,
-                    "rot_prior": self.rot_prior, "visibility": self.visibility,
-                    "rule": self.rule, "metadata": self.metadata}, tmp)
-        tmp.replace(path)
-        return path
+        return save_checkpoint(path, kind="inspection-classifier",
+                               config=asdict(self.net.config), model=self.net,
+                               temperature=self.temperature, platt=list(self.platt),
+                               train_prior=self.train_prior, rot_prior=self.rot_prior,
+                               visibility=self.visibility, rule=self.rule,
+                               metadata=self.metadata)
 
     @torch.no_grad()
     def logits(self, crops: Sequence[np.ndarray], batch_size: int = 256) -> np.ndarray:

@@ -154,5 +154,10 @@ class PhotometricAugment:
         out = self.transform(images.float())
         return out.clamp(0.0, 1.0).to(dtype)
 
+    def each(self, images: torch.Tensor) -> torch.Tensor:
+        """``images`` ``[n, 3, H, W]``, each through a camera of its own (a training loop's
+        ``augment``)."""
+        return torch.stack([self(image) for image in images])
+
     def __repr__(self) -> str:
         return f"PhotometricAugment(strength={self.strength})"

@@ -1,4 +1,5 @@
-"""Training the inspection classifier from scratch on crops of inspection views.
+"""Training the inspection classifier (through :func:`perception.trainer.fit`) on crops of
+inspection views.
 
 Training samples are *context crops*: the onion's ground-truth box with more room around it
 than the network reads (:data:`CONTEXT_SCALE`), so that each epoch can cut the crop the network
@@ -14,7 +15,6 @@ Layouts as in :mod:`perception.inspection`.
 from __future__ import annotations
 
 import copy
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -33,15 +33,13 @@ from perception.inspection import (
     crop_onion,
     fit_platt,
     fit_temperature,
-    normalize,
     to_tensor,
 )
 from perception.photometric import PhotometricAugment
+from perception.trainer import fit
 
 __all__ = ["CONTEXT_SCALE", "CropSet", "InspectionTrainConfig", "augment", "context_crop",
            "train_inspection"]
-
-logger = logging.getLogger(__name__)
 
 CONTEXT_SCALE = 1.35
 """A context crop spans this many times the window the network reads."""
@@ -147,35 +145,19 @@ def augment(context: np.ndarray, rng: np.random.Generator, config: InspectionTra
     return np.ascontiguousarray(crop)
 
 
-def _training_batch(crops: list[np.ndarray], photometric: PhotometricAugment | None
-                    ) -> torch.Tensor:
-    """:func:`~perception.inspection.to_tensor` of training crops, each through a camera of
-    its own first (``photometric``; None: as they are)."""
-    if photometric is None:
-        return to_tensor(crops)
-    raw = torch.from_numpy(np.stack(crops)).permute(0, 3, 1, 2).float() / 255.0
-    seen = torch.stack([photometric(crop) for crop in raw])
-    return normalize(seen)
-
-
 def _weighted_loss(logits: torch.Tensor, labels: torch.Tensor, weights: torch.Tensor
                    ) -> torch.Tensor:
     per = nn.functional.binary_cross_entropy_with_logits(logits, labels, reduction="none")
     return (per * weights).sum() / weights.sum()
 
 
-@torch.no_grad()
-def _logits(net: InspectionNet, crops: np.ndarray, device: torch.device,
-            batch_size: int = 256) -> np.ndarray:
-    net.eval()
-    out = [net(to_tensor(crops[i:i + batch_size]).to(device)).float().cpu().numpy()
-           for i in range(0, len(crops), batch_size)]
-    return np.concatenate(out)
-
-
 def _nll(logits: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> float:
     per = np.logaddexp(0.0, logits) - labels * logits
     return float(np.sum(per * weights) / np.sum(weights))
+
+
+def _accuracy(logits: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> float:
+    return float(np.sum(weights * ((logits > 0) == (labels > 0.5))) / weights.sum())
 
 
 def _class_weights(classes: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -191,17 +173,17 @@ def _class_weights(classes: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig,
                      net_config: InspectionNetConfig | None = None, *,
                      rule: str = "noisy-or", device: str | torch.device = "cpu",
-                     on_epoch: Callable[[int, dict], None] | None = None,
+                     on_epoch: Callable[[dict], None] | None = None,
                      init: Path | str | None = None) -> tuple[InspectionClassifier, dict]:
     """Train the network to see rot on ``train`` context crops; keep the epoch of lowest
     weighted validation loss on ``val`` (inference crops); fit its calibrations there.
 
     Crops whose label is unclear (-1) are left out of the loss, the choice of epoch and the
     temperature; Platt's scaling to the onion's class uses every validation crop, its classes
-    weighted equally (so ``train_prior`` is 0.5). On CUDA the forward and backward passes run
-    in mixed precision (float16 autocast with a gradient scaler); on the CPU in float32.
-    ``init`` is an inspection classifier (:meth:`InspectionClassifier.save`) whose network to
-    start from instead of random weights (fine-tuning; its network must be ``net_config``).
+    weighted equally (so ``train_prior`` is 0.5). ``on_epoch`` and ``device`` are
+    :func:`perception.trainer.fit`'s. ``init`` is an inspection classifier
+    (:meth:`InspectionClassifier.save`) whose network to start from instead of random weights
+    (fine-tuning; its network must be ``net_config``).
 
     Returns
     -------
@@ -240,46 +222,31 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, epochs=config.epochs,
                                                 steps_per_epoch=steps_per_epoch,
                                                 pct_start=0.15)
-    amp = device.type == "cuda"
-    scaler = torch.amp.GradScaler("cuda", enabled=amp)
-    best, best_loss, best_epoch, history = None, np.inf, 0, []
-    photometric = PhotometricAugment() if config.photometric else None
-    for epoch in range(config.epochs):
-        net.train()
+
+    def batches(epoch: int):
         order = rng.permutation(len(crops))
-        total, seen = 0.0, 0.0
         for i in range(0, len(order), config.batch_size):
             idx = order[i:i + config.batch_size]
             if len(idx) < 2:
                 continue  # batch norm needs two samples
-            x = _training_batch([augment(crops[j], rng, config) for j in idx],
-                                photometric).to(device)
-            y = torch.from_numpy(labels[idx]).to(device)
             w = torch.from_numpy(weights[idx]).to(device)
-            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-                logits = net(x)
-            loss = _weighted_loss(logits.float(), y, w)
-            opt.zero_grad(set_to_none=True)
-            scaler.scale(loss).backward()
-            scaler.step(opt)
-            scaler.update()
-            sched.step()
-            total += float(loss.detach()) * float(w.sum())
-            seen += float(w.sum())
-        z = _logits(net, np.asarray(val.crops)[val_known], device)
+            yield (to_tensor([augment(crops[j], rng, config) for j in idx]),
+                   (torch.from_numpy(labels[idx]).to(device), w), float(w.sum()))
+
+    def validate(model: InspectionNet) -> tuple[float, dict]:
+        z = InspectionClassifier(model, device=device).logits(np.asarray(val.crops)[val_known])
         val_loss = _nll(z, val_y, val_w)
-        acc = float(np.sum(val_w * ((z > 0) == (val_y > 0.5))) / val_w.sum())
-        row = {"epoch": epoch, "train_loss": total / max(seen, 1e-12), "val_loss": val_loss,
-               "val_accuracy": acc}
-        history.append(row)
-        logger.info("inspection classifier epoch %d: train loss %.4f, val loss %.4f, "
-                    "val accuracy %.4f", epoch, row["train_loss"], val_loss, acc)
-        if val_loss < best_loss:
-            best_loss, best, best_epoch = val_loss, copy.deepcopy(net.state_dict()), epoch
-        if on_epoch is not None:
-            on_epoch(epoch, row)
+        return -val_loss, {"val_loss": val_loss, "val_accuracy": _accuracy(z, val_y, val_w)}
+
+    best = {}
+    history = fit(net, opt, sched, batches, lambda logits, yw: _weighted_loss(logits, *yw),
+                  validate, epochs=config.epochs, device=device,
+                  augment=PhotometricAugment().each if config.photometric else None,
+                  on_best=lambda model: best.update(copy.deepcopy(model.state_dict())),
+                  on_epoch=on_epoch, name="inspection classifier")
+    best_epoch = min(history, key=lambda h: h["val_loss"])["epoch"]  # the first of the least
     net.load_state_dict(best)
-    z_all = _logits(net, np.asarray(val.crops), device)
+    z_all = InspectionClassifier(net, device=device).logits(np.asarray(val.crops))
     z = z_all[val_known]
     temperature = fit_temperature(z, val_y, val_w)
     classes = np.asarray(val.classes, float)
@@ -290,7 +257,7 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
         "net": asdict(net_config),
         "val": {"loss": _nll(z, val_y, val_w),
                 "loss_calibrated": _nll(z / temperature, val_y, val_w),
-                "accuracy": float(np.sum(val_w * ((z > 0) == (val_y > 0.5))) / val_w.sum()),
+                "accuracy": _accuracy(z, val_y, val_w),
                 "n": int(val_known.sum()), "n_unclear": int((~val_known).sum())},
         "n_train": int(known.sum()), "n_train_unclear": int((~known).sum()),
     }

@@ -24,14 +24,12 @@ network as a depth channel of zeros, the value a depth camera gives where it has
 ``ClassifierConfig.depth_dropout``, so one model reads steps with and without depth.
 
 This package reads no dataset: :func:`train_classifier` takes steps (anything with the
-attributes of :class:`LabelledStep`, e.g. ``recordings.dataset.DatasetStep``); reading them
+attributes of :class:`LabelledStep`, e.g. ``recordings.labels.dataset.DatasetStep``); reading them
 from disk is the ``train`` stage's job (:mod:`onionsort.stages.train`).
 """
 
 from __future__ import annotations
 
-import json
-import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -43,12 +41,12 @@ import torch
 from torch import nn
 
 from irl.domains.onion_sorting import SORTING_TASK
+from perception.checkpoint import load_checkpoint, save_checkpoint, write_json
+from perception.trainer import fit
 
 __all__ = ["HEADS", "OCCLUDED_THRESHOLD", "ClassifierConfig", "LabelledStep", "StateClassifier",
            "drop_depth", "evaluate", "evaluate_steps", "step_input", "step_targets",
            "steps_to_tensors", "train_classifier"]
-
-logger = logging.getLogger(__name__)
 
 DEPTH_SCALE = 5.0
 #: The task whose factors the camera shows (the prediction factor is read at inspection).
@@ -71,7 +69,7 @@ _LEGACY_DEPTH_DROPOUT = 0.0
 class LabelledStep(Protocol):
     """One labelled step, as the classifier trains on it.
 
-    ``recordings.dataset.DatasetStep`` satisfies it structurally. (``isinstance`` checks only
+    ``recordings.labels.dataset.DatasetStep`` satisfies it structurally. (``isinstance`` checks only
     that the attributes exist.)
 
     Attributes
@@ -170,27 +168,19 @@ class StateClassifier(nn.Module):
 
     def save(self, path: Path | str) -> Path:
         """Write the configuration and weights to ``path`` (through a temporary name)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".partial")
-        state = {k: v.detach().cpu() for k, v in self.state_dict().items()}
-        torch.save({"config": asdict(self.config), "state_dict": state}, tmp)
-        tmp.replace(path)
-        return path
+        return save_checkpoint(path, config=asdict(self.config), state_dict=self)
 
     @classmethod
     def load(cls, path: Path | str, device: str | torch.device = "cpu") -> StateClassifier:
         """The classifier saved at ``path``, in eval mode, on ``device``."""
-        path = Path(path)
-        if not path.exists():
-            raise FileNotFoundError(f"no state-classifier checkpoint at {path}")
-        try:
-            ckpt = torch.load(path, map_location="cpu", weights_only=True)
-            config = {"depth_dropout": _LEGACY_DEPTH_DROPOUT, **ckpt["config"]}
-            model = cls(ClassifierConfig(**config))
+
+        def build(ckpt: dict) -> StateClassifier:
+            model = cls(ClassifierConfig(**{"depth_dropout": _LEGACY_DEPTH_DROPOUT,
+                                            **ckpt["config"]}))
             model.load_state_dict(ckpt["state_dict"])
-        except Exception as exc:  # not a checkpoint, truncated, or another model's weights
-            raise ValueError(f"{path} is not a state-classifier checkpoint ({exc})") from None
-        return model.to(device).eval()
+            return model
+
+        return load_checkpoint(path, "state-classifier checkpoint", build).to(device).eval()
 
 
 def frame_input(color: np.ndarray, depth: np.ndarray | None, config: ClassifierConfig
@@ -375,7 +365,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
                      device: str | torch.device = "cpu",
                      photometric: Callable[[torch.Tensor], torch.Tensor] | None = None,
                      init: Path | str | None = None) -> dict:
-    """Train on ``train``, keep the best epoch on ``val``, report metrics on ``test``.
+    """Train on ``train`` (:func:`perception.trainer.fit`), keep the best epoch on ``val``,
+    report metrics on ``test``.
 
     Each training step's depth is zeroed with probability ``config.depth_dropout``. The best
     epoch is the one whose worst validation metric (accuracy of each factor, occlusion recall
@@ -388,12 +379,8 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     config : ClassifierConfig
     out : path
         Folder for ``state_classifier.pt`` and ``state_classifier_metrics.json`` (created).
-    on_epoch : callable, optional
-        Called after each epoch with its history record (``epoch``, ``train_loss``, val
-        metrics), e.g. to draw a progress bar.
-    device : str or torch.device
-        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
-        the CPU in float32.
+    on_epoch, device
+        As :func:`perception.trainer.fit`'s.
     photometric : callable, optional
         Photometric augmentation of the training steps alone (:func:`augment_colours`; e.g.
         ``perception.photometric.PhotometricAugment()``, which the ``train`` stage passes),
@@ -417,8 +404,6 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     x_tr, y_tr = steps_to_tensors(train, config)
     x_va, y_va = steps_to_tensors(val, config)
     device = torch.device(device)
-    amp = device.type == "cuda"
-    scaler = torch.amp.GradScaler("cuda", enabled=amp)
     model = StateClassifier(config)
     if init is not None:
         start = StateClassifier.load(init)
@@ -433,34 +418,21 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * ((len(x_tr) + config.batch_size - 1) // config.batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=steps)
-    best, history = -1.0, []
-    for epoch in range(config.epochs):
-        model.train()
+
+    def batches(epoch: int):
         order = torch.randperm(len(x_tr), generator=gen)
-        total = 0.0
         for i in range(0, len(order), config.batch_size):
             idx = order[i:i + config.batch_size]
-            x, _ = drop_depth(x_tr[idx].float(), config.depth_dropout, drop_gen)
-            if photometric is not None:
-                x = augment_colours(x, photometric)
-            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-                logits = model(x.to(device))
-            loss = _loss({k: v.float() for k, v in logits.items()},
-                         {k: v[idx].to(device) for k, v in y_tr.items()})
-            opt.zero_grad()
-            scaler.scale(loss).backward()
-            scaler.step(opt)
-            scaler.update()
-            sched.step()
-            total += loss.item() * len(idx)
-        score, val_metrics = _val_score(model, x_va, y_va, config.depth_dropout)
-        history.append({"epoch": epoch, "train_loss": total / len(x_tr), **val_metrics})
-        logger.info("epoch %d: %s", epoch, history[-1])
-        if on_epoch is not None:
-            on_epoch(history[-1])
-        if score > best:
-            best = score
-            model.save(out / "state_classifier.pt")
+            yield x_tr[idx].float(), {k: v[idx].to(device) for k, v in y_tr.items()}, len(idx)
+
+    def augment(x: torch.Tensor) -> torch.Tensor:
+        x, _ = drop_depth(x, config.depth_dropout, drop_gen)
+        return x if photometric is None else augment_colours(x, photometric)
+
+    history = fit(model, opt, sched, batches, _loss,
+                  lambda m: _val_score(m, x_va, y_va, config.depth_dropout), epochs=config.epochs,
+                  on_best=lambda m: m.save(out / "state_classifier.pt"), device=device,
+                  augment=augment, on_epoch=on_epoch, name="state classifier")
     model = StateClassifier.load(out / "state_classifier.pt", device=device)
     metrics: dict[str, Any] = {}
     if len(test):
@@ -470,7 +442,5 @@ def train_classifier(train: Sequence[LabelledStep], val: Sequence[LabelledStep],
     metrics.update({"history": history, "config": asdict(config),
                     "photometric": None if photometric is None else repr(photometric),
                     "n_steps": {"train": len(train), "val": len(val), "test": len(test)}})
-    tmp = out / "state_classifier_metrics.json.partial"
-    tmp.write_text(json.dumps(metrics, indent=1))
-    tmp.replace(out / "state_classifier_metrics.json")
+    write_json(out / "state_classifier_metrics.json", metrics)
     return metrics

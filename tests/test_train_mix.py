@@ -86,7 +86,7 @@ def test_each_trainer_counts_a_datasets_training_frames_its_weights_times(
     """Three stages, two datasets (the rendered one and its COCO import) at 3,1: the
     training set holds the first's frames three times, the second's once; val and test once
     each."""
-    import perception.train
+    import perception.train_detector
     import perception.train_inspection
     import state_abstraction.classifier
     from onionsort.stages.inspection import train_inspection_stage
@@ -107,7 +107,7 @@ def test_each_trainer_counts_a_datasets_training_frames_its_weights_times(
             raise KeyboardInterrupt  # stop here: what it was given is what counts
         return record
 
-    monkeypatch.setattr(perception.train, "train_detector", fake("detector"))
+    monkeypatch.setattr(perception.train_detector, "train_detector", fake("detector"))
     monkeypatch.setattr(state_abstraction.classifier, "train_classifier", fake("classifier"))
     monkeypatch.setattr(perception.train_inspection, "train_inspection", fake("inspection"))
     init = tmp_path / "start.pt"

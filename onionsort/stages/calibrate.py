@@ -224,7 +224,7 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     (each colour image changed by ``image_map`` first, if given)."""
 
     from perception.metrics import mean_average_precision
-    from perception.train import EVAL_SCORE_THRESHOLD
+    from perception.train_detector import EVAL_SCORE_THRESHOLD
     from recordings.labels.dataset import read_metadata, read_split, split_names
 
     views = read_metadata(root).get("views", ["camera"])

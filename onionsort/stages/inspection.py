@@ -2,9 +2,9 @@
 
 The library (:mod:`perception.inspection`, :mod:`perception.train_inspection`) trains on crops
 held in memory and reads no dataset; this module reads a dataset's inspection views with
-:mod:`recordings.dataset` (the sorter's, ``source: human``, and the Sawyer's, ``source: robot``,
-at every difficulty level the dataset holds), cuts the crops, weighs them, and groups the views
-of each onion so that their fused call can be measured.
+:mod:`recordings.labels.dataset` (the sorter's, ``source: human``, and the Sawyer's,
+``source: robot``, at every difficulty level the dataset holds), cuts the crops, weighs them,
+and groups the views of each onion so that their fused call can be measured.
 
 Weights: each (difficulty level, source, label) cell of the training and validation views
 weighs the same in all, times the level's weight (``level_weights``; 1 each by default): the
@@ -129,7 +129,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     (and a blank crop) where it finds none. ``dataset_level`` names the level of records that
     do not name theirs (datasets written before the field). A split with no such view is an
     error, or empty with ``allow_empty``. ``image_map`` changes each view as it is read
-    (:data:`recordings.dataset.ImageMap`).
+    (:data:`recordings.labels.dataset.ImageMap`).
     """
     from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
@@ -218,7 +218,7 @@ def _load_detector(folder: Path | None, device):
     return Detector.load(path, device=device)
 
 
-def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None) -> dict:
+def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     """Train the inspection classifier on ``config.data``'s train splits; choose its fusion
     rule on the validation splits' onions; write ``inspection_classifier.pt`` and
     ``inspection_metrics.json`` into ``config.out`` (with ``camera="robot"``,
@@ -237,6 +237,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
     from onionsort.stages.base import resolve_device
     from onionsort.stages.models import INSPECTION_FILE
     from onionsort.stages.parallel import torch_threads
+    from onionsort.stages.train import epoch_bar
     from perception.fusion import FUSION_RULES
     from perception.train_inspection import CropSet, InspectionTrainConfig, train_inspection
 
@@ -272,12 +273,13 @@ def train_inspection_stage(config: InspectionTrainStageConfig, *, on_epoch=None)
         weights = weights * counts * len(weights) / (weights * counts).sum()
     train_set = CropSet(train.crops, train.labels, train.classes, weights)
     val_set = CropSet(val.crops, val.labels, val.classes, val.weights(config.level_weights))
-    classifier, metrics = train_inspection(
-        train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
-                                                  batch_size=config.batch_size,
-                                                  seed=config.seed, lr=config.lr,
-                                                  photometric=config.augment),
-        device=device, on_epoch=on_epoch, init=config.init)
+    with epoch_bar("inspection classifier", config.epochs) as on_epoch:
+        classifier, metrics = train_inspection(
+            train_set, val_set, InspectionTrainConfig(epochs=config.epochs,
+                                                      batch_size=config.batch_size,
+                                                      seed=config.seed, lr=config.lr,
+                                                      photometric=config.augment),
+            device=device, on_epoch=on_epoch, init=config.init)
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)

@@ -10,15 +10,12 @@ calibration and the sessions it is used with can be checked to come from the sam
 
 from __future__ import annotations
 
-import collections
 import hashlib
-import io
-import pickle
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs.common import sorting_threshold
+from perception.checkpoint import checkpoint_config
 
 __all__ = [
     "CALIBRATION_FILE",
@@ -27,7 +24,6 @@ __all__ = [
     "ROBOT_FUSION_FILE",
     "ROBOT_INSPECTION_FILE",
     "PerceptionModels",
-    "checkpoint_config",
     "model_mismatch",
     "read_fused_calibration",
 ]
@@ -270,44 +266,3 @@ def model_mismatch(a: dict | None, b: dict | None) -> list[str]:
     a, b = a or {}, b or {}
     return [k for k in HASH_KEYS if a.get(k) != b.get(k)]
 
-
-def _left_out(*args, **kwargs) -> None:
-    """What a tensor, or any other torch object, becomes in :func:`checkpoint_config`."""
-    return None
-
-
-class _ConfigReader(pickle.Unpickler):
-    """A checkpoint's pickle with its tensors left out: torch's types become
-    :func:`_left_out`, storages None, and any type but ``OrderedDict`` is refused (no code of
-    the file's choosing runs)."""
-
-    def find_class(self, module: str, name: str):
-        if module == "torch" or module.startswith("torch."):
-            return _left_out
-        if (module, name) == ("collections", "OrderedDict"):
-            return collections.OrderedDict
-        raise pickle.UnpicklingError(f"unexpected type {module}.{name} in a checkpoint")
-
-    def persistent_load(self, pid) -> None:
-        return None
-
-
-def checkpoint_config(path: Path | str) -> dict:
-    """The ``config`` of a checkpoint that ``torch.save`` wrote as ``{"config": {...}, ...}``
-    (every model here), read without loading torch (:class:`_ConfigReader`).
-
-    Raises
-    ------
-    ValueError
-        Where the archive holds no model configuration.
-    OSError, zipfile.BadZipFile, pickle.UnpicklingError, EOFError, ...
-        Where ``path`` is no readable checkpoint.
-    """
-    with zipfile.ZipFile(path) as archive:
-        name = next((n for n in archive.namelist() if n.endswith("/data.pkl")), None)
-        if name is None:
-            raise ValueError(f"{path} is not a torch checkpoint (no data.pkl)")
-        data = _ConfigReader(io.BytesIO(archive.read(name))).load()
-    if not isinstance(data, dict) or not isinstance(data.get("config"), dict):
-        raise ValueError(f"{path} holds no model configuration")
-    return dict(data["config"])

@@ -1,7 +1,7 @@
 """The ``train`` stage: read a labelled dataset, train the state classifier or the detector.
 
 The libraries (:mod:`state_abstraction`, :mod:`perception`) train on samples held in memory and
-read no dataset; this stage reads them with :mod:`recordings.dataset` and chooses which
+read no dataset; this stage reads them with :mod:`recordings.labels.dataset` and chooses which
 images the detector trains on. Both write into ``out`` (checkpoints, a metrics file).
 
 Examples
@@ -16,6 +16,8 @@ Examples
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -37,24 +39,14 @@ EMPTY_INSPECTION_SHARE = 0.15
 INSPECTION_REPEAT = 3
 
 
-class _EpochBar:
-    """A progress bar over epochs, moved by the trainers' ``on_epoch`` records (so a resumed
-    run starts where it left off)."""
+@contextmanager
+def epoch_bar(desc: str, epochs: int) -> Iterator[Callable[[dict], None]]:
+    """A progress bar over epochs; yields the trainers' ``on_epoch``, which moves it to each
+    record's epoch (so a resumed run starts where it left off)."""
+    from tqdm import tqdm
 
-    def __init__(self, desc: str, epochs: int) -> None:
-        from tqdm import tqdm
-
-        self.bar = tqdm(total=epochs, desc=desc, unit="epoch")
-
-    def update(self, record: dict) -> None:
-        self.bar.n = int(record["epoch"]) + 1
-        self.bar.refresh()
-
-    def __enter__(self) -> _EpochBar:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.bar.close()
+    with tqdm(total=epochs, desc=desc, unit="epoch") as bar:
+        yield lambda record: bar.update(int(record["epoch"]) + 1 - bar.n)
 
 
 def _metadata(root: Path) -> dict:
@@ -105,9 +97,9 @@ def train_state_classifier(config: ClassifierTrainConfig) -> dict:
         if not splits[split]:
             raise ValueError(f"split {split!r} of {', '.join(map(str, config.data))} holds no "
                              f"complete step of {model.frames} frames")
-    with _EpochBar("state classifier", model.epochs) as bar:
+    with epoch_bar("state classifier", model.epochs) as on_epoch:
         return train_classifier(splits["train"], splits["val"], splits["test"], model,
-                                config.out, on_epoch=bar.update,
+                                config.out, on_epoch=on_epoch,
                                 device=resolve_device(config.device), init=config.init,
                                 photometric=PhotometricAugment() if config.augment else None)
 
@@ -145,13 +137,13 @@ def train_detector(config: DetectorTrainConfig) -> dict:
     Returns
     -------
     dict
-        The metrics of :func:`perception.train.train_detector` (``val``, ``test`` mAP,
+        The metrics of :func:`perception.train_detector.train_detector` (``val``, ``test`` mAP,
         ``history``, ...); the checkpoint is ``config.out / "detector.pt"``.
     """
     import torch
 
-    from perception.train import TrainConfig
-    from perception.train import train_detector as train
+    from perception.train_detector import TrainConfig
+    from perception.train_detector import train_detector as train
 
     log_config("train detector", config)
     if config.resume and not (config.out / "detector_last.pt").is_file():
@@ -177,7 +169,7 @@ def train_detector(config: DetectorTrainConfig) -> dict:
     model = TrainConfig(epochs=config.epochs, images_per_epoch=config.images_per_epoch,
                         batch_size=config.batch_size, seed=config.seed, lr=config.lr,
                         photometric=config.augment)
-    with _EpochBar("detector", model.epochs) as bar:
+    with epoch_bar("detector", model.epochs) as on_epoch:
         return train(images["train"], images["val"], images["test"], model, config.out,
-                     resume=config.resume, on_epoch=bar.update,
+                     resume=config.resume, on_epoch=on_epoch,
                      device=resolve_device(config.device), init=config.init)

@@ -15,7 +15,7 @@ from perception.assign import assign, decode, detection_loss
 from perception.data import Sample, augment, letterbox, to_canvas, to_samples
 from perception.detector import postprocess
 from perception.model import grid_points
-from perception.train import TrainConfig, train_detector
+from perception.train_detector import TrainConfig, train_detector
 
 TINY = DetectorConfig(width=128, height=96, channels=4)
 
@@ -112,7 +112,7 @@ def test_loss_is_finite_and_falls_on_one_batch():
 
 
 def test_tiny_training_run_checkpoints_and_resumes_exactly(tiny_images, tmp_path, monkeypatch):
-    import perception.train as train_module
+    import perception.train_detector as train_module
 
     config = TrainConfig(epochs=4, images_per_epoch=16, batch_size=4, lr=1e-2, seed=1)
     splits = tiny_images["train"], tiny_images["val"], tiny_images["test"]

@@ -96,7 +96,7 @@ def test_the_state_classifier_augments_its_training_steps_only(spy, tmp_path):
 
 
 def test_the_detector_augments_its_training_images_only(spy, tmp_path):
-    from perception.train import TrainConfig, evaluate_detector, train_detector
+    from perception.train_detector import TrainConfig, evaluate_detector, train_detector
 
     rng = np.random.default_rng(0)
     images = [(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), [[10, 10, 30, 30]], [k % 2])
@@ -138,7 +138,7 @@ def test_the_inspection_classifier_augments_its_training_crops_only(spy):
 
 
 def test_a_detector_run_saved_before_augmentation_resumes_as_trained_without_it(tmp_path):
-    from perception.train import TrainConfig, train_detector
+    from perception.train_detector import TrainConfig, train_detector
 
     rng = np.random.default_rng(1)
     images = [(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), [[10, 10, 30, 30]], [0])

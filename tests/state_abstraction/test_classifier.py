@@ -203,7 +203,8 @@ def test_forward_shapes():
 
 
 ALLOWED = {"perception": {"torch", "torchvision", "cv2", "numpy", "perception"},
-           "state_abstraction": {"torch", "numpy", "cv2", "irl", "state_abstraction"}}
+           "state_abstraction": {"torch", "numpy", "cv2", "irl", "perception",
+                                 "state_abstraction"}}
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))

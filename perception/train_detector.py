@@ -1,4 +1,5 @@
-"""Training and evaluation of the detector from scratch on labelled images.
+"""Training (through :func:`perception.trainer.fit`) and evaluation of the detector on
+labelled images.
 
 Checkpoints: ``OUT/detector_last.pt`` after every epoch (network, EMA, optimiser, scheduler,
 epoch, configuration: what ``resume`` continues from), ``OUT/detector.pt`` the EMA weights of the
@@ -10,9 +11,6 @@ the ``train`` stage (:mod:`onionsort.stages.train`) reads them from a dataset.
 
 from __future__ import annotations
 
-import copy
-import json
-import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -22,15 +20,15 @@ import numpy as np
 import torch
 
 from perception.assign import detection_loss
+from perception.checkpoint import load_checkpoint, write_json
 from perception.data import LabelledImage, Sample, augment, to_samples
-from perception.detector import Detector, postprocess, save_weights
+from perception.detector import Detector, postprocess
 from perception.metrics import mean_average_precision
 from perception.model import DetectorConfig, DetectorNet, grid_points
 from perception.photometric import PhotometricAugment
+from perception.trainer import ema, fit
 
 __all__ = ["TrainConfig", "evaluate_detector", "train_detector"]
-
-logger = logging.getLogger(__name__)
 
 #: Score threshold when measuring mAP (low, as is usual: mAP integrates over scores).
 EVAL_SCORE_THRESHOLD = 0.01
@@ -92,10 +90,6 @@ def evaluate_detector(net: DetectorNet, samples: list[Sample], batch_size: int =
     return mean_average_precision(gts, dts)
 
 
-def _cpu(state: dict) -> dict:
-    return {k: v.detach().cpu() for k, v in state.items()}
-
-
 def _schedule(step: int, total: int, warmup: int) -> float:
     if step < warmup:
         return (step + 1) / warmup
@@ -122,13 +116,9 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     resume : bool
         Continue the run in ``out`` from ``detector_last.pt``, exactly (same images, same
         configuration).
-    on_epoch : callable, optional
-        Called after each epoch with its history record (``epoch``, ``train_loss``, val mAP),
-        e.g. to draw a progress bar; ``epoch`` counts from 0 (from the resumed epoch on
-        ``resume``).
-    device : str or torch.device
-        Where to train; on CUDA in mixed precision (float16 autocast, a gradient scaler), on
-        the CPU in float32.
+    on_epoch, device
+        As :func:`perception.trainer.fit`'s (``epoch`` counts from 0, from the resumed epoch
+        on ``resume``).
     init : path, optional
         A detector checkpoint (:meth:`perception.Detector.save`) to start from instead of
         random weights: fine-tuning (its configuration must be ``net_config``).
@@ -152,8 +142,6 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
     train_samples = to_samples(train, net_config.width, net_config.height)
     val_samples = to_samples(val, net_config.width, net_config.height)
     device = torch.device(device)
-    amp = device.type == "cuda"
-    scaler = torch.amp.GradScaler("cuda", enabled=amp)
     net = DetectorNet(net_config)
     if init is not None:
         start_from = Detector.load(init).net
@@ -162,85 +150,45 @@ def train_detector(train: Sequence[LabelledImage], val: Sequence[LabelledImage],
                              f"not {net_config}")
         net.load_state_dict(start_from.state_dict())
     net = net.to(device)
-    ema = copy.deepcopy(net).eval()
+    average = ema(net, config.ema_decay)
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     n_epoch = min(config.images_per_epoch, len(train_samples))
     per_epoch = math.ceil(n_epoch / config.batch_size)
     total, warmup = config.epochs * per_epoch, int(config.warmup_epochs * per_epoch)
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: _schedule(k, total, warmup))
-    start, history, best = 0, [], -1.0
-    if resume:
-        ckpt = torch.load(last, map_location=device, weights_only=False)
+    ckpt = load_checkpoint(last, "detector training checkpoint") if resume else None
+    if ckpt is not None:
         # a run saved before the field existed trained without photometric augmentation
         saved = {"photometric": False, **ckpt["train_config"]}
         if saved != asdict(config) or ckpt["config"] != net_config.to_dict():
             raise ValueError(f"cannot resume from {last}: it was trained with "
                              f"{ckpt['train_config']}, {ckpt['config']}")
-        net.load_state_dict(ckpt["model"])
-        ema.load_state_dict(ckpt["ema"])
-        opt.load_state_dict(ckpt["optimizer"])
-        sched.load_state_dict(ckpt["scheduler"])
-        torch.set_rng_state(ckpt["torch_rng"])
-        rng.bit_generator.state = ckpt["numpy_rng"]
-        start, history, best = ckpt["epoch"] + 1, ckpt["history"], ckpt["best"]
-        logger.info("resuming from epoch %d of %d", start, config.epochs)
     points, strides = grid_points(net_config.height, net_config.width)
     points, strides = points.to(device), strides.to(device)
-    step = start * per_epoch
-    photometric = PhotometricAugment() if config.photometric else None
-    for epoch in range(start, config.epochs):
-        net.train()
+
+    def batches(epoch: int):
         order = rng.permutation(len(train_samples))[:n_epoch]
-        losses = []
         for i in range(0, len(order), config.batch_size):
             x, targets = _batch([augment(train_samples[j], rng)
                                  for j in order[i:i + config.batch_size]], device)
-            if photometric is not None:  # a camera of its own for each image
-                x = torch.stack([photometric(image) for image in x])
-            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-                logits, ltrb = net(x)
-            loss, _ = detection_loss(logits.float(), ltrb.float(), points, strides, targets)
-            opt.zero_grad()
-            scaler.scale(loss).backward()
-            scaler.unscale_(opt)
-            torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
-            scaler.step(opt)
-            scaler.update()
-            sched.step()
-            step += 1
-            decay = config.ema_decay * (1 - math.exp(-step / 200))
-            with torch.no_grad():
-                for e, p in zip(ema.state_dict().values(), net.state_dict().values(),
-                                strict=True):
-                    if e.dtype.is_floating_point:
-                        e.mul_(decay).add_(p.detach(), alpha=1 - decay)
-                    else:
-                        e.copy_(p)
-            losses.append(loss.item())
-        metrics = evaluate_detector(ema, val_samples)
-        history.append({"epoch": epoch, "train_loss": float(np.mean(losses)),
-                        **{f"val_{k}": v for k, v in metrics.items()}})
-        logger.info("epoch %d: %s", epoch, history[-1])
-        if on_epoch is not None:
-            on_epoch(history[-1])
-        if metrics["map50_95"] > best:
-            best = metrics["map50_95"]
-            save_weights(ema, out / "detector.pt")
-        tmp = last.with_name(last.name + ".partial")
-        torch.save({"model": _cpu(net.state_dict()), "ema": _cpu(ema.state_dict()),
-                    "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-                    "epoch": epoch, "history": history, "best": best,
-                    "config": net_config.to_dict(), "train_config": asdict(config),
-                    "torch_rng": torch.get_rng_state(), "numpy_rng": rng.bit_generator.state},
-                   tmp)
-        tmp.replace(last)
+            yield x, targets, 1.0
+
+    def validate(model: DetectorNet) -> tuple[float, dict]:
+        metrics = evaluate_detector(model, val_samples)
+        return metrics["map50_95"], {f"val_{k}": v for k, v in metrics.items()}
+
+    history = fit(net, opt, sched, batches,
+                  lambda outputs, targets: detection_loss(*outputs, points, strides, targets)[0],
+                  validate, epochs=config.epochs, device=device, clip_grad=10.0,
+                  augment=PhotometricAugment().each if config.photometric else None,
+                  average=average, on_best=lambda m: Detector(m, device).save(out / "detector.pt"),
+                  on_epoch=on_epoch, last=last, rng=rng, resume=ckpt, name="detector",
+                  meta={"config": net_config.to_dict(), "train_config": asdict(config)})
     best_net = Detector.load(out / "detector.pt", device=device).net
     test_samples = to_samples(test, net_config.width, net_config.height)
     result = {"val": evaluate_detector(best_net, val_samples),
               "test": evaluate_detector(best_net, test_samples) if test_samples else None,
               "history": history, "config": net_config.to_dict(), "train": asdict(config),
               "n_train_images": len(train_samples), "n_test_images": len(test_samples)}
-    tmp = out / "detector_metrics.json.partial"
-    tmp.write_text(json.dumps(result, indent=1))
-    tmp.replace(out / "detector_metrics.json")
+    write_json(out / "detector_metrics.json", result)
     return result
