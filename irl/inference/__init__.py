@@ -26,7 +26,7 @@ pass, exact at any range at about three times the cost), ``compiled`` (the numba
 ``workspace`` (scratch arrays kept between passes).
 """
 
-from irl.inference.api import forward_backward, log_forward_backward, posterior_stats
+from irl.inference.api import forward_backward, posterior_stats
 from irl.inference.compiled import BACKENDS, check_backend
 from irl.inference.packing import (
     ObservationFactors,
@@ -46,7 +46,6 @@ __all__ = [
     "check_backend",
     "forward_backward",
     "group_by_length",
-    "log_forward_backward",
     "observation_factors",
     "pack_demonstrations",
     "posterior_stats",

@@ -1,5 +1,5 @@
-"""Forward-backward's entry points: a batch (:func:`forward_backward`,
-:func:`log_forward_backward`) and demonstrations of any lengths in batches
+"""Forward-backward's entry points: a batch (:func:`forward_backward`; ``method="log"``
+keeps every message in log space) and demonstrations of any lengths in batches
 (:func:`posterior_stats`), each pass handed to the numba, scaled or log-space kernels.
 
 Layouts: ``log_pi[s, a]`` or ``log_pi[t, s, a]``, packed observations ``obs[n, t]`` (-1 =
@@ -152,31 +152,6 @@ def _passes(mdp, log_policy, emissions: _Emissions, obs, lengths, log_p0, ids, m
         if stats is not None:
             return stats
     return _log_pass(mdp, log_policy, emissions, obs, lengths, log_p0, ids)
-
-
-def log_forward_backward(
-    mdp: TabularMDP,
-    log_policy: np.ndarray,
-    obs: np.ndarray,
-    observation_model,
-    *,
-    lengths: np.ndarray | None = None,
-    factors: ObservationFactors | None = None,
-    log_initial: np.ndarray | None = None,
-    demo_ids: Sequence[int] | None = None,
-) -> PosteriorStats:
-    """Forward-backward with every message in log space: exact at any dynamic range.
-
-    Arguments as :func:`forward_backward`. The messages are pushed through the transition
-    operator with ``logsumexp`` over its positive entries (:meth:`TabularMDP.log_push_forward`,
-    :meth:`TabularMDP.log_expect_next`), ``O(T nnz(T))`` exponentials per demonstration.
-    """
-    obs, lengths = _check_batch(mdp, log_policy, obs, observation_model, lengths, factors,
-                                "log")
-    log_p0 = mdp.log_initial if log_initial is None else log_initial
-    ids = np.arange(obs.shape[0]) if demo_ids is None else np.asarray(demo_ids)
-    return _log_pass(mdp, log_policy, _Emissions(observation_model, obs, None), obs, lengths,
-                     log_p0, ids)
 
 
 def posterior_stats(
