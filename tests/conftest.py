@@ -21,6 +21,26 @@ def ray():
     ray.shutdown()
 
 
+@pytest.fixture(scope="session")
+def run_tool():
+    """``run_tool(name, script, *args, env=None)``: a tool of another project (Label Studio's
+    SDK, Ultralytics) reading our files in a child process (:func:`tests.tools.run_tool`), the
+    tool installed on first use into a folder of its own. Skipped where it cannot be installed
+    (no package registry), except in CI (``ONIONSORT_REQUIRE_TOOLS=1``): there it fails."""
+    from tests import tools
+
+    def run(name, script, *args, env=None):
+        try:
+            tools.install(name)
+        except RuntimeError as exc:
+            if os.environ.get("ONIONSORT_REQUIRE_TOOLS") == "1":
+                raise
+            pytest.skip(str(exc))
+        return tools.run_tool(name, script, *args, env=env)
+
+    return run
+
+
 @pytest.fixture
 def built(monkeypatch):
     """The estimators that ``run_trial``, ``learn`` and ``experiment`` build (all through

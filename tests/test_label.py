@@ -109,6 +109,26 @@ def test_the_yolo_export_has_ultralytics_layout(rendered, exported):
                        [(x0 + x1) / 2 / w, (y0 + y1) / 2 / h, (x1 - x0) / w, (y1 - y0) / h])
 
 
+def test_ultralytics_own_loader_reads_every_box_of_the_yolo_export(rendered, exported,
+                                                                     tmp_path, run_tool):
+    """Ultralytics' dataset check and loader (as its trainer reads a set) read every split of
+    the YOLO export: no corrupt, missing or empty label file, every image, and every box of
+    each class that the dataset holds."""
+    shutil.copytree(exported["yolo"], tmp_path / "yolo")  # the loader writes its caches
+    read = run_tool("ultralytics", "check_yolo.py", str(tmp_path / "yolo" / "data.yaml"),
+                    env={"YOLO_OFFLINE": "1", "YOLO_CONFIG_DIR": str(tmp_path / "config")})
+    assert read["names"] == {str(k): name for k, name in enumerate(CLASSES)}
+    for split in SPLITS:
+        records = read_records(rendered, split)
+        boxes = {str(k): sum(c == k for r in records for c in r["classes"])
+                 for k in range(len(CLASSES))}
+        empty = sum(not r["classes"] for r in records)
+        assert read[split] == {
+            "found": len(records) - empty, "missing": 0, "empty": empty, "corrupt": 0,
+            "images": len(records), "total": len(records),
+            "boxes": {k: n for k, n in boxes.items() if n}}, split
+
+
 def test_a_set_without_splits_in_jpeg_and_larger_splits_by_session_and_keeps_boxes(
         rendered, exported, tmp_path):
     """One COCO file and a states CSV without splits, images four times larger as JPEG:

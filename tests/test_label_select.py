@@ -119,6 +119,80 @@ def test_label_studio_tasks_carry_predictions_and_where_each_frame_is(sessions, 
                 assert f'value="{r["value"]["choices"][0]}"' in config
 
 
+def test_label_studios_sdk_validates_every_task_and_shows_the_least_sure_first(
+        sessions, tmp_path, run_tool):
+    """Label Studio's own SDK validates the labelling interface, every task's data and every
+    prediction (its score in [0, 1]); sorted as its Data Manager sorts them, by score
+    ascending, the tasks come in ``label select``'s ranking: the least sure step first."""
+    out = tmp_path / "ls"
+    assert main(["label", "select", *map(str, sessions), "--frames", "12", "--format",
+                 "labelstudio", "--device", "cpu", "--out", str(out)]) == 0
+    checked = run_tool("labelstudio", "check_labelstudio.py", str(out / "labeling_config.xml"),
+                       str(out / "tasks.json"))
+    tasks = json.loads((out / "tasks.json").read_text())
+    assert checked == {"config": [], "tasks": [True] * 12, "predictions": [[[]]] * 12}
+    uncertainty = {f"images/{f['image']}": f["uncertainty"]
+                   for f in json.loads((out / "selection.json").read_text())["frames"]}
+    for task in tasks:
+        assert task["predictions"][0]["score"] == pytest.approx(
+            1.0 - uncertainty[task["data"]["image"]])
+    shown = sorted(tasks, key=lambda t: t["predictions"][0]["score"])
+    ranked = [uncertainty[t["data"]["image"]] for t in shown]
+    assert ranked == sorted(uncertainty.values(), reverse=True)
+    assert ranked[0] > ranked[-1]  # the selection's steps differ in how sure they are
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("level", ["realistic", "paper", "hard"])
+def test_label_studios_sdk_validates_every_task_at_every_level(level, tmp_path, run_tool):
+    """The same at the harder levels (the clean one is above), on sessions of their own."""
+    rec = tmp_path / "rec"
+    assert main(["record", "--sessions", "3", "--steps-per-session", "8", "--seed", "47",
+                 "--difficulty", level, "--workers", "1", "--out", str(rec)]) == 0
+    out = tmp_path / "ls"
+    assert main(["label", "select", *map(str, sorted(rec.glob("*.mcap"))), "--frames", "24",
+                 "--format", "labelstudio", "--device", "cpu", "--out", str(out)]) == 0
+    checked = run_tool("labelstudio", "check_labelstudio.py", str(out / "labeling_config.xml"),
+                       str(out / "tasks.json"))
+    assert checked == {"config": [], "tasks": [True] * 24, "predictions": [[[]]] * 24}
+
+
+def test_accepting_every_label_studio_prediction_imports_the_predicted_labels(sessions,
+                                                                               tmp_path):
+    """Exported, "annotated" by accepting every prediction as it is, and imported with
+    ``label import --format labelstudio``: the dataset holds exactly the predicted labels."""
+    from irl.domains.onion_sorting import SORTING_TASK as task
+
+    out = tmp_path / "ls"
+    assert main(["label", "select", *map(str, sessions), "--frames", "12", "--format",
+                 "labelstudio", "--device", "cpu", "--out", str(out)]) == 0
+    tasks = json.loads((out / "tasks.json").read_text())
+    exported = _label_studio_export(tasks, lambda k, result: result)
+    (out / "export.json").write_text(json.dumps(exported))
+    back = tmp_path / "back"
+    assert main(["label", "import", str(out), "--format", "labelstudio",
+                 "--out", str(back)]) == 0
+    records = {r["image"]: r for split in ("train", "val", "test")
+               for r in read_records(back, split)}
+    assert len(records) == len(tasks)
+    for t in tasks:
+        rec = records[t["data"]["image"].rsplit("/", 1)[1]]
+        result = t["predictions"][0]["result"]
+        choices = {r["from_name"]: r["value"]["choices"][0] for r in result
+                   if r["type"] == "choices"}
+        for factor in ("onion", "end_effector", "prediction"):
+            assert task.value_name(factor, rec[factor]) == choices[factor]
+        assert task.action_names[rec["action"]] == choices["action"]
+        assert rec["occluded"] == (choices["occluded"] == "yes")
+        boxes = [r for r in result if r["type"] == "rectanglelabels"]
+        assert len(rec["boxes"]) == len(boxes)
+        for (x0, y0, x1, y1), r, c in zip(rec["boxes"], boxes, rec["classes"], strict=True):
+            v = r["value"]
+            assert [x0, y0, x1 - x0, y1 - y0] == pytest.approx(
+                [v["x"] * 3.2, v["y"] * 2.4, v["width"] * 3.2, v["height"] * 2.4], abs=2e-3)
+            assert ("good", "blemished")[c] == v["rectanglelabels"][0]
+
+
 def _label_studio_export(tasks: list, fix) -> list:
     """What Label Studio's JSON export gives once a person has labelled ``tasks`` (its import
     format): each task with an ``annotations`` entry whose result is the prediction's,

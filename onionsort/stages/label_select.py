@@ -20,7 +20,9 @@ The frames are written as a labelling task pre-annotated with the models' output
   those frames in ``inspection/`` in the same layout: what ``label import`` reads back once a
   person has corrected it;
 - ``labelstudio``: ``images/``, ``tasks.json`` in Label Studio's import format with
-  ``predictions`` and ``labeling_config.xml``, the interface that reads them.
+  ``predictions`` and ``labeling_config.xml``, the interface that reads them. A prediction's
+  ``score`` is the models' confidence in the step's state guess, one minus its uncertainty (in
+  [0, 1]): Label Studio's Data Manager shows the lowest score first, the least sure frame.
 
 ``selection.json`` lists the frames taken, each with its uncertainty.
 """
@@ -234,7 +236,7 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
             ls_tasks.append(LabelStudioTask(
                 f"images/{name(k, f)}", width, height, boxes,
                 [CLASSES[c] for c in np.asarray(det.classes, int)],
-                np.asarray(det.scores, float).tolist(), choices, -scores[k][t], where))
+                np.asarray(det.scores, float).tolist(), choices, 1.0 - scores[k][t], where))
     if config.format == "coco":
         write_coco(tmp / "annotations" / "instances_default.json", coco, CLASSES)
         write_states(tmp / STATES_FILE, rows, task)

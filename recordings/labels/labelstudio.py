@@ -36,7 +36,10 @@ _UPLOAD_PREFIX = re.compile(r"^[0-9a-f]{8}-")
 class LabelStudioTask:
     """One image to label: its path (relative), size, the predicted boxes (pixels), their
     class names and scores, the predicted state labels (``{name: value}``), an overall
-    ``score`` and ``data`` to carry along (``session``, ``step``, ``frame``)."""
+    ``score`` and ``data`` to carry along (``session``, ``step``, ``frame``).
+
+    ``score`` is the prediction's confidence, in [0, 1] as Label Studio requires; its Data
+    Manager shows the task with the lowest score first."""
 
     image: str
     width: int
@@ -50,6 +53,9 @@ class LabelStudioTask:
 
 
 def _task(t: LabelStudioTask, model: str) -> dict:
+    if not 0.0 <= t.score <= 1.0:
+        raise ValueError(f"a Label Studio prediction's score must be in [0, 1]; got {t.score} "
+                         f"for {t.image}")
     result = []
     for k, ((x0, y0, x1, y1), label, score) in enumerate(zip(t.boxes, t.labels, t.scores,
                                                             strict=True)):
