@@ -8,18 +8,24 @@ sorter's views of it) for each fusion rule, with its precision, recall and expec
 error; and how many sessions perception read backwards (more than half of their good/blemished
 reads the other class). ``--plots DIR`` draws the precision-recall curves.
 
-``--camera-shift SEED`` measures it all again through other cameras: each session and each
-robot line-up through a camera of its own drawn from SEED (white balance off by a colour
-temperature, another exposure and gamma, slight defocus, sensor noise, JPEG;
-``perception.camera_shift``), depth unchanged, and prints each figure unchanged and changed,
-with the drop. Use a seed that no training run used.
+``--camera-shift SEEDS`` measures it all again through other cameras, once per seed (11 or
+11,12,13): each session and each robot line-up through a camera of its own drawn from the seed
+(white balance off by a colour temperature, another exposure and gamma, slight defocus, sensor
+noise, JPEG; ``perception.camera_shift``), depth unchanged; ``--one-camera`` takes one camera
+per seed for every session and line-up instead, as a lab with one camera would. It prints each
+figure unchanged, through each seed's cameras, their mean, and the drops (how much worse than
+unchanged: a fall, or for an ECE and the sessions read backwards a rise) of the mean and of the
+worst seed. Use seeds that no training run or choice used.
 
 Examples
 --------
     onionsort eval-perception --data runs/heldout --split all
     onionsort eval-perception --data runs/fresh-paper --split all --views 4 --plots runs/pr
     onionsort eval-perception --data runs/heldout --split all --no-depth --json
-    onionsort eval-perception --data runs/fresh-realistic --split all --views 5 --camera-shift 2026
+    onionsort eval-perception --data runs/fresh-realistic --split all --views 5 \
+        --camera-shift 11,12,13
+    onionsort eval-perception --data runs/fresh-realistic --split all --camera-shift 3737 \
+        --one-camera
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from onionsort.configs.calibrate import PerceptionEvalConfig
 class EvalPerceptionCommand(PerceptionEvalConfig):
     """The command's options: the stage's, and ``--json``."""
 
-    json: bool = option(False, after="camera_shift", help="print one JSON object")
+    json: bool = option(False, after="one_camera", help="print one JSON object")
 
 
 def register(subparsers) -> None:
@@ -53,7 +59,7 @@ def run(args) -> int:
         print(json.dumps(r))
         return 0
     if "camera_shift" in r:
-        _print_shift(r, r["camera_shift"]["shifted"], r["camera_shift"]["seed"])
+        _print_shift(r["camera_shift"])
     else:
         _print_figures(r)
     for path in r.get("plots", []):
@@ -102,21 +108,27 @@ def _print_inspection(report: dict) -> None:
                       f"{f['ece_by_chance']:.3f})")
 
 
-def _print_shift(r: dict, shifted: dict, seed: int) -> None:
-    def num(x) -> str:
-        return "-" if x is None else f"{x:.3f}"
+def _print_shift(shift: dict) -> None:
+    """The figures through other cameras (:func:`onionsort.stages.calibrate.shift_summary`):
+    unchanged, each seed's, their mean, and the drops of the mean and of the worst seed."""
+    def num(x, width: int = 6, sign: str = "") -> str:
+        if x is None:
+            return f"{'-':>{width}s}"
+        return f"{x:>{width}d}" if isinstance(x, int) else f"{x:>{sign}{width}.3f}"
 
-    from onionsort.stages.calibrate import perception_figures
-
-    print(f"through other cameras (seed {seed}): each session and robot line-up a camera of "
-          "its own; depth unchanged")
-    before, after = perception_figures(r), perception_figures(shifted)
-    width = max(map(len, before))
-    print(f"  {'figure':{width}s}  unchanged  changed   drop")
-    for name, value in before.items():
-        other = after.get(name)
-        drop = "-" if value is None or other is None else f"{value - other:+.3f}"
-        print(f"  {name:{width}s}  {num(value):>9s}  {num(other):>7s}  {drop:>6s}")
-    print(f"  {'sessions read backwards':{width}s}  "
-          f"{r['session_swaps']['swapped']:>9d}  {shifted['session_swaps']['swapped']:>7d}  "
-          f"(of {r['session_swaps']['sessions']})")
+    seeds = shift["seeds"]
+    cameras = ("one camera for every session and robot line-up" if shift["one_camera"] else
+               "each session and robot line-up a camera of its own")
+    print(f"through other cameras (seed{'s' if len(seeds) > 1 else ''} "
+          f"{', '.join(map(str, seeds))}): {cameras}; depth unchanged; a drop is how much "
+          "worse than unchanged (for an ECE and the sessions read backwards, a rise)")
+    figures = {(f"{name} (of {shift['sessions']})" if name == "sessions read backwards"
+                else name): f for name, f in shift["figures"].items()}
+    width = max(map(len, figures))
+    columns = [f"{s:>6d}" for s in seeds] + ["  mean", "mean drop", "worst drop"]
+    print(f"  {'figure':{width}s}  unchanged  " + "  ".join(
+        f"{c:>6s}" if i < len(seeds) else c for i, c in enumerate(columns)))
+    for name, f in figures.items():
+        each = "  ".join(num(v) for v in f["changed"])
+        print(f"  {name:{width}s}  {num(f['unchanged'], 9)}  {each}  {num(f['mean'])}  "
+              f"{num(f['mean_drop'], 9, '+')}  {num(f['worst_drop'], 10, '+')}")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import argparse
 import numbers
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,13 +12,45 @@ from typing import ClassVar
 from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import TORCH_THREADS, ParallelOptions
 
-__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "check_camera_shift"]
+__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "camera_seeds", "check_camera_seeds",
+           "check_camera_shift"]
 
 
 def check_camera_shift(seed) -> None:
     """Refuse a ``camera_shift`` that is not a seed, an int >= 0 (numpy's ints are ints)."""
     if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"camera_shift must be a seed, an int >= 0; got {seed!r}")
+
+
+def check_camera_seeds(seeds) -> tuple[int, ...]:
+    """``seeds`` as a tuple of ints: one seed, or a list of them, each an int >= 0, none twice
+    and at least one; else a ``ValueError`` that names the first bad one."""
+    if isinstance(seeds, numbers.Integral) and not isinstance(seeds, bool):
+        seeds = (seeds,)
+    if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
+        raise ValueError(f"camera_shift must be seeds, ints >= 0; got {seeds!r}")
+    seeds = tuple(seeds)
+    if not seeds:
+        raise ValueError("camera_shift must name at least one seed; got none")
+    for seed in seeds:
+        check_camera_shift(seed)
+    repeated = next((s for i, s in enumerate(seeds) if s in seeds[:i]), None)
+    if repeated is not None:
+        raise ValueError(f"camera_shift names seed {repeated} twice; got {list(seeds)}")
+    return tuple(int(s) for s in seeds)
+
+
+def camera_seeds(text: str) -> tuple[int, ...]:
+    """``--camera-shift``'s text, for argparse ``type=``: comma-separated ints (checked by
+    :func:`check_camera_seeds` when the config is made)."""
+    parts = [x.strip() for x in text.split(",")]
+    try:
+        return tuple(int(x) for x in parts)
+    except ValueError:
+        bad = next(x for x in parts if not x.lstrip("-").isdigit())
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated seeds, ints >= 0 (e.g. 11,12,13); got {bad!r} in "
+            f"{text!r}") from None
 
 
 @documented
@@ -57,8 +90,9 @@ class CalibrateConfig(ParallelOptions):
 @dataclass(frozen=True)
 class PerceptionEvalConfig:
     """A dataset split to measure the perception models on: the detector, the state
-    classifier and the inspection; ``camera_shift`` draws the other cameras
-    (:class:`~onionsort.stages.calibrate.SessionCameras`)."""
+    classifier and the inspection; ``camera_shift`` draws the other cameras, once per seed
+    (:class:`~onionsort.stages.calibrate.SessionCameras`; one seed, an int, is a list of
+    one)."""
 
     data: Path = option(help="labelled dataset folder")
     split: str = option("test", help="split to evaluate on: train, val, test or all (test)")
@@ -68,16 +102,22 @@ class PerceptionEvalConfig:
                                           "(default: all the dataset holds)")
     plots: Path | None = option(None, metavar="DIR",
                                 help="draw the inspection's precision-recall curves into DIR")
-    camera_shift: int | None = option(None, metavar="SEED",
-                                      help="measure through other cameras too, drawn from SEED "
-                                           "(an int >= 0; default: none), and print each "
-                                           "figure unchanged and changed")
+    camera_shift: tuple[int, ...] | None = option(
+        None, metavar="SEEDS", type=camera_seeds,
+        help="measure through other cameras too, once per seed of SEEDS (ints >= 0, "
+             "comma-separated: 11,12,13; default: none), and print each figure unchanged, "
+             "through each seed's cameras, their mean and the worst drop")
+    one_camera: bool = option(False, help="with --camera-shift: one camera per seed for every "
+                                          "session and line-up (a lab's one camera), not one "
+                                          "camera a session")
     models: Path | None = common.models()
     device: str = common.device()
 
     def __post_init__(self) -> None:
         common.check_device(self.device)
         if self.camera_shift is not None:
-            check_camera_shift(self.camera_shift)
+            object.__setattr__(self, "camera_shift", check_camera_seeds(self.camera_shift))
+        elif self.one_camera:
+            raise ValueError("one_camera needs camera_shift: the seeds of the cameras")
         if self.views is not None and self.views < 1:
             raise ValueError(f"views must be >= 1; got {self.views}")

@@ -47,6 +47,7 @@ __all__ = [
     "eval_perception",
     "measure_perception",
     "perception_figures",
+    "shift_summary",
 ]
 
 logger = logging.getLogger(__name__)
@@ -296,16 +297,20 @@ def dataset_identity(root: Path | str) -> dict:
 class SessionCameras:
     """A dataset seen through other cameras: each session and each robot line-up through a
     camera of its own, ``CameraShift.draw((seed, kind, index))`` (kind 0 a session, 1 a
-    line-up; :mod:`perception.camera_shift`), on its colour images and inspection views alike.
-    An :data:`recordings.labels.dataset.ImageMap`."""
+    line-up; :mod:`perception.camera_shift`), on its colour images and inspection views alike;
+    with ``one_camera``, every image through the one camera ``CameraShift.draw(seed)``, as a
+    lab with one camera would take them. An :data:`recordings.labels.dataset.ImageMap`."""
 
     seed: int
+    one_camera: bool = False
 
     def __post_init__(self) -> None:
         check_camera_shift(self.seed)
 
     def camera(self, record: dict):
         """The camera of the session or line-up ``record`` belongs to."""
+        if self.one_camera:
+            return _camera(int(self.seed), None, None)
         robot = record.get("source", "human") == "robot"
         return _camera(int(self.seed), int(robot),
                        int(record["lineup"] if robot else record["session"]))
@@ -315,18 +320,21 @@ class SessionCameras:
 
 
 @functools.lru_cache(maxsize=4096)
-def _camera(seed: int, kind: int, index: int):
+def _camera(seed: int, kind: int | None, index: int | None):
     from perception.camera_shift import CameraShift
 
-    return CameraShift.draw((seed, kind, index))
+    return CameraShift.draw(seed if kind is None else (seed, kind, index))
 
 
 def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None
                     ) -> dict:
     """mAP of the detector, the state classifier's accuracy and the inspection on a dataset
-    split; with ``config.camera_shift``, the same again through other cameras
-    (:class:`SessionCameras`), under ``"camera_shift"``: ``seed`` and ``shifted`` (the same
-    keys, measured on the changed images)."""
+    split; with ``config.camera_shift``, the same again through other cameras, once per seed
+    (:class:`SessionCameras`), under ``"camera_shift"``: ``seeds``, ``one_camera``,
+    ``sessions`` (those with a class read, which may be read backwards), ``shifted`` (one
+    result per seed, the same keys as the unchanged one, measured on the changed images) and
+    ``figures`` (:func:`shift_summary`). Each seed's figures are those
+    that seed gives alone: a seed's cameras do not depend on the other seeds."""
     log_config("eval-perception", config)
     if config.plots is not None:
         check_output_folder(config.plots, "--plots")
@@ -338,8 +346,12 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
         out["plots"] = [str(p) for p in precision_recall_figure(
             out["inspection_classifier"], config.plots)]
     if config.camera_shift is not None:
-        out["camera_shift"] = {"seed": config.camera_shift, "shifted": _eval_figures(
-            models, config, SessionCameras(config.camera_shift))}
+        shifted = [_eval_figures(models, config, SessionCameras(seed, config.one_camera))
+                   for seed in config.camera_shift]
+        out["camera_shift"] = {"seeds": list(config.camera_shift),
+                               "one_camera": config.one_camera,
+                               "sessions": out["session_swaps"]["sessions"], "shifted": shifted,
+                               "figures": shift_summary(out, shifted)}
     return out
 
 
@@ -364,6 +376,41 @@ def perception_figures(r: dict) -> dict[str, float | None]:
                 out[f"{who}: fused by {rule}, recall"] = f["recall"]
                 out[f"{who}: fused by {rule}, ECE"] = f["ece"]
                 out[f"{who}: fused by {rule}, ECE by chance"] = f.get("ece_by_chance")
+    return out
+
+
+def _worse_when_higher(name: str) -> bool:
+    """Whether a figure of :func:`perception_figures` (or the sessions read backwards) is
+    worse when higher: a calibration error, a count of sessions read backwards."""
+    return "ECE" in name or name == "sessions read backwards"
+
+
+def shift_summary(unchanged: dict, shifted: list[dict]) -> dict[str, dict]:
+    """Each figure of :func:`perception_figures`, and ``"sessions read backwards"``, through
+    the cameras of several seeds: ``unchanged``, ``changed`` (one value per seed, in the
+    seeds' order), their ``mean``, the ``worst`` of them, and the drops, how much worse than
+    unchanged: ``mean_drop`` and ``worst_drop`` (a fall, or for an ECE and the sessions read
+    backwards a rise; negative where it got better). A figure that is None unchanged or
+    through a camera has None for what needs it."""
+    before = perception_figures(unchanged)
+    before["sessions read backwards"] = unchanged["session_swaps"]["swapped"]
+    afters = []
+    for r in shifted:
+        figures = perception_figures(r)
+        figures["sessions read backwards"] = r["session_swaps"]["swapped"]
+        afters.append(figures)
+    out = {}
+    for name, value in before.items():
+        changed = [a.get(name) for a in afters]
+        sign = -1.0 if _worse_when_higher(name) else 1.0
+        known = [v for v in changed if v is not None]
+        full = len(known) == len(changed) and bool(known)
+        mean = float(np.mean(known)) if full else None
+        worst = (max(known) if sign < 0 else min(known)) if full else None
+        out[name] = {
+            "unchanged": value, "changed": changed, "mean": mean, "worst": worst,
+            "mean_drop": None if value is None or mean is None else sign * (value - mean),
+            "worst_drop": None if value is None or worst is None else sign * (value - worst)}
     return out
 
 

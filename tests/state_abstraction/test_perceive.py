@@ -163,10 +163,13 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     assert not shifted  # never applied unless asked
     assert main([*argv, "--json", "--camera-shift", "11"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert result["camera_shift"]["seed"] == 11
+    shift = result["camera_shift"]
+    assert shift["seeds"] == [11] and shift["one_camera"] is False
+    assert shift["sessions"] == plain["session_swaps"]["sessions"]
     # the unchanged figures are those of a run without cameras; the changed ones are measured
     assert {k: v for k, v in result.items() if k != "camera_shift"} == plain
-    assert result["camera_shift"]["shifted"].keys() == plain.keys()
+    (one,) = shift["shifted"]
+    assert one.keys() == plain.keys()
     cameras = {camera for camera, _ in shifted}
     assert len(cameras) == 3  # one per session (3 sessions of 12 frames), main and close views
     assert {shape for _, shape in shifted} == {(240, 320, 3), (120, 160, 3)}
@@ -175,12 +178,16 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     assert main([*argv, "--json", "--camera-shift", "11"]) == 0
     assert json.loads(capsys.readouterr().out) == result
     assert {camera for camera, _ in shifted} == cameras
+    # one seed: its mean and its worst are its figure
+    for name, f in shift["figures"].items():
+        assert f["changed"] == [f["mean"]] == [f["worst"]], name
     from onionsort.commands.eval_perception import _print_shift
 
-    _print_shift(result, result["camera_shift"]["shifted"], 11)
+    _print_shift(shift)
     text = capsys.readouterr().out
-    assert "through other cameras (seed 11)" in text and "unchanged  changed" in text
-    assert "sessions read backwards" in text
+    assert "through other cameras (seed 11): each session and robot line-up a camera" in text
+    assert "unchanged      11    mean  mean drop  worst drop" in text
+    assert f"sessions read backwards (of {shift['sessions']})" in text
     # the fused calls' figures include the fused probability's calibration (ECE)
     from onionsort.stages.calibrate import perception_figures as figures
 
@@ -191,21 +198,116 @@ def test_eval_perception_through_other_cameras_only_when_asked(random_models, sm
     assert named["inspection clean robot: fused by noisy-or, ECE"] == 0.07
 
 
+def test_eval_perception_through_several_cameras_is_reproducible(random_models, small_data,
+                                                                 capsys, monkeypatch):
+    """``--camera-shift 11,12,13``: each seed's figures are those it gives alone, the mean and
+    the worst are over the seeds, and the whole is the same from the same seeds; with
+    ``--one-camera`` every session goes through the seed's one camera."""
+    argv = ["eval-perception", "--data", str(small_data), "--split", "all", "--models",
+            str(random_models), "--no-inspection", "--json"]
+    capsys.readouterr()
+    assert main([*argv, "--camera-shift", "11,12,13"]) == 0
+    several = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--camera-shift", "11,12,13"]) == 0
+    assert json.loads(capsys.readouterr().out) == several
+    assert main([*argv, "--camera-shift", "12"]) == 0
+    alone = json.loads(capsys.readouterr().out)["camera_shift"]
+    shift = several["camera_shift"]
+    assert shift["seeds"] == [11, 12, 13]
+    assert shift["shifted"][1] == alone["shifted"][0]
+    for name, f in shift["figures"].items():
+        assert f["changed"][1] == alone["figures"][name]["changed"][0]
+        if f["unchanged"] is None or None in f["changed"]:
+            continue
+        worse_high = "ECE" in name or name == "sessions read backwards"
+        assert f["mean"] == pytest.approx(np.mean(f["changed"]))
+        assert f["worst"] == (max if worse_high else min)(f["changed"])
+        sign = -1 if worse_high else 1
+        assert f["worst_drop"] == pytest.approx(sign * (f["unchanged"] - f["worst"]))
+        assert f["worst_drop"] >= f["mean_drop"] - 1e-12
+    from onionsort.commands.eval_perception import _print_shift
+
+    _print_shift(shift)
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("through other cameras (seeds 11, 12, 13)")
+    assert "unchanged      11      12      13    mean  mean drop  worst drop" in lines[1]
+    row = next(line for line in lines if "state: onion" in line).split()
+    f = shift["figures"]["state: onion"]
+    assert [float(x) for x in row[2:9]] == pytest.approx(
+        [f["unchanged"], *f["changed"], f["mean"], f["mean_drop"], f["worst_drop"]], abs=6e-4)
+    # one camera per seed for every session and line-up
+    from onionsort.stages.calibrate import SessionCameras
+    from perception.camera_shift import CameraShift
+
+    cameras = SessionCameras(12, one_camera=True)
+    assert cameras.camera({"session": 0}) == cameras.camera(
+        {"source": "robot", "lineup": 4}) == CameraShift.draw(12)
+    assert SessionCameras(11).camera({"session": 0}) != SessionCameras(13).camera(
+        {"session": 0})
+    used = set()
+    apply = CameraShift.apply
+
+    def spy(self, image):
+        used.add(self)
+        return apply(self, image)
+
+    monkeypatch.setattr(CameraShift, "apply", spy)
+    assert main([*argv, "--camera-shift", "12", "--one-camera"]) == 0
+    one = json.loads(capsys.readouterr().out)["camera_shift"]
+    assert one["one_camera"] is True and one["seeds"] == [12]
+    assert used == {CameraShift.draw(12)}
+
+
 def test_eval_perception_through_other_cameras_names_the_plots_it_wrote(tmp_path, capsys,
                                                                         monkeypatch):
     """``--camera-shift`` with ``--plots``: the table, then the plots written (as without)."""
     import onionsort.stages
+    from onionsort.stages.calibrate import shift_summary
 
     figures = {"map_by_view": {"all": {"map50": 0.8}}, "accuracy": {"onion": 1.0},
                "prediction_after_first_inspection": None, "occlusion_recall": 1.0,
                "occlusion_precision": 1.0, "session_swaps": {"sessions": 2, "swapped": 0}}
     plot = tmp_path / "pr" / "pr.png"
     monkeypatch.setattr(onionsort.stages, "eval_perception", lambda config: {
-        **figures, "plots": [str(plot)], "camera_shift": {"seed": 3, "shifted": figures}})
+        **figures, "plots": [str(plot)], "camera_shift": {
+            "seeds": [3], "one_camera": False, "sessions": 2, "shifted": [figures],
+            "figures": shift_summary(figures, [figures])}})
     assert main(["eval-perception", "--data", str(tmp_path), "--camera-shift", "3", "--plots",
                  str(tmp_path / "pr")]) == 0
     out = capsys.readouterr().out
     assert "through other cameras (seed 3)" in out and f"wrote {plot}" in out
+
+
+def test_shift_summary_takes_the_worst_seed_in_the_bad_direction():
+    """A figure's worst seed is its lowest, an ECE's and the sessions read backwards' their
+    highest; a drop is how much worse than unchanged; None stays None."""
+    from onionsort.stages.calibrate import shift_summary
+
+    def result(onion, ece, swapped, prediction=0.9):
+        level = {"found": 1.0, "rot_accuracy": 0.9, "view_accuracy": 0.8,
+                 "fused": {"noisy-or": {"accuracy": 0.9, "precision": 1.0, "recall": 0.8,
+                                        "ece": ece}}}
+        return {"map_by_view": {"all": {"map50": 0.8}}, "accuracy": {"onion": onion},
+                "prediction_after_first_inspection": prediction, "occlusion_recall": 1.0,
+                "occlusion_precision": 1.0, "session_swaps": {"sessions": 4,
+                                                              "swapped": swapped},
+                "inspection_classifier": {"levels": {"hard": {"robot": level}}}}
+
+    out = shift_summary(result(1.0, 0.05, 0), [result(0.9, 0.10, 1, None),
+                                               result(0.7, 0.02, 0, 0.8)])
+    onion = out["state: onion"]
+    assert onion["changed"] == [0.9, 0.7] and onion["worst"] == 0.7
+    assert onion["mean"] == pytest.approx(0.8) and onion["mean_drop"] == pytest.approx(0.2)
+    assert onion["worst_drop"] == pytest.approx(0.3)
+    ece = out["inspection hard robot: fused by noisy-or, ECE"]
+    assert ece["worst"] == 0.10 and ece["worst_drop"] == pytest.approx(0.05)
+    assert ece["mean_drop"] == pytest.approx(0.01)
+    swaps = out["sessions read backwards"]
+    assert swaps == {"unchanged": 0, "changed": [1, 0], "mean": 0.5, "worst": 1,
+                     "mean_drop": 0.5, "worst_drop": 1.0}
+    prediction = out["state: prediction after the first inspection"]
+    assert prediction["changed"] == [None, 0.8]
+    assert prediction["mean"] is prediction["worst"] is prediction["worst_drop"] is None
 
 
 def test_missing_models_name_the_training_command(random_models, tmp_path):
