@@ -167,6 +167,8 @@ CASES = [
      ["data_none is not a dataset folder"]),
     (["label", "select", "{d}/two_frames.mcap", "--frames", "0", "--out", "{d}/x"],
      ["frames must be >= 1; got 0"]),
+    (["label", "select", "{d}/unperceived.mcap", "--frames", "3", "--recall", "--out",
+      "{d}/x"], ["unperceived.mcap carries no ground truth", "--recall"]),
     (["label", "select", "{d}/garbage.mcap", "--frames", "5", "--out", "{d}/x"],
      ["garbage.mcap", "not an MCAP file"]),
     (["label", "import", "{d}/afile", "--format", "yolo", "--out", "{d}/x"],
@@ -505,7 +507,8 @@ _FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources/video.py", "-
 #: Which commands print the messages of a module of ``onionsort/commands`` or
 #: ``onionsort/stages`` (by the module's name).
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
-                    "calibrate": ["calibrate", "eval-perception"]}
+                    "calibrate": ["calibrate", "eval-perception"],
+                    "label_select": ["label"]}
 _SHARED = {"base", "models", "parallel", "__init__", "_args"}
 #: Which commands run a stage module's refusals (``calibrate.py``'s come from calibrate alone).
 _CALLER_COMMANDS = {**_MODULE_COMMANDS, "calibrate": ["calibrate"], "inspection": ["train"]}

@@ -96,6 +96,33 @@ def test_coco_selection_is_pre_annotated_and_comes_back_through_label_import(ses
     assert sum(len(read_records(back, s)) for s in ("train", "val", "test")) == 12
 
 
+def test_recall_scores_the_choice_against_the_truth(sessions, tmp_path, capsys):
+    """``--recall``: the wrong steps counted against the truth, as an oracle that compares the
+    whole state guess counts them; those chosen among them; each wrong step left out; the
+    choice itself the same as without ``--recall``."""
+    from onionsort.stages.models import PerceptionModels
+
+    argv = ["label", "select", *map(str, sessions), "--frames", "12", "--device", "cpu"]
+    assert main([*argv, "--out", str(tmp_path / "plain")]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--recall", "--out", str(tmp_path / "scored")]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads((tmp_path / "scored" / "selection.json").read_text())
+    plain = json.loads((tmp_path / "plain" / "selection.json").read_text())
+    assert doc["frames"] == plain["frames"] and "recall" not in plain
+    r = doc["recall"]
+    wrong = _wrong_steps(sessions, PerceptionModels.load(None, "cpu"))
+    picked = {(f["session"], f["step"]) for f in doc["frames"]}
+    assert (r["steps"], r["wrong"], r["taken"]) == (len(wrong), sum(wrong.values()), len(picked))
+    assert r["wrong_taken"] == sum(wrong[s] for s in picked)
+    assert {(m["session"], m["step"]) for m in r["missed"]} == {
+        s for s, w in wrong.items() if w and s not in picked}
+    assert all(m["wrong"] for m in r["missed"])
+    assert (f"against the truth: {r['wrong']} of {r['steps']} steps wrong" in out
+            and f"{r['wrong_taken']} of the {r['taken']} taken" in out)
+    assert out.count("  left out: session ") == len(r["missed"])
+
+
 def test_label_studio_tasks_carry_predictions_and_where_each_frame_is(sessions, tmp_path):
     out = tmp_path / "ls"
     assert main(["label", "select", *map(str, sessions[:2]), "--frames", "6", "--format",

@@ -15,7 +15,9 @@ state guess is wrong): the steps more likely wrong than right first, then in rou
 sessions; it writes them as a labelling task
 pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
 (what ``label import`` reads back once corrected), or Label Studio's import format with
-predictions.
+predictions. ``--recall``, on recorded sessions that carry the truth, also scores the choice:
+how many steps have a wrong state guess, how many of those chosen do, and each wrong step left
+out (the truth is read after choosing, never by the choice).
 
 ``label import`` reads such a folder, or what CVAT, Label Studio or Roboflow export
 (``<split>/_annotations.coco.json``; one file without splits; ``--format labelstudio``: Label
@@ -36,6 +38,7 @@ Examples
     onionsort label import yolo-set --format yolo --depth yolo-set/depth --out runs/lab-yolo
     onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
     onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
+    onionsort label select runs/sel/*.mcap --frames 60 --recall --out runs/sel-task
     onionsort label import runs/ls --format labelstudio --out runs/lab
 """
 
@@ -98,5 +101,15 @@ def run_select(args: argparse.Namespace) -> int:
     sessions = {f["session"] for f in chosen}
     print(f"chose {len(chosen)} frames ({len(steps)} steps of {len(sessions)} sessions) of "
           f"{result['steps_seen']} steps, those whose state guess is the most likely wrong")
+    if "recall" in result:
+        r = result["recall"]
+        ratio = "" if r["ratio"] is None else f": {r['ratio']:.1f} times as often"
+        print(f"against the truth: {r['wrong']} of {r['steps']} steps wrong "
+              f"({r['wrong'] / r['steps']:.3f}); {r['wrong_taken']} of the {r['taken']} "
+              f"taken ({r['wrong_taken'] / r['taken']:.3f}){ratio}; "
+              f"{len(r['missed'])} wrong steps left out")
+        for m in r["missed"]:
+            print(f"  left out: session {m['session']} step {m['step']}, uncertainty "
+                  f"{m['uncertainty']:.4f}, wrong: {', '.join(m['wrong'])}")
     print(f"wrote {args.out}")
     return 0

@@ -107,8 +107,9 @@ class LabelImportConfig:
 @dataclass(frozen=True, kw_only=True)
 class LabelSelectConfig:
     """``onionsort label select``: the sessions, how many frames, the output folder (new),
-    its format (``coco`` or ``labelstudio``), the models (None: the shipped ones) and where
-    torch runs them."""
+    its format (``coco`` or ``labelstudio``), whether to score the choice against the
+    sessions' truth (``recall``), the models (None: the shipped ones) and where torch runs
+    them."""
 
     sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION",
                                         help="recorded sessions (.mcap)")
@@ -120,6 +121,10 @@ class LabelSelectConfig:
                               "import reads back) or labelstudio (tasks.json with predictions "
                               "and labeling_config.xml)")
     out: Path = option(help="a new folder")
+    recall: bool = option(False, help="sessions that carry ground truth: also count the steps "
+                                      "whose state guess is wrong and how many of them the "
+                                      "frames chosen hold (the truth is read after choosing, "
+                                      "to score it only)")
     models: Path | None = common.models()
     device: str = common.device()
 

@@ -25,6 +25,10 @@ The frames are written as a labelling task pre-annotated with the models' output
   [0, 1]): Label Studio's Data Manager shows the lowest score first, the least sure frame.
 
 ``selection.json`` lists the frames taken, each with its uncertainty.
+
+With ``recall``, on sessions that carry ground truth, the choice is scored against the truth
+after it is made (:func:`recall`): how many steps have a wrong state guess, how many of the
+steps taken do, and each wrong step left out; ``selection.json`` holds that too.
 """
 
 from __future__ import annotations
@@ -38,8 +42,8 @@ from onionsort.configs.label import SELECT_FORMATS, LabelSelectConfig
 from onionsort.stages.base import log_config
 from onionsort.stages.label import STATES_FILE, _staging
 
-__all__ = ["SELECT_FORMATS", "SORTER_CONSISTENCY", "LabelSelectConfig", "select_frames",
-           "sorter_calls", "step_uncertainties"]
+__all__ = ["SELECT_FORMATS", "SORTER_CONSISTENCY", "LabelSelectConfig", "recall",
+           "select_frames", "sorter_calls", "step_uncertainties", "wrong_factors"]
 
 logger = logging.getLogger(__name__)
 
@@ -154,9 +158,42 @@ def _choose(scores: list[list[float]], frames_per_step: int, budget: int
     return taken
 
 
+def wrong_factors(step, guess, task) -> list[str]:
+    """What a step's state guess has wrong against the step's truth (its first frame's
+    ``state``): ``"occluded"`` where the occluded call is wrong, and on a step truly
+    unoccluded and called so, each factor of the task whose value differs."""
+    truth = step[0].state
+    bad = [] if bool(guess.occluded) == bool(truth["occluded"]) else ["occluded"]
+    if not truth["occluded"] and not guess.occluded:
+        bad += [f for f in task.factor_names
+                if task.value_name(f, getattr(guess, f)) != truth[f]]
+    return bad
+
+
+def recall(steps: list, perceived: list, scores: list[list[float]],
+           taken: list[tuple[int, int]], task) -> dict:
+    """The choice ``taken`` (``(session, step)`` pairs) scored against the sessions' truth:
+    ``steps`` and ``wrong`` (how many steps, and how many with a wrong state guess),
+    ``taken`` and ``wrong_taken`` (the same among those taken), ``ratio`` (the wrong share of
+    those taken over that of all steps; None where no step is wrong) and ``missed``: each
+    wrong step not taken, with its uncertainty and what it has wrong."""
+    wrong = {(k, t): wrong_factors(st, guess, task)
+             for k, (mine, seen) in enumerate(zip(steps, perceived, strict=True))
+             for t, (st, guess) in enumerate(zip(mine, seen, strict=True))}
+    chosen = set(taken)
+    n_wrong = sum(bool(w) for w in wrong.values())
+    hit = sum(bool(wrong[s]) for s in chosen)
+    return {"steps": len(wrong), "wrong": n_wrong, "taken": len(chosen), "wrong_taken": hit,
+            "ratio": (hit / len(chosen)) / (n_wrong / len(wrong)) if n_wrong else None,
+            "missed": [{"session": k, "step": t, "uncertainty": round(scores[k][t], 4),
+                        "wrong": w}
+                       for (k, t), w in sorted(wrong.items()) if w and (k, t) not in chosen]}
+
+
 def select_frames(config: LabelSelectConfig, models=None) -> dict:
     """Choose and write the frames (see the module docstring); returns ``frames`` (the list
-    of ``selection.json``) and ``steps_seen``."""
+    of ``selection.json``) and ``steps_seen``, and with ``config.recall`` the choice scored
+    against the truth, ``recall`` (:func:`recall`)."""
     from irl.domains.onion_sorting import SORTING_TASK as task
     from onionsort.stages.label import _check_new_folder
     from onionsort.stages.models import PerceptionModels
@@ -165,6 +202,12 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
     log_config("label select", config)
     _check_new_folder(config.out)
     sessions = [open_session(p) for p in config.sessions]
+    if config.recall:
+        bare = [str(p) for p, s in zip(config.sessions, sessions, strict=True)
+                if not s.has_ground_truth]
+        if bare:
+            raise ValueError(f"{', '.join(bare)} carries no ground truth (a sensor-only "
+                             "session): --recall scores the choice against the truth")
     models = PerceptionModels.load(config.models, config.device) if models is None else models
     fps = models.frames_per_step
     for path, s in zip(config.sessions, sessions, strict=True):
@@ -189,12 +232,18 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
         frames = steps[k][t][:config.frames] if fps > config.frames else steps[k][t]
         for f in frames:
             chosen.append((k, t, f))
+    scored = recall(steps, perceived, scores, taken, task) if config.recall else None
     with _staging(config.out) as tmp:
-        selection = _write(config, tmp, chosen, sessions, perceived, scores, models, task)
-    return {"frames": selection, "steps_seen": sum(len(s) for s in steps)}
+        selection = _write(config, tmp, chosen, sessions, perceived, scores, models, task,
+                           scored)
+    out = {"frames": selection, "steps_seen": sum(len(s) for s in steps)}
+    if scored is not None:
+        out["recall"] = scored
+    return out
 
 
-def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task) -> list:
+def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task,
+           scored: dict | None) -> list:
     from onionsort.stages.base import write_json
     from recordings.labels.coco import CocoImage, write_coco
     from recordings.labels.dataset import CLASSES, write_rgb_png
@@ -267,8 +316,10 @@ def _write(config, tmp: Path, chosen, sessions, perceived, scores, models, task)
         choices = {n: task.factors[n] for n in ("onion", "end_effector", "prediction")}
         choices.update(action=task.action_names, occluded=("no", "yes"))
         (tmp / "labeling_config.xml").write_text(labeling_config(CLASSES, choices))
-    write_json(tmp / "selection.json", {"measure": "the chance that the step's state guess is "
-                                                   "wrong, by the models' probabilities and "
-                                                   "what the sorter later did with the onion",
-                                        "frames": selection})
+    doc = {"measure": "the chance that the step's state guess is wrong, by the models' "
+                      "probabilities and what the sorter later did with the onion",
+           "frames": selection}
+    if scored is not None:
+        doc["recall"] = scored
+    write_json(tmp / "selection.json", doc)
     return selection
