@@ -319,6 +319,11 @@ CASES = [
      ["camera_shift names seed 11 twice", "[11, 12, 11]"]),
     (["eval-perception", "--data", "{d}/data_bad", "--one-camera"],
      ["one_camera needs camera_shift"]),
+    (["eval-posterior", "chess"], ["argument domain", "invalid choice", "'chess'"]),
+    (["eval-posterior", "sorting", "--problems", "0"], ["problems must be >= 1", "got 0"]),
+    (["eval-posterior", "sorting", "--noise", "1.5"], ["noise must be in [0, 1)", "got 1.5"]),
+    (["eval-posterior", "sorting", "--method", "nuts"],
+     ["--method", "invalid choice", "'nuts'", "'laplace'"]),
     # demo
     (["demo", "--quick", "--out", "{d}/afile/demo"], ["afile/demo", "cannot be created"]),
     (["demo", "--quick", "--out", "{d}/half"],
@@ -507,6 +512,7 @@ _FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources/video.py", "-
 #: Which commands print the messages of a module of ``onionsort/commands`` or
 #: ``onionsort/stages`` (by the module's name).
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
+                    "eval_posterior": ["eval-posterior"],
                     "calibrate": ["calibrate", "eval-perception"],
                     "label_select": ["label"]}
 _SHARED = {"base", "models", "parallel", "__init__", "_args"}

@@ -16,6 +16,7 @@ COMMAND_MODULES = [
     "onionsort.commands.perceive",
     "onionsort.commands.calibrate",
     "onionsort.commands.eval_perception",
+    "onionsort.commands.eval_posterior",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",
     "onionsort.commands.suggest",

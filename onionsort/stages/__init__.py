@@ -16,6 +16,8 @@ evaluate           :class:`EvaluateConfig`      :func:`evaluate`
 suggest            :class:`SuggestConfig`       :func:`suggest` -> states worth a demonstration
 demo               :class:`DemoConfig`          :func:`demo` (composes the stages above)
 experiment         :class:`ExperimentConfig`    :func:`run_experiment` (synthetic sweeps)
+eval-posterior     ``PosteriorEvalConfig``      ``eval_posterior`` (in
+                                                :mod:`onionsort.stages.eval_posterior`)
 report             :class:`ReportConfig`        :func:`report` -> ``RUN/report.md``
 =================  ===========================  ==========================================
 
