@@ -37,7 +37,11 @@ before timing).
    of 4 at the same size, which shows what linear scaling means on this machine's memory
    hierarchy.
 4. Forward-backward at S = 10,000 (factored sensor) against its floor: the same sparse
-   products, forward and backward, done by scipy alone on arrays of the same shapes.
+   products, forward and backward, done by scipy alone on arrays of the same shapes; and what
+   one block of :func:`irl._blas.one_blas_thread` costs (the fastest of 5 runs of 200 empty
+   blocks at a size that sets the limit, 10^5 states x actions), against that
+   forward-backward: irl holds BLAS to one thread only from ``S A`` = 10,000 on, where a
+   block's cost is nothing beside the work it holds.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ import os
 import resource
 import sys
 import time
+import timeit
 import tracemalloc
 from pathlib import Path
 
@@ -55,7 +60,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads; see th
 import numpy as np
 
 import irl
-from irl import _numba
+from irl import _blas, _numba
 from irl.inference import pack_demonstrations, posterior_stats, scratch_held
 from irl.solvers import OptimalQSolver, log_boltzmann_policy
 
@@ -379,6 +384,20 @@ def bench_floor(repeats: int) -> None:
     if NUMBA:
         print(f"    numba backend: {t_numba * 1e3:.0f} ms; ratio to the products "
               f"{t_numba / t_floor:.1f}x")
+    block = blas_block_cost()
+    print(f"    one block of irl._blas.one_blas_thread: {block * 1e6:.1f} microseconds (fastest "
+          f"of 5 x 200), {block / t_fb:.1e} of this forward-backward")
+
+
+def blas_block_cost() -> float:
+    """Seconds one empty block of :func:`irl._blas.one_blas_thread` costs at a size that sets
+    the limit: the fastest of 5 runs of 200 (wall time: threadpoolctl's work)."""
+    def block() -> None:
+        with _blas.one_blas_thread(10**5):
+            pass
+
+    block()  # threadpoolctl's first look at the loaded libraries is not the block's cost
+    return min(timeit.repeat(block, number=200, repeat=5)) / 200
 
 
 def main() -> None:

@@ -7,13 +7,13 @@ machine whose cores are busy the pool's threads spin waiting for each other: on 
 machine beside other jobs, one cold MMAP-BIRL gradient at 102,400 states took 8.98 s of CPU
 time with the default pool against 4.35 s on one thread (numba backend: 2.93 s against 1.42
 s), while at 10,000 states, under OpenBLAS's threshold, the two were the same
-(``bench/bench_irl_blas.py``). That threshold made the cost grow faster than the state count
-(x29 for x10.24 the states, against x14 on one thread).
+(docs/notes/2026-11-26-irl-cost-in-states.md). That threshold made the cost grow faster than
+the state count (x29 for x10.24 the states, against x14 on one thread).
 
 :func:`one_blas_thread` limits BLAS to one thread for the length of a block whose arrays are
 large enough for OpenBLAS to thread them; below, it does nothing, since a limiting block
-costs about 12 microseconds (``bench/blas_block_cost.py``). Layout: none (a context
-manager).
+costs about 12 microseconds (the last line of ``python bench/bench_irl.py``'s section [4]).
+Layout: none (a context manager).
 """
 
 from __future__ import annotations
