@@ -409,8 +409,9 @@ def shift_summary(unchanged: dict, shifted: list[dict]) -> dict[str, dict]:
         worst = (max(known) if sign < 0 else min(known)) if full else None
         out[name] = {
             "unchanged": value, "changed": changed, "mean": mean, "worst": worst,
-            "mean_drop": None if value is None or mean is None else sign * (value - mean),
-            "worst_drop": None if value is None or worst is None else sign * (value - worst)}
+            "mean_drop": None if value is None or mean is None else sign * (value - mean) + 0.0,
+            "worst_drop": (None if value is None or worst is None
+                           else sign * (value - worst) + 0.0)}  # + 0.0: no -0.0
     return out
 
 

@@ -305,6 +305,8 @@ def test_shift_summary_takes_the_worst_seed_in_the_bad_direction():
     swaps = out["sessions read backwards"]
     assert swaps == {"unchanged": 0, "changed": [1, 0], "mean": 0.5, "worst": 1,
                      "mean_drop": 0.5, "worst_drop": 1.0}
+    none = shift_summary(result(1.0, 0.05, 0), [result(1.0, 0.05, 0)])["sessions read backwards"]
+    assert str(none["mean_drop"]) == str(none["worst_drop"]) == "0.0"  # not -0.0
     prediction = out["state: prediction after the first inspection"]
     assert prediction["changed"] == [None, 0.8]
     assert prediction["mean"] is prediction["worst"] is prediction["worst_drop"] is None
