@@ -23,8 +23,6 @@ SMALLER = {("--frames", "3000"): ["--frames", "36", "--steps-per-session", "4",
                                   "--robot-onions", "10", "--robot-views", "2"],
            ("--frames", "240"): ["--frames", "18"], ("--epochs", "6"): ["--epochs", "1"],
            ("--epochs", "4"): ["--epochs", "1"]}
-#: The heading of docs/lab.md's measurement of fine-tuning, after the walk.
-MEASUREMENT = "## Does fine-tuning pay?"
 #: The lab's sessions: to label for training, held out to label for calibration, to learn from.
 USES = {"train-line": 3, "heldout-line": 3, "line": 2}
 
@@ -69,12 +67,7 @@ def _correct(task: Path, truth: dict) -> None:
 def test_every_command_of_the_lab_walk_runs(tmp_path, monkeypatch):
     from irl.domains.onion_sorting import SORTING_TASK
 
-    lines = (ROOT / "docs" / "lab.md").read_text().splitlines()
-    # the walk ends where the measurement of fine-tuning begins (its own commands, full size)
-    end = next((i + 1 for i, line in enumerate(lines) if line.startswith(MEASUREMENT)),
-               len(lines) + 1)
-    commands = [c for c in doc_commands(ROOT / "docs" / "lab.md")
-                if not c.inline and c.line < end]
+    commands = [c for c in doc_commands(ROOT / "docs" / "lab.md") if not c.inline]
     monkeypatch.chdir(tmp_path)
     os.symlink(ROOT / "onionsort", tmp_path / "onionsort")  # onionsort/models/...
     n = sum(USES.values())
