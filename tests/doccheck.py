@@ -512,7 +512,8 @@ STALE_MARKS = {
                                 r"|\bcommit [0-9a-f]{4,40}\b"),
     "an issue number": re.compile(r"\b(?:[Ii]ssues?|PRs?|[Pp]ull requests?) #?\d+"
                                   r"|(?<![\w&/#])#\d+(?![\w-])"),
-    "a load average": re.compile(r"\bload[ -]?averages?\b|\bloadavg\b"
+    "a load average": re.compile(r"\bload[ -]?averages?(?: (?:of|about|around|between|near|"
+                                 r"was|is|at))?:? ~?\d|\bloadavg\b"
                                  r"|\b(?:machine|CPU|system) load (?:of )?\d"),
 }
 

@@ -404,7 +404,8 @@ STALE = """# A page
 Measured on 2026-11-26 at commit 12b54eb (load average 3.2), as issue 40 asked; see #41.
 On Nov 26, 2026 and in November 2026 and on 26 November 2026, `7cd142f` again.
 Fine: [the note](notes/2026-11-26-study.md), [x](#5-fine-tune-on-a-mix), COCO 2017, a
-pull request 12, run `onionsort demo --seed 200`, 6,500 K, a face of 1e-9, deadbeef, 1234567.
+pull request 12, run `onionsort demo --seed 200`, 6,500 K, a face of 1e-9, deadbeef, 1234567,
+no load average on a page, at a load average of 19-21.
 
 [def]: notes/2026-11-23-default-beta.md
 """
@@ -420,12 +421,13 @@ def test_the_page_checker_names_each_stale_mark(tmp_path):
         ("docs/page.md:3", "a commit hash", "commit 12b54eb"),
         ("docs/page.md:3", "an issue number", "issue 40"),
         ("docs/page.md:3", "an issue number", "#41"),
-        ("docs/page.md:3", "a load average", "load average"),
+        ("docs/page.md:3", "a load average", "load average 3"),
         ("docs/page.md:4", "a date", "Nov 26, 2026"),
         ("docs/page.md:4", "a date", "November 2026"),
         ("docs/page.md:4", "a date", "26 November 2026"),
         ("docs/page.md:4", "a commit hash", "7cd142f"),
         ("docs/page.md:6", "an issue number", "pull request 12"),
+        ("docs/page.md:7", "a load average", "load average of 1"),
     ], problems
     long = _write(tmp_path, "docs/long.md", "# Long\n" + "line\n" * 400)
     assert page_problems(long, tmp_path) == [
