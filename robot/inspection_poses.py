@@ -11,7 +11,7 @@ __all__ = ["INSPECTION_TILT", "INSPECTION_VIEWS", "inspection_poses"]
 INSPECTION_VIEWS = 5
 """Views the Sawyer takes of every onion by default (see :func:`inspection_poses`): the fewest
 whose fused call at `paper` and `hard` was within 0.02 of the best over 1 to 8 views, on tuning
-frames of seed 8 (40 onions a level; docs/perception.md, *The robot's inspection, measured*)."""
+frames of seed 8 (40 onions a level; docs/notes/2026-11-25-robot-inspection-tuning.md)."""
 INSPECTION_TILT = np.deg2rad(40.0)
 """How far the tilted views turn the onion's underside towards the camera (radians)."""
 

@@ -9,6 +9,11 @@ checked. Placeholders in capitals (``RUN_DIR``, ``LEVEL``, ``N``) stand for valu
 accepted where a value goes, also where the option has ``choices`` or a ``type`` that would
 refuse it, but never as a (sub)command or a flag.
 
+A page of the manual (every markdown file under docs/ but the generated docs/cli.md and the
+dated notes of docs/notes/) says what is true today: it holds no date, commit hash, issue
+number or load average (those belong to a dated note), and no more than ``MAX_PAGE_LINES``
+lines.
+
 A link is checked where it is not code: ``[text](path#anchor)``, ``![alt](path)`` and
 ``[label]: path`` must name a file or folder of the repository relative to the linking file,
 and an anchor into a markdown file must be one of its headings' GitHub slugs. Links out of
@@ -37,7 +42,9 @@ __all__ = [
     "github_slug",
     "heading_anchors",
     "link_problems",
+    "manual_pages",
     "markdown_files",
+    "page_problems",
     "parse_problem",
     "placeholder_parser",
     "shell_commands",
@@ -486,4 +493,57 @@ def link_problems(path: Path, root: Path) -> list[str]:
             if anchor not in anchors:
                 problems.append(f"{where}:{line}: link {target}: no heading with anchor "
                                 f"#{anchor} in {resolved.relative_to(root.resolve()).as_posix()}")
+    return problems
+
+
+# -- the manual's pages ----------------------------------------------------------------------
+
+#: the most lines a page of the manual may have
+MAX_PAGE_LINES = 400
+_MONTH = (r"(?:January|February|March|April|May|June|July|August|September|October|November"
+          r"|December|Jan|Feb|Mar|Apr|Jun|Jul|Aug|Sept?|Oct|Nov|Dec)")
+#: what a page of the manual must not hold, by name: a dated, versioned or measured-once mark
+STALE_MARKS = {
+    "a date": re.compile(
+        r"\b(?:19|20)\d\d-(?:0[1-9]|1[0-2])-(?:0[1-9]|[12]\d|3[01])\b"  # 2026-11-26
+        rf"|\b{_MONTH}\.? (?:\d{{1,2}}(?:st|nd|rd|th)?,? )?(?:19|20)\d\d\b"  # Nov 26, 2026
+        rf"|\b\d{{1,2}} {_MONTH} (?:19|20)\d\d\b"),  # 26 November 2026
+    "a commit hash": re.compile(r"\b(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}\b"
+                                r"|\bcommit [0-9a-f]{4,40}\b"),
+    "an issue number": re.compile(r"\b(?:[Ii]ssues?|PRs?|[Pp]ull requests?) #?\d+"
+                                  r"|(?<![\w&/#])#\d+(?![\w-])"),
+    "a load average": re.compile(r"\bload[ -]?averages?(?: (?:of|about|around|between|near|"
+                                 r"was|is|at))?:? ~?\d|\bloadavg\b"
+                                 r"|\b(?:machine|CPU|system) load (?:of )?\d"),
+}
+
+#: a link's target, or a link definition's (``](docs/notes/2026-11-26-x.md)``, ``[x]: path``)
+_TARGET = re.compile(r"\]\([^)]*\)|^( {0,3}\[[^\]]+\]:)\s*\S+")
+
+
+def manual_pages(root: Path) -> list[Path]:
+    """The pages of the manual: every markdown file under docs/ but docs/cli.md (generated
+    from the parsers) and the dated notes under docs/notes/."""
+    docs = root / "docs"
+    return [p for p in sorted(docs.rglob("*.md"))
+            if p != docs / "cli.md" and docs / "notes" not in p.parents]
+
+
+def page_problems(path: Path, root: Path) -> list[str]:
+    """``file:line: what`` for each date, commit hash, issue number or load average on the
+    manual's page ``path`` (code included; link targets left out, so that a page may link a
+    dated note by its name), and for a page over ``MAX_PAGE_LINES`` lines."""
+    text = path.read_text(encoding="utf-8")
+    where = path.relative_to(root).as_posix()
+    problems = []
+    n = len(text.splitlines())
+    if n > MAX_PAGE_LINES:
+        problems.append(f"{where}: {n} lines, over {MAX_PAGE_LINES}: move what is history to a "
+                        "dated note in docs/notes/, or split the page")
+    for number, line in enumerate(text.splitlines(), 1):
+        line = _TARGET.sub(lambda m: m.group(1) or "]()", line)
+        for what, pattern in STALE_MARKS.items():
+            for match in pattern.finditer(line):
+                problems.append(f"{where}:{number}: {what}, {match.group()!r} (it belongs to a "
+                                "dated note in docs/notes/)")
     return problems

@@ -1,5 +1,7 @@
 """The docs stay true: docs/cli.md is what the parsers generate, every ``onionsort`` command
-in README.md and docs/ parses, and every link resolves inside the repository.
+in README.md and docs/ parses, every link resolves inside the repository, and the manual's
+pages (docs/ but cli.md and the dated notes) hold no date, commit hash, issue number or load
+average and no more than 400 lines each.
 
 The checkers (tests/doccheck.py) are themselves tested on small markdown files with known
 faults.
@@ -26,7 +28,9 @@ from tests.doccheck import (
     github_slug,
     heading_anchors,
     link_problems,
+    manual_pages,
     markdown_files,
+    page_problems,
     placeholder_parser,
     shell_commands,
 )
@@ -367,3 +371,75 @@ def test_the_link_checker_names_each_fault(tmp_path):
         "docs/page.md:7: link guide.md#also-nope: no heading with anchor #also-nope in "
         "docs/guide.md",
     ]
+
+
+# -- the manual's pages ----------------------------------------------------------------------
+
+def test_the_manual_says_what_is_true_today():
+    """No page of the manual carries a date, a commit hash, an issue number or a load average
+    (a study's history goes to a dated note in docs/notes/), and none is over 400 lines."""
+    pages = manual_pages(ROOT)
+    assert ROOT / "docs" / "architecture.md" in pages and ROOT / "docs" / "cli.md" not in pages
+    assert not any("notes" in p.relative_to(ROOT / "docs").parts for p in pages)
+    problems = [p for page in pages for p in page_problems(page, ROOT)]
+    assert not problems, "the manual's pages:\n" + "\n".join(problems)
+
+
+def test_every_note_is_dated_and_indexed():
+    notes = ROOT / "docs" / "notes"
+    index = (notes / "README.md").read_text(encoding="utf-8")
+    for note in sorted(notes.glob("*.md")):
+        if note.name == "README.md":
+            continue
+        date = re.match(r"(\d{4}-\d{2}-\d{2})-[a-z0-9-]+\.md$", note.name)
+        assert date, f"docs/notes/{note.name}: a note's name is YYYY-MM-DD-topic.md"
+        heading = note.read_text(encoding="utf-8").splitlines()[0]
+        assert heading.startswith("# ") and f"({date.group(1)})" in heading, \
+            f"docs/notes/{note.name}: its heading names its date, as in its file name"
+        assert f"]({note.name})" in index, f"docs/notes/README.md does not list {note.name}"
+
+
+STALE = """# A page
+
+Measured on 2026-11-26 at commit 12b54eb (load average 3.2), as issue 40 asked; see #41.
+On Nov 26, 2026 and in November 2026 and on 26 November 2026, `7cd142f` again.
+Fine: [the note](notes/2026-11-26-study.md), [x](#5-fine-tune-on-a-mix), COCO 2017, a
+pull request 12, run `onionsort demo --seed 200`, 6,500 K, a face of 1e-9, deadbeef, 1234567,
+no load average on a page, at a load average of 19-21.
+
+[def]: notes/2026-11-23-default-beta.md
+"""
+
+
+def test_the_page_checker_names_each_stale_mark(tmp_path):
+    page = _write(tmp_path, "docs/page.md", STALE)
+    problems = page_problems(page, tmp_path)
+    found = [(p.split(": ", 2)[0], p.split(": ", 2)[1].split(",")[0], p.split("'")[1])
+             for p in problems]
+    assert found == [
+        ("docs/page.md:3", "a date", "2026-11-26"),
+        ("docs/page.md:3", "a commit hash", "commit 12b54eb"),
+        ("docs/page.md:3", "an issue number", "issue 40"),
+        ("docs/page.md:3", "an issue number", "#41"),
+        ("docs/page.md:3", "a load average", "load average 3"),
+        ("docs/page.md:4", "a date", "Nov 26, 2026"),
+        ("docs/page.md:4", "a date", "November 2026"),
+        ("docs/page.md:4", "a date", "26 November 2026"),
+        ("docs/page.md:4", "a commit hash", "7cd142f"),
+        ("docs/page.md:6", "an issue number", "pull request 12"),
+        ("docs/page.md:7", "a load average", "load average of 1"),
+    ], problems
+    long = _write(tmp_path, "docs/long.md", "# Long\n" + "line\n" * 400)
+    assert page_problems(long, tmp_path) == [
+        "docs/long.md: 401 lines, over 400: move what is history to a dated note in docs/notes/, "
+        "or split the page"]
+    assert page_problems(_write(tmp_path, "docs/ok.md", "# Ok\n" + "line\n" * 399),
+                         tmp_path) == []
+
+
+def test_the_manual_leaves_out_the_cli_reference_and_the_notes(tmp_path):
+    for name in ("docs/a.md", "docs/cli.md", "docs/notes/2026-01-02-x.md", "docs/notes/README.md",
+                 "docs/figures/FIGURES.md", "README.md"):
+        _write(tmp_path, name, "# x\n")
+    assert [p.relative_to(tmp_path).as_posix() for p in manual_pages(tmp_path)] == [
+        "docs/a.md", "docs/figures/FIGURES.md"]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import glob
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -23,6 +24,9 @@ SMALLER = {("--frames", "3000"): ["--frames", "36", "--steps-per-session", "4",
                                   "--robot-onions", "10", "--robot-views", "2"],
            ("--frames", "240"): ["--frames", "18"], ("--epochs", "6"): ["--epochs", "1"],
            ("--epochs", "4"): ["--epochs", "1"]}
+#: The walk is docs/lab.md's numbered sections (``## 1. Record the line`` ...); the sections
+#: after them explain and measure, with commands of their own at full size.
+WALK_SECTION = re.compile(r"## \d+\. ")
 #: The lab's sessions: to label for training, held out to label for calibration, to learn from.
 USES = {"train-line": 3, "heldout-line": 3, "line": 2}
 
@@ -67,7 +71,13 @@ def _correct(task: Path, truth: dict) -> None:
 def test_every_command_of_the_lab_walk_runs(tmp_path, monkeypatch):
     from irl.domains.onion_sorting import SORTING_TASK
 
-    commands = [c for c in doc_commands(ROOT / "docs" / "lab.md") if not c.inline]
+    lines = (ROOT / "docs" / "lab.md").read_text().splitlines()
+    # the walk ends at the first heading after its last numbered section
+    last = max(i for i, line in enumerate(lines) if WALK_SECTION.match(line))
+    end = next((i + 1 for i, line in enumerate(lines[last + 1:], last + 1)
+                if line.startswith("## ")), len(lines) + 1)
+    commands = [c for c in doc_commands(ROOT / "docs" / "lab.md")
+                if not c.inline and c.line < end]
     monkeypatch.chdir(tmp_path)
     os.symlink(ROOT / "onionsort", tmp_path / "onionsort")  # onionsort/models/...
     n = sum(USES.values())
