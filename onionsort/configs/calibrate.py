@@ -31,14 +31,14 @@ class CalibrateConfig(ParallelOptions):
     """
 
     data: Path = option(help="labelled dataset folder")
-    split: str = option("test", help="the held-out split to use: train, val, test or all "
-                                     "(test)")
+    split: str = option("test", help="the held-out split to use: train, val, test or all")
     out: Path = option(help="folder for the calibration")
-    smoothing: float = option(1.0, help="additive smoothing of the confusion counts (1.0)")
+    smoothing: float = option(1.0, help="additive smoothing of the confusion counts")
     depth: bool = option(True, help="measure the classifier on colour alone (for sessions "
                                     "without depth)")
-    inspection: bool = option(True, help="measure without the inspection view (imported "
-                                         "videos have none)")
+    inspection: bool = option(True, help="measure without the inspection view (for a video "
+                                         "imported without --inspection; the onion's class "
+                                         "is then unobserved)")
     overwrite: bool = option(False, help="replace a calibration.json already in --out")
     models: Path | None = common.models()
     device: str = common.device()
@@ -61,17 +61,18 @@ class PerceptionEvalConfig:
     (:class:`~onionsort.stages.calibrate.SessionCameras`)."""
 
     data: Path = option(help="labelled dataset folder")
-    split: str = option("test", help="split to evaluate on: train, val, test or all (test)")
+    split: str = option("test", help="split to evaluate on: train, val, test or all")
     depth: bool = option(True, help="classifier on colour alone")
     inspection: bool = option(True, help="without the inspection view")
     views: int | None = option(None, help="fuse the Sawyer's first VIEWS views of each onion "
                                           "(default: all the dataset holds)")
     plots: Path | None = option(None, metavar="DIR",
-                                help="draw the inspection's precision-recall curves into DIR")
+                                help="draw the inspection's precision-recall curves into DIR "
+                                     "(default: none)")
     camera_shift: int | None = option(None, metavar="SEED",
-                                      help="measure through other cameras too, drawn from SEED "
-                                           "(an int >= 0; default: none), and print each "
-                                           "figure unchanged and changed")
+                                      help="measure through other cameras too, drawn from SEED, "
+                                           "an int >= 0, and print each figure unchanged and "
+                                           "changed (default: none)")
     models: Path | None = common.models()
     device: str = common.device()
 
