@@ -11,7 +11,7 @@ Examples
 --------
     pip install -e ".[dev]"                      # pdoc is in the dev extra
     python scripts/build_api_docs.py             # writes build/api/ (open build/api/irl.html)
-    python scripts/build_api_docs.py --out /tmp/api
+    python scripts/build_api_docs.py --out build/api-irl
 """
 
 from __future__ import annotations
