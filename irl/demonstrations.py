@@ -35,6 +35,21 @@ OCCLUDED = -1
 class Demonstration:
     """One demonstration: ``observations[t]`` is an observation index, or ``None`` if occluded.
 
+    What an index means is the observation model's: for a pair model ``o = s' * A + a'`` (the
+    state and action read), for a state model ``o = s'``. Build one from logged pairs with
+    :meth:`from_pairs` (for the identity model) or by computing the indices.
+
+    Parameters
+    ----------
+    observations : sequence of int or None
+        One entry per step, at least one: an index ``>= 0`` (numpy integers accepted), or
+        ``None`` for an occluded step.
+
+    Attributes
+    ----------
+    observations : tuple of int or None
+        As given, numpy integers made ``int``.
+
     Examples
     --------
     >>> Demonstration(observations=[3, None, 7]).n_occluded
@@ -120,7 +135,17 @@ class Demonstration:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Ground-truth states and actions of one demonstration, both shape (T,)."""
+    """Ground-truth states and actions of one demonstration.
+
+    Parameters
+    ----------
+    states, actions : array of int, shape (T,)
+        ``s_t`` and ``a_t``, non-negative, of equal length.
+
+    Attributes
+    ----------
+    states, actions : ndarray of int64, shape (T,)
+    """
 
     states: np.ndarray = field(repr=False)
     actions: np.ndarray = field(repr=False)
@@ -146,6 +171,15 @@ class StepTruth:
     States and actions are flat indices of the task (:mod:`irl.domains`). A simulator
     produces these and a session stores and reads them back; a sequence of them is a
     :class:`Trajectory` with its occlusion mask.
+
+    Attributes
+    ----------
+    step : int
+        The step's index in its session.
+    state, action, next_state : int
+        ``s_t``, ``a_t`` and ``s_{t+1}``.
+    occluded : bool
+        Whether the observer's view of the step was blocked.
     """
 
     step: int
@@ -177,6 +211,18 @@ def check_demonstrations(demos, n_observations: int) -> list[Demonstration]:
 
     Raises ``TypeError``/``ValueError`` naming the demonstration (``demos[i]``) and the step at
     fault.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        At least one.
+    n_observations : int
+        Every observation index must be below it.
+
+    Returns
+    -------
+    list of Demonstration
+        ``demos`` as a list.
     """
     if isinstance(demos, Demonstration):
         raise TypeError("demos must be a sequence of Demonstration; got a single Demonstration")
@@ -203,6 +249,17 @@ def pack_observations(demos: Sequence[Demonstration], n_observations: int) -> np
     """Stack demonstrations of one length into an array (N, T) with -1 for occluded steps.
 
     Raises ``ValueError`` naming the demonstration and step of an out-of-range observation.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        All of one length ``T``.
+    n_observations : int
+
+    Returns
+    -------
+    ndarray of int64, shape (N, T)
+        Observation indices, :data:`OCCLUDED` (-1) at occluded steps.
     """
     lengths = {len(d) for d in demos}
     if len(lengths) != 1:
@@ -224,6 +281,22 @@ def sample_trajectory(
     """Roll out a stochastic policy ``pi[s, a]`` for ``length`` steps.
 
     The first state is drawn from ``mdp.initial`` unless ``initial_state`` is given.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    policy : ndarray of shape (S, A)
+        ``pi[s, a]``, each row a distribution over actions.
+    length : int
+        Steps, >= 1.
+    seed : int, Generator or None
+    initial_state : int, optional
+        The first state instead of a draw (keyword only).
+
+    Returns
+    -------
+    Trajectory
+        The states visited and the actions taken.
     """
     rng = check_random_state(seed)
     length = check_int(length, "length", low=1)
@@ -253,6 +326,19 @@ def observe(
 
     The occluded steps are drawn uniformly without replacement; the others emit
     ``o ~ O[s_t, a_t, :]``.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+    observation_model : ObservationModel
+    occlusion : float in [0, 1]
+        The share of steps occluded.
+    seed : int, Generator or None
+
+    Returns
+    -------
+    Demonstration
+        What an observer of the trajectory sees.
     """
     rng = check_random_state(seed)
     occlusion = check_real(occlusion, "occlusion", low=0.0, high=1.0)

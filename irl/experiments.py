@@ -99,6 +99,16 @@ def parse_learner_setting(setting) -> str:
 
     ``"x0.50"`` becomes ``"x0.5"``, ``1.5`` and ``"1.50"`` become ``"1.5"``. A ``ValueError``
     names the value unless it is ``"paper"``, a positive finite factor or a positive finite beta.
+
+    Parameters
+    ----------
+    setting : str or float
+        ``"paper"``, ``"x<factor>"`` of the domain's beta, or a beta.
+
+    Returns
+    -------
+    str
+        The canonical label.
     """
     text = str(setting).strip().lower()
     if text == "paper":
@@ -122,6 +132,17 @@ def learner_domain(domain: Domain, setting: str) -> Domain:
     ``"x<f>"`` multiplies the domain's beta by ``f``; a number replaces it; ``"paper"`` is the
     paper's beta 0.03 with the domain's prior (on Forestworld the paper's N(-1, 0.5); the paper
     names no prior for sorting). The true reward and the observation model are unchanged.
+
+    Parameters
+    ----------
+    domain : Domain
+    setting : str
+        A learner setting (:func:`parse_learner_setting`).
+
+    Returns
+    -------
+    Domain
+        A copy of ``domain`` with the learners' beta.
     """
     label = parse_learner_setting(setting)
     if label == "paper":
@@ -213,6 +234,28 @@ class SweepConfig:
 
 @dataclass(frozen=True)
 class Trial:
+    """One fit of one method on one batch of one point of a sweep.
+
+    Attributes
+    ----------
+    domain : str
+        ``"forestworld"`` or ``"sorting"``.
+    method : str
+        A key of :data:`irl.learners.LEARNERS`.
+    occlusion, noise : float
+        The point.
+    batch : int
+        The batch's index at the point.
+    trajectories, length : int
+        Demonstrations in the batch, and steps in each.
+    seed : int
+        The sweep's seed (see :meth:`data_seed`).
+    learner : str
+        The learner setting (:func:`parse_learner_setting`).
+    backend : str
+        Forward-backward kernels (numpy or numba); not part of the data seeds.
+    """
+
     domain: str
     method: str
     occlusion: float
@@ -222,7 +265,6 @@ class Trial:
     length: int
     seed: int
     learner: str = "x1"
-    #: Forward-backward kernels (numpy or numba); not part of the data seeds.
     backend: str = "numpy"
 
     def data_seed(self, index: int) -> np.random.SeedSequence:
@@ -235,6 +277,33 @@ class Trial:
 
 @dataclass(frozen=True)
 class TrialResult:
+    """How one trial's fit did.
+
+    Attributes
+    ----------
+    method : str
+    occlusion, noise : float
+    batch : int
+        As the trial's.
+    ile, normalized_ile : float
+        :func:`irl.inverse_learning_error` and the same in percent of the expert's value.
+    seconds : float
+        The fit's wall-clock time (the only field that differs between runs).
+    n_iter : int
+        The learner's ``n_iter_``.
+    converged : bool
+        Whether the fit gave no :class:`~irl.ConvergenceWarning`.
+    trajectories, length : int
+    learner : str
+        As the trial's.
+    learner_beta : float
+        The beta of the learner setting (a learner without a beta ignores it).
+    exact_policy : int
+        1 where the learned policy is optimal in every (reachable) state, else 0.
+    backend : str
+        The trial's kernels, used by the learners that run forward-backward.
+    """
+
     method: str
     occlusion: float
     noise: float
@@ -249,12 +318,23 @@ class TrialResult:
     learner: str = "x1"
     learner_beta: float = math.nan
     exact_policy: int = 0
-    #: The trial's ``backend``, used by the learners that run forward-backward.
     backend: str = "numpy"
 
 
 def sample_batch(domain: Domain, trial: Trial) -> list:
-    """The trial's demonstrations, each from its own seed (see :meth:`Trial.data_seed`)."""
+    """The trial's demonstrations, each from its own seed (see :meth:`Trial.data_seed`).
+
+    Parameters
+    ----------
+    domain : Domain
+        The trial's domain at its noise.
+    trial : Trial
+
+    Returns
+    -------
+    list of Demonstration
+        ``trial.trajectories`` of them.
+    """
     policy = domain.expert_policy()
     demos = []
     for i in range(trial.trajectories):
@@ -265,7 +345,16 @@ def sample_batch(domain: Domain, trial: Trial) -> list:
 
 
 def run_trial(trial: Trial) -> TrialResult:
-    """Sample the trial's batch, fit its method with its learner setting, and score it."""
+    """Sample the trial's batch, fit its method with its learner setting, and score it.
+
+    Parameters
+    ----------
+    trial : Trial
+
+    Returns
+    -------
+    TrialResult
+    """
     domain = DOMAINS[trial.domain](noise=trial.noise)
     demos = sample_batch(domain, trial)
     told = learner_domain(domain, trial.learner)
@@ -322,6 +411,12 @@ def run_trials(
     that differ only in a learner setting their method does not use share one fit (see
     :func:`_shared_fits`), yielded for each of them. When the caller stops iterating early,
     trials not yet started are cancelled.
+
+    Yields
+    ------
+    index : int
+        The trial's position in ``trials``.
+    result : TrialResult
     """
     trials = list(trials)
     shared = _shared_fits(trials)
@@ -402,6 +497,17 @@ def run_sweep(
 
     ``workers`` and ``executor`` are those of :func:`run_trials`. With ``workers > 1`` timings
     share the machine, so compare run times only between sweeps run with the same ``workers``.
+
+    Parameters
+    ----------
+    config : SweepConfig
+    workers : int
+    executor : concurrent.futures.Executor, optional
+
+    Yields
+    ------
+    TrialResult
+        One per trial, in trial order.
     """
     trials = config.trials()
     where = "the given executor" if executor is not None else f"{max(workers, 1)} worker(s)"
@@ -445,6 +551,21 @@ def summarize(
     ``exact_policy_ci_low``/``_high``, ``ile_mean``, ``ile_std``, ``ile_ci_low``/``_high``,
     ``seconds_mean``, ``seconds_std``, ``seconds_ci_low``/``_high``, and ``converged`` (count).
     Intervals are reproducible from ``seed`` (the sweep's seed).
+
+    Parameters
+    ----------
+    results : iterable of TrialResult
+    seed : int
+        The sweep's seed, from which each group's bootstrap is drawn.
+    n_resamples : int
+        Bootstrap resamples.
+    confidence : float
+        The intervals' level, e.g. 0.95.
+
+    Returns
+    -------
+    list of dict
+        One row per group, in the order of the learners' registry, then the point.
     """
     table: dict[tuple, list[TrialResult]] = {}
     for r in results:
@@ -487,4 +608,15 @@ def _sort_key(key: tuple, first: TrialResult) -> tuple:
 
 
 def result_rows(results: Sequence[TrialResult]) -> list[dict]:
+    """The results as rows of a table (``results.csv``).
+
+    Parameters
+    ----------
+    results : sequence of TrialResult
+
+    Returns
+    -------
+    list of dict
+        Each result's fields by name.
+    """
     return [asdict(r) for r in results]

@@ -45,6 +45,18 @@ class TabularMDP:
         Initial state distribution ``p0[s]``.
     state_names, action_names, feature_names : sequence of str, optional
         Human-readable names, used in reports and plots.
+
+    Attributes
+    ----------
+    transitions : ndarray or sequence of sparse matrices
+        As given.
+    features : ndarray of shape (S, A, K)
+    discount : float
+    initial : ndarray of shape (S,)
+    n_states, n_actions, n_features : int
+        ``S``, ``A`` and ``K``.
+    state_names, action_names, feature_names : list of str
+        As given, or ``s0, s1, ...``, ``a0, ...``, ``phi0, ...``.
     """
 
     def __init__(

@@ -63,6 +63,21 @@ def inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta=None, *,
     reward ``learned_theta`` or, for a learner without a reward (behaviour cloning), its
     deterministic ``policy[s]`` (exactly one of the two). Both are evaluated under the true
     reward. Zero when ``pi_L`` is optimal.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    true_theta : ndarray of shape (K,)
+        The expert's reward weights.
+    learned_theta : ndarray of shape (K,), optional
+        The learned weights, whose greedy policy is scored.
+    policy : ndarray of int, shape (S,), optional
+        A learned deterministic policy instead (keyword only).
+
+    Returns
+    -------
+    float
+        The summed absolute value difference, >= 0.
     """
     v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta, policy)
     return float(np.abs(v_e - v_l).sum())
@@ -71,7 +86,21 @@ def inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta=None, *,
 def normalized_inverse_learning_error(mdp: TabularMDP, true_theta, learned_theta=None, *,
                                       policy=None) -> float:
     """ILE in percent of the expert's value: ``100 ||V_E - V_L||_1 / ||V_E||_1`` (``pi_L`` as
-    in :func:`inverse_learning_error`)."""
+    in :func:`inverse_learning_error`).
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    true_theta : ndarray of shape (K,)
+    learned_theta : ndarray of shape (K,), optional
+    policy : ndarray of int, shape (S,), optional
+        As in :func:`inverse_learning_error`: exactly one of the two.
+
+    Returns
+    -------
+    float
+        The ILE in percent (0 when the learned policy is optimal; not bounded by 100).
+    """
     v_e, v_l = _expert_and_learned_values(mdp, true_theta, learned_theta, policy)
     return float(100.0 * np.abs(v_e - v_l).sum() / max(np.abs(v_e).sum(), 1e-300))
 
@@ -83,6 +112,20 @@ def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta=None, states=None
     The learned action is the greedy one of ``learned_theta``, or ``policy[s]`` (exactly one of
     the two, as in :func:`inverse_learning_error`). An action counts as optimal if its true
     ``Q*`` is within 1e-9 of the best (ties allowed).
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    true_theta : ndarray of shape (K,)
+    learned_theta : ndarray of shape (K,), optional
+    states : array of int, optional
+        The states to count over; all by default.
+    policy : ndarray of int, shape (S,), optional
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 when the learned policy is optimal everywhere counted.
     """
     true_theta, learned_theta, policy = _check_learned(mdp, true_theta, learned_theta, policy)
     idx = (np.arange(mdp.n_states) if states is None
@@ -97,7 +140,18 @@ def policy_mismatch(mdp: TabularMDP, true_theta, learned_theta=None, states=None
 
 def reward_distance(true_theta, learned_theta) -> float:
     """Euclidean distance between unit-normalized weight vectors (the scale of a reward is not
-    identifiable from behaviour), in [0, 2]."""
+    identifiable from behaviour).
+
+    Parameters
+    ----------
+    true_theta, learned_theta : ndarray of shape (K,)
+        Neither all zeros.
+
+    Returns
+    -------
+    float
+        In [0, 2]: 0 for weights of the same direction, 2 for opposite ones.
+    """
     a = as_float_array(true_theta, "true_theta", ndim=1)
     b = as_float_array(learned_theta, "learned_theta", ndim=1)
     if a.shape != b.shape:

@@ -15,7 +15,21 @@ class GaussianPrior:
 
     ``mean`` and ``std`` are scalars or one value per weight. The log-density gradient is
     ``-(theta - mean) / std^2``; the paper's Eq. (gradient of the prior) has an extra factor
-    1/2, which is an erratum (see docs/paper-errata.md).
+    1/2, which is an erratum (see docs/paper-errata.md). With a Boltzmann-rational expert only
+    ``beta * theta`` is identified, so the prior's scale and the learner's ``beta`` are chosen
+    together (docs/api.md, "beta and the prior").
+
+    Parameters
+    ----------
+    mean : float or array of shape (K,), default 0.0
+        The prior mean of each weight.
+    std : float or array of shape (K,), default 1.0
+        The prior standard deviation of each weight, > 0.
+
+    Attributes
+    ----------
+    mean, std : ndarray of shape () or (K,)
+        As given, as float arrays.
     """
 
     def __init__(self, mean=0.0, std=1.0) -> None:

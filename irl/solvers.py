@@ -105,19 +105,53 @@ class OptimalSolution:
 
 
 def greedy_policy(Q: np.ndarray) -> np.ndarray:
-    """``argmax_a Q[s, a]`` (lowest action index on ties), shape (S,)."""
+    """``argmax_a Q[s, a]`` (lowest action index on ties).
+
+    Parameters
+    ----------
+    Q : ndarray of shape (S, A)
+
+    Returns
+    -------
+    ndarray of int, shape (S,)
+        ``policy[s] -> a``.
+    """
     return np.argmax(Q, axis=1)
 
 
 def boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
-    """``pi[s, a] = softmax_a(beta * Q[s, a])``."""
+    """``pi[s, a] = softmax_a(beta * Q[s, a])``.
+
+    Parameters
+    ----------
+    Q : ndarray of shape (S, A)
+    beta : float
+        The rationality: 0 is uniform, larger is greedier.
+
+    Returns
+    -------
+    ndarray of shape (S, A)
+        Each row sums to 1.
+    """
     return np.exp(log_boltzmann_policy(Q, beta))
 
 
 def log_boltzmann_policy(Q: np.ndarray, beta: float) -> np.ndarray:
     """``log pi[s, a]`` of the Boltzmann policy, computed stably (``log_softmax`` over the
     actions, one column at a time: numpy reduces a short contiguous axis slowly, and the
-    learners call this at every gradient)."""
+    learners call this at every gradient).
+
+    Parameters
+    ----------
+    Q : ndarray of shape (S, A)
+        (Any other shape: the softmax is over its axis 1.)
+    beta : float
+
+    Returns
+    -------
+    ndarray of the shape of ``Q``
+        Finite wherever ``beta * Q`` is; ``logsumexp`` over the actions is 0.
+    """
     Q = np.asarray(Q, dtype=float)
     if Q.ndim != 2:
         return log_softmax(beta * Q, axis=1)
@@ -265,12 +299,36 @@ def solve_policy_derivatives(mdp: TabularMDP, policy: np.ndarray) -> np.ndarray:
 
     Solves ``dV = (I - gamma P_pi)^{-1} phi_pi`` (one factorization, K right-hand sides) and
     returns ``dQ = phi + gamma T dV``. For an optimal ``pi`` this is ``dQ*/dtheta``.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    policy : ndarray of int, shape (S,)
+        A deterministic policy.
+
+    Returns
+    -------
+    ndarray of shape (S, A, K)
+        ``dQ``; ``dQ @ theta`` is ``Q^pi`` under the reward of ``theta``.
     """
     return _derivatives(mdp, policy, _PolicySystem(mdp).factor(policy))
 
 
 def policy_values(mdp: TabularMDP, reward: np.ndarray, policy: np.ndarray) -> np.ndarray:
-    """Exact values ``V^pi[s]`` of a deterministic policy under reward ``R[s, a]``."""
+    """Exact values ``V^pi[s]`` of a deterministic policy under reward ``R[s, a]``.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    reward : ndarray of shape (S, A)
+        ``R[s, a]``, e.g. ``mdp.reward(theta)``.
+    policy : ndarray of int, shape (S,)
+
+    Returns
+    -------
+    ndarray of shape (S,)
+        The discounted value of following ``policy`` from each state.
+    """
     r_pi = reward[np.arange(mdp.n_states), policy]
     return _solve_policy_system(mdp, policy, r_pi[:, None])[:, 0]
 

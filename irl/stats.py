@@ -121,6 +121,16 @@ def split_rhat(draws) -> float:
     The larger of the bulk R-hat (of the rank-normalized split chains) and the tail R-hat (of
     the same, folded about the median). Values near 1 (below 1.01) say the chains agree.
     Constant draws give NaN, as they do in ArviZ.
+
+    Parameters
+    ----------
+    draws : array of shape (m, n)
+        ``n`` draws of each of ``m`` chains.
+
+    Returns
+    -------
+    float
+        R-hat, >= 1 up to rounding, or NaN for constant draws.
     """
     x = _split_chains(_check_draws(draws))
     if np.ptp(x) < np.finfo(float).resolution:
@@ -174,7 +184,18 @@ def _ess(x: np.ndarray) -> float:
 
 def effective_sample_size(draws) -> float:
     """Bulk effective sample size of one scalar's chains ``draws[m, n]``: how many independent
-    draws estimate its mean as well (of the rank-normalized split chains)."""
+    draws estimate its mean as well (of the rank-normalized split chains).
+
+    Parameters
+    ----------
+    draws : array of shape (m, n)
+        ``n`` draws of each of ``m`` chains.
+
+    Returns
+    -------
+    float
+        The bulk ESS, as ``arviz.ess(method="bulk")`` computes it.
+    """
     return _ess(_z_scale(_split_chains(_check_draws(draws))))
 
 
@@ -187,7 +208,18 @@ def psis_khat_threshold(n_draws: int) -> float:
     """The largest Pareto shape ``k`` for which ``n_draws`` importance draws give a reliable
     estimate: ``min(1 - 1 / log10(S), 0.7)`` (Vehtari et al. 2024: below it the estimate's error
     falls as for a finite variance within ``S`` draws; above 0.7 no practical ``S``
-    suffices). At most 0 for fewer than 10 draws, which no ``k`` passes."""
+    suffices). At most 0 for fewer than 10 draws, which no ``k`` passes.
+
+    Parameters
+    ----------
+    n_draws : int
+        ``S``, the importance draws, >= 1.
+
+    Returns
+    -------
+    float
+        The threshold on ``k`` (``-inf`` for one draw).
+    """
     S = check_int(n_draws, "n_draws", low=1)
     return min(1.0 - 1.0 / np.log10(S), PSIS_KHAT_MAX) if S > 1 else float("-inf")
 
@@ -221,9 +253,20 @@ def pareto_smoothed(log_weights) -> tuple[np.ndarray, float]:
     order statistics, truncated at the largest raw weight (Vehtari et al. 2024, with a
     relative efficiency of 1).
 
-    Returns ``(log_w_smoothed[S], k)``, the smoothed log weights normalized to sum to 1 in
-    exp; ``k`` is ``inf`` where fewer than 5 weights exceed the cutoff (no fit possible) and
-    the weights are then only normalized. Compare ``k`` with :func:`psis_khat_threshold`."""
+    Parameters
+    ----------
+    log_weights : array of shape (S,)
+        The draws' log importance weights, at least one finite.
+
+    Returns
+    -------
+    log_w_smoothed : ndarray of shape (S,)
+        The smoothed log weights, normalized to sum to 1 in exp.
+    k : float
+        The fitted Pareto shape; ``inf`` where fewer than 5 weights exceed the cutoff (no fit
+        possible), the weights then only normalized. Compare it with
+        :func:`psis_khat_threshold`.
+    """
     x = np.asarray(log_weights, dtype=float).copy()
     if x.ndim != 1 or not x.size:
         raise ValueError(f"log_weights must be a non-empty 1-D array; got shape {x.shape}")

@@ -22,7 +22,8 @@ import sys
 from onionsort import __version__
 from onionsort.commands import COMMAND_MODULES
 
-__all__ = ["OneLineParser", "build_parser", "describe_error", "is_bad_input", "main"]
+__all__ = ["DESCRIPTION", "OneLineParser", "build_parser", "describe_error", "is_bad_input",
+           "main"]
 
 #: What to do about an ``OSError`` without a message of its own, by its ``errno``.
 _OS_HINTS = {
@@ -46,13 +47,30 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see `{self.prog} --help`\n")
 
 
+#: What ``onionsort --help`` says before the commands.
+DESCRIPTION = """Learn to sort onions from occluded, noisy demonstrations (MMAP-BIRL).
+
+Each command is a stage of the pipeline (record, perceive, calibrate, learn, evaluate) or runs
+them all (demo); each command's `--help` says what it does, what it writes, and its options.
+An error a user can cause is one line and exit code 2 (`--debug` shows the traceback).
+
+Examples
+--------
+    onionsort demo --quick --out runs/demo-quick
+    onionsort demo
+    onionsort -v learn runs/rec/*.mcap --observation-model runs/cal/calibration.json \\
+        --out runs/learn
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(
-        prog="onionsort",
-        description="Learn to sort onions from occluded, noisy demonstrations (MMAP-BIRL).",
-    )
+    """The parser of every command (each module of
+    :data:`~onionsort.commands.COMMAND_MODULES` adds its own)."""
+    parser = OneLineParser(prog="onionsort", description=DESCRIPTION,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"onionsort {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more logging: -v for progress (INFO), -vv for debugging (DEBUG)")
     parser.add_argument("--debug", action="store_true",
                         help="show the traceback of an error instead of a one-line message")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

@@ -225,14 +225,17 @@ def _cell(text: str) -> str:
 
 
 def _help(action: argparse.Action, default: str) -> str:
-    """The help text with argparse's ``%(...)s`` expanded (``%(default)s`` as rendered)."""
+    """The help text with argparse's ``%(...)s`` expanded (``%(default)s`` as rendered), less
+    a last ``(default: VALUE)`` that says what the table's Default column says."""
     if not action.help:
         return ""
     params = {k: v for k, v in vars(action).items() if v is not argparse.SUPPRESS}
     params["default"] = default
     if action.choices is not None:
         params["choices"] = ", ".join(map(str, action.choices))
-    return action.help % params
+    text = action.help % params
+    shown = f" (default: {default})"
+    return text[:-len(shown)] if default and text.endswith(shown) else text
 
 
 def options_tables(cmd: Command, dependent: set[tuple[str, str]]) -> list[str]:
@@ -265,8 +268,13 @@ def options_tables(cmd: Command, dependent: set[tuple[str, str]]) -> list[str]:
                     and action.default in (False, 0)) or (
                     isinstance(action, argparse._StoreFalseAction) and action.default is True):
                 default = ""  # a switch: given or not
-            cell = "required" if action.required and action.option_strings else \
-                (f"`{default}`" if default and default != MACHINE_DEPENDENT else default)
+            one_of = next((g._group_actions for g in cmd.parser._mutually_exclusive_groups
+                           if g.required and action in g._group_actions), None)
+            if one_of is not None:  # (--out OUT | --list): one of them must be given
+                cell = "one of " + ", ".join(f"`{a.option_strings[0]}`" for a in one_of)
+            else:
+                cell = "required" if action.required and action.option_strings else \
+                    (f"`{default}`" if default and default != MACHINE_DEPENDENT else default)
             out.append(f"| {name} | {_cell(value)} | {_cell(cell)} | "
                        f"{_cell(_help(action, default))} |")
         out.append("")

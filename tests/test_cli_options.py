@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from onionsort.cli import build_parser
-from onionsort.configs import config_options, config_values
+from onionsort.configs import DEFAULT, config_options, config_values, shown_default
 from tests.test_docs import gen  # scripts/gen_cli_docs.py
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -93,13 +93,19 @@ def test_each_flag_is_the_config_field_it_sets(prog, tmp_path):
     required, argv_required = {}, []
     for field, opt, annotation in options:
         action = actions[field.name]
-        assert action.help == (opt.help.format(**words) if opt.help else opt.help)
+        text = opt.text(words)  # the help, and the default the builder shows after it
+        shown = shown_default(None if _default(field) is dataclasses.MISSING
+                              else _default(field)).replace("%", "%%")
+        assert action.help in (text, f"{text} {DEFAULT}{shown})"), field.name
         if opt.action is not argparse.BooleanOptionalAction:
             assert action.option_strings == ([] if opt.positional else
                                              opt.flags(field.name, field.default))
         assert (tuple(action.choices) if action.choices else None) == opt.choices
         if _default(field) is dataclasses.MISSING:
-            assert opt.positional or action.required or opt.required is False
+            # one of a required group, (--out OUT | --list): given here, left out below where
+            # another of its group is tested
+            in_group = opt.exclusive is not None
+            assert opt.positional or action.required or opt.required is False or in_group
             if opt.required is False:
                 continue
             text, value = _other_value(field, opt, annotation, tmp_path)
@@ -118,18 +124,27 @@ def test_each_flag_is_the_config_field_it_sets(prog, tmp_path):
     assert values == {**{k: None if v is dataclasses.MISSING else v
                          for k, v in defaults.items()}, **required}
     # each option given a value other than its default: that field, and no other, changes
+    exclusive = {f.name: o.exclusive for f, o, _ in options}
     for field, opt, annotation in options:
         if field.name in required:
             continue
+        # a required group's member given above makes way for this one of its group
+        rivals = [n for n in required if opt.exclusive and exclusive[n] == opt.exclusive]
+        base, expected = list(argv_required), dict(values)
+        for name in rivals:
+            flag = actions[name].option_strings[0]
+            at = base.index(flag)
+            del base[at:at + 2]
+            expected[name] = None
         text, value = _other_value(field, opt, annotation, tmp_path)
         if opt.positional:
-            argv = [*text, *argv_required]
+            argv = [*text, *base]
         else:
             flag = opt.flags(field.name, field.default)[0]
-            argv = [*argv_required, *([flag, *text] if text[:1] != [None] else [])] \
-                if opt.action is not argparse.BooleanOptionalAction else [*argv_required, *text]
+            argv = [*base, *([flag, *text] if text[:1] != [None] else [])] \
+                if opt.action is not argparse.BooleanOptionalAction else [*base, *text]
         args = parser.parse_args([w for w in argv if w is not None] or [])
-        assert config_values(config_cls, args) == {**values, field.name: value}, field.name
+        assert config_values(config_cls, args) == {**expected, field.name: value}, field.name
 
 
 def _before() -> list[tuple[str, str, str]]:

@@ -47,7 +47,18 @@ TRUE_THETA = np.array([-2.0, -2.0, 2.0])
 
 
 def sector(x: int, y: int) -> int:
-    """State index of sector (x, y)."""
+    """State index of sector (x, y).
+
+    Parameters
+    ----------
+    x, y : int
+        The sector's coordinates, each in ``[0, GRID)``.
+
+    Returns
+    -------
+    int
+        ``x * GRID + y``.
+    """
     if not (0 <= x < GRID and 0 <= y < GRID):
         raise ValueError(f"sector ({x}, {y}) is outside the {GRID}x{GRID} grid")
     return x * GRID + y
@@ -100,6 +111,12 @@ def forestworld(
         Probability that a move goes where intended.
     discount, beta : float
         gamma = 0.99 as in the paper; beta is the fugitive's Boltzmann rationality.
+
+    Returns
+    -------
+    Domain
+        With the true weights :data:`TRUE_THETA`, the prior ``N(-1, 0.5)`` per weight and
+        the task :data:`FORESTWORLD_TASK`.
     """
     success = check_real(success, "success", low=0.0, high=1.0)
     beta = check_real(beta, "beta", low=0.0, low_open=True)

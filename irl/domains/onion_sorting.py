@@ -39,7 +39,7 @@ claim -> pick -> inspect -> bad to bin / good to conveyor -> claim.
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import NamedTuple
+from typing import NamedTuple, get_type_hints
 
 import numpy as np
 
@@ -73,7 +73,13 @@ __all__ = [
 
 
 class Location(IntEnum):
-    """Where the onion or the end effector is."""
+    """Where the onion or the end effector is.
+
+    Attributes
+    ----------
+    CONVEYOR, HOVER, FACE, BIN : int
+        On the conveyor, just above it, at the inspection pose, in (or over) the bin.
+    """
 
     CONVEYOR = 0
     HOVER = 1
@@ -82,7 +88,13 @@ class Location(IntEnum):
 
 
 class Prediction(IntEnum):
-    """The sorter's belief about the onion in focus."""
+    """The sorter's belief about the onion in focus.
+
+    Attributes
+    ----------
+    GOOD, BAD, UNKNOWN : int
+        Inspected and sound, inspected and blemished, not inspected yet.
+    """
 
     GOOD = 0
     BAD = 1
@@ -90,7 +102,14 @@ class Prediction(IntEnum):
 
 
 class SortAction(IntEnum):
-    """The sorter's abstract actions."""
+    """The sorter's abstract actions.
+
+    Attributes
+    ----------
+    CLAIM, PICK, INSPECT, PLACE_ON_CONVEYOR, PLACE_IN_BIN : int
+        Take the next onion in focus, lift it, look at it at the inspection pose, put it back
+        on the line, drop it in the bin.
+    """
 
     CLAIM = 0
     PICK = 1
@@ -100,7 +119,15 @@ class SortAction(IntEnum):
 
 
 class FeatureName(IntEnum):
-    """Indices of the reward features."""
+    """Indices of the reward features.
+
+    Attributes
+    ----------
+    GOOD_ON_CONVEYOR, BAD_ON_CONVEYOR, GOOD_IN_BIN, BAD_IN_BIN : int
+        Placing an inspected onion of that class there.
+    CLAIM_NEW_ONION, PICK_IF_UNKNOWN : int
+        Claiming an onion when none is in focus; picking up the onion in focus.
+    """
 
     GOOD_ON_CONVEYOR = 0
     BAD_ON_CONVEYOR = 1
@@ -111,12 +138,24 @@ class FeatureName(IntEnum):
 
 
 class SortingState(NamedTuple):
-    """A factored onion-sorting state."""
+    """A factored onion-sorting state.
+
+    Attributes
+    ----------
+    onion, end_effector : Location
+        Where the onion in focus and the gripper are.
+    prediction : Prediction
+        The sorter's belief about the onion in focus.
+    """
 
     onion: Location
     end_effector: Location
     prediction: Prediction
 
+
+# The constructor namedtuple generates lives in no module, so its annotations (strings here)
+# cannot be resolved from it: resolve them once, for whatever reads its signature.
+SortingState.__new__.__annotations__ = get_type_hints(SortingState)
 
 _FACTOR_ENUMS = (Location, Location, Prediction)
 
@@ -139,12 +178,32 @@ N_ACTIONS = SORTING_TASK.n_actions
 
 
 def encode_state(state: SortingState | tuple[int, int, int]) -> int:
-    """Flat state index of ``(onion, end_effector, prediction)``."""
+    """Flat state index of ``(onion, end_effector, prediction)``.
+
+    Parameters
+    ----------
+    state : SortingState or tuple of three int
+
+    Returns
+    -------
+    int
+        ``s`` in ``[0, 48)``, as :data:`SORTING_TASK` encodes it.
+    """
     return SORTING_TASK.encode(tuple(int(x) for x in state))
 
 
 def decode_state(index: int) -> SortingState:
-    """The factored state of a flat index."""
+    """The factored state of a flat index.
+
+    Parameters
+    ----------
+    index : int
+        ``s`` in ``[0, 48)``.
+
+    Returns
+    -------
+    SortingState
+    """
     values = SORTING_TASK.decode(int(index)).values()
     return SortingState(*(enum(v) for enum, v in zip(_FACTOR_ENUMS, values, strict=True)))
 
@@ -159,7 +218,16 @@ _GRIPPER_WORDS = {**_PLACE_WORDS, Location.CONVEYOR: "at the conveyor",
 
 def describe_state(index: int) -> str:
     """State ``index`` in the task's words, e.g. "a blemished onion held at the inspection
-    pose"."""
+    pose".
+
+    Parameters
+    ----------
+    index : int
+
+    Returns
+    -------
+    str
+    """
     s = decode_state(index)
     onion = _ONION_WORDS[s.prediction]
     if _holding(s) and s.end_effector == s.onion:
@@ -187,6 +255,18 @@ def next_state(state: SortingState, action: SortAction, blemished: bool) -> Sort
     This is the deterministic core of the transition model: the only randomness in the MDP is
     the class of the onion, revealed by INSPECT. The simulator calls this with the physical
     onion's class.
+
+    Parameters
+    ----------
+    state : SortingState
+    action : SortAction
+    blemished : bool
+        The class the onion in focus has (or will prove to have at INSPECT).
+
+    Returns
+    -------
+    SortingState
+        ``state`` itself where the action does not apply.
     """
     s = SortingState(Location(state[0]), Location(state[1]), Prediction(state[2]))
     action = SortAction(action)
@@ -207,7 +287,16 @@ def next_state(state: SortingState, action: SortAction, blemished: bool) -> Sort
 
 
 def sorting_transitions(blemish_rate: float = 0.5) -> np.ndarray:
-    """``T[s, a, s']`` of the sorting MDP; INSPECT reveals BAD with probability ``blemish_rate``."""
+    """``T[s, a, s']`` of the sorting MDP; INSPECT reveals BAD with probability ``blemish_rate``.
+
+    Parameters
+    ----------
+    blemish_rate : float in [0, 1]
+
+    Returns
+    -------
+    ndarray of shape (48, 5, 48)
+    """
     if not 0.0 <= blemish_rate <= 1.0:
         raise ValueError(f"blemish_rate must be in [0, 1]; got {blemish_rate}")
     T = np.zeros((N_STATES, N_ACTIONS, N_STATES))
@@ -220,7 +309,12 @@ def sorting_transitions(blemish_rate: float = 0.5) -> np.ndarray:
 
 
 def sorting_features() -> np.ndarray:
-    """``phi[s, a, k]``: the six Boolean features of :class:`FeatureName`."""
+    """``phi[s, a, k]``: the six Boolean features of :class:`FeatureName`.
+
+    Returns
+    -------
+    ndarray of shape (48, 5, 6)
+    """
     phi = np.zeros((N_STATES, N_ACTIONS, len(FeatureName)))
     for s in range(N_STATES):
         st = decode_state(s)
@@ -265,7 +359,13 @@ def reachable_states() -> list[int]:
 
 
 def transition_table_markdown() -> str:
-    """The transitions and features of every reachable state, as a Markdown table."""
+    """The transitions and features of every reachable state, as a Markdown table.
+
+    Returns
+    -------
+    str
+        The table of docs/onion-sorting.md.
+    """
     names = [f.name.lower() for f in FeatureName]
     phi = sorting_features()
     rows = ["| state (onion, hand, prediction) | action | next state | features |",
@@ -297,6 +397,16 @@ def misplacement_costs(theta: np.ndarray | None = None) -> tuple[float, float]:
     and by binning a good one instead of keeping it, ``theta[good_on_conveyor] -
     theta[good_in_bin]``. Either placement ends the onion's turn the same way (the next step
     claims another), so these are the differences of the two actions' values too.
+
+    Parameters
+    ----------
+    theta : ndarray of shape (6,), optional
+        Reward weights; :data:`TRUE_THETA` by default.
+
+    Returns
+    -------
+    miss, waste : float
+        The two costs, each >= 0.
 
     Raises
     ------
@@ -349,6 +459,12 @@ def onion_sorting(
         Probability that a newly claimed onion is blemished.
     discount, beta : float
         The paper's gamma = 0.99, and the sorter's Boltzmann rationality.
+
+    Returns
+    -------
+    Domain
+        With the true weights :data:`TRUE_THETA`, the prior ``N(0, 3^2)`` per weight and the
+        task :data:`SORTING_TASK`.
     """
     noise = check_real(noise, "noise", low=0.0, high=1.0, high_open=True)
     blemish_rate = check_real(blemish_rate, "blemish_rate", low=0.0, high=1.0)

@@ -88,6 +88,23 @@ class TaskDescription:
     feature_names : sequence of str
         Reward feature ``k`` is ``feature_names[k]``.
 
+    Attributes
+    ----------
+    name : str
+    factors : mapping of str to tuple of str
+        Read-only.
+    action_names, feature_names : tuple of str
+    factor_names : tuple of str
+        The factors, most significant first.
+    factor_sizes : tuple of int
+        The number of values of each factor.
+    n_states, n_actions, n_features : int
+        ``prod(factor_sizes)``, ``len(action_names)``, ``len(feature_names)``.
+    n_pairs : int
+        ``n_states * n_actions``: the pair observations ``o = s * A + a``.
+    state_names : tuple of str
+        ``"(v_1, ..., v_F)"`` of each state.
+
     Examples
     --------
     >>> t = TaskDescription("grid", {"x": ("0", "1", "2"), "y": ("0", "1")},

@@ -106,6 +106,12 @@ def forward_backward(
         when the model factors that way; ``_NUMBA_ELEMENTS``, ``_NUMBA_FACTOR_ELEMENTS``),
         and hands anything else, and any batch its range check refuses, to the numpy passes.
 
+    Returns
+    -------
+    PosteriorStats
+        Per demonstration: ``log P(o_1..T)``, the expected visits of each pair and the
+        posterior of the first state.
+
     Raises
     ------
     ValueError
@@ -171,6 +177,24 @@ def posterior_stats(
     ``demos`` may be packed once beforehand (:func:`pack_demonstrations`, with
     ``equal_lengths=True`` for time-indexed policies); then ``observation_model`` is the
     packing's.
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    log_policy : ndarray of shape (S, A) or None
+        ``log pi[s, a]``; None with ``log_policies_by_length``.
+    demos : sequence of Demonstration or PackedDemonstrations
+    observation_model : ObservationModel, optional
+        Needed unless ``demos`` is packed.
+    log_policies_by_length : callable ``T -> ndarray of shape (T, S, A)``, optional
+        A time-indexed log-policy per demonstration length (keyword only).
+    method, backend : str
+        As :func:`forward_backward`'s.
+
+    Returns
+    -------
+    PosteriorStats
+        One row per demonstration, in the order of ``demos``.
     """
     if isinstance(demos, PackedDemonstrations):
         packed = demos

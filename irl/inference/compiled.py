@@ -28,7 +28,18 @@ _NUMBA_FACTOR_ELEMENTS = 1 << 25
 
 def check_backend(backend) -> str:
     """``backend`` if it is one of :data:`BACKENDS` and can run here; else a ValueError
-    (TypeError) that names it."""
+    (TypeError) that names it.
+
+    Parameters
+    ----------
+    backend : str
+        ``"numpy"``, or ``"numba"`` where numba is installed.
+
+    Returns
+    -------
+    str
+        ``backend``.
+    """
     if not isinstance(backend, str):
         raise TypeError(f"backend must be one of {BACKENDS}; got {describe(backend)}")
     if backend not in BACKENDS:

@@ -89,7 +89,18 @@ class ObservationFactors:
 
 def observation_factors(observation_model, obs: np.ndarray) -> ObservationFactors:
     """:class:`ObservationFactors` of observations ``obs[n, t]`` (-1: occluded), from
-    :meth:`irl.observation.ObservationModel.scaled_likelihoods`."""
+    :meth:`irl.observation.ObservationModel.scaled_likelihoods`.
+
+    Parameters
+    ----------
+    observation_model : ObservationModel
+    obs : ndarray of int, shape (N, T)
+
+    Returns
+    -------
+    ObservationFactors
+        ``possible`` False when some step's observation is impossible under every pair.
+    """
     factor, shift, min_log = observation_model.scaled_likelihoods(obs, action_major=True)
     if not np.all(np.isfinite(shift)):
         return ObservationFactors(None, None, -np.inf, False)
@@ -126,7 +137,17 @@ class PackedDemonstrations:
 
 
 def group_by_length(demos: Sequence[Demonstration]) -> dict[int, np.ndarray]:
-    """Indices of the demonstrations of each length, ``{T: indices}``, for batching."""
+    """Indices of the demonstrations of each length, ``{T: indices}``, for batching.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+
+    Returns
+    -------
+    dict of int to ndarray of int
+        Length ``T`` -> the indices of the demonstrations of that length, shortest first.
+    """
     groups: dict[int, list[int]] = {}
     for i, d in enumerate(demos):
         groups.setdefault(len(d), []).append(i)
@@ -165,6 +186,11 @@ def pack_demonstrations(
         padded batches.
     cache : bool
         Keep the observations' log-likelihoods when they fit in ``_CACHE_ELEMENTS`` floats.
+
+    Returns
+    -------
+    PackedDemonstrations
+        For :func:`posterior_stats`, reused over the passes of a fit.
     """
     demos = check_demonstrations(demos, observation_model.n_observations)
     lengths = np.array([len(d) for d in demos])

@@ -56,6 +56,11 @@ def scratch_held():
     A fit runs forward-backward once per gradient on the same shapes; at S = 100,000 its
     predicted marginals alone are 800 MB, faulted in afresh by every pass unless held. The
     learners hold them for the length of a fit; a single pass drops them when it ends.
+
+    Yields
+    ------
+    None
+        A context manager: ``with scratch_held(): ...``.
     """
     _workspace.holders += 1
     try:

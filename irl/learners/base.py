@@ -21,7 +21,18 @@ _NO_DEMOS = object()
 
 
 class LearnerBase:
-    """Parameters by name (``get_params``/``set_params``), a readable repr, fitted checks."""
+    """Parameters by name (``get_params``/``set_params``), a readable repr, fitted checks.
+
+    A learner's ``__init__`` stores each argument under its own name and does nothing else;
+    ``fit`` checks them and sets the learned state.
+
+    Attributes
+    ----------
+    mdp : TabularMDP
+        The MDP the learner's ``__init__`` was given (every learner takes one).
+    observation_model : ObservationModel
+        How the demonstrations were observed (likewise).
+    """
 
     @classmethod
     def _param_names(cls) -> list[str]:

@@ -415,7 +415,21 @@ class MAPBIRL(_BayesianIRL):
     Each observed step is read as the pair ``observation_model.nominal[o]`` and scored by
     ``log pi(a | s)``; occluded steps are dropped. With the identity observation model and no
     occlusion this is the same estimator as :class:`MMAPBIRL` (their log-likelihoods differ by
-    the theta-independent ``log p0 + sum log T``). Parameters are those of :class:`MMAPBIRL`.
+    the theta-independent ``log p0 + sum log T``).
+
+    Parameters
+    ----------
+    mdp, observation_model, beta, prior, optimizer, n_restarts
+        As :class:`MMAPBIRL`'s; an observation must report a pair (``nominal[o]`` with an
+        action), so a state-only model is refused.
+    max_iter, tol, step_size, decay, epsilon, init, seed
+        As :class:`MMAPBIRL`'s. MAP-BIRL runs no forward-backward, so it has no ``backend``,
+        and reads no session swap.
+
+    Attributes
+    ----------
+    theta_, policy_, log_posterior_, n_iter_, history_, converged_, prior_
+        As :class:`MMAPBIRL`'s, for the face-value posterior.
     """
 
     def _prepare(self, model, demos):

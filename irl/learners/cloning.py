@@ -62,7 +62,19 @@ UNSEEN = ("uniform", "most-common")
 
 def fallback_actions(counts: np.ndarray, unseen: str) -> np.ndarray:
     """``m[a]``: uniform, or the Laplace-smoothed overall action frequencies of ``counts``
-    ``N[s, a]`` (``unseen="most-common"``)."""
+    ``N[s, a]`` (``unseen="most-common"``).
+
+    Parameters
+    ----------
+    counts : ndarray of shape (S, A)
+        ``N[s, a]``, the (expected) visits of each pair.
+    unseen : {"uniform", "most-common"}
+
+    Returns
+    -------
+    ndarray of shape (A,)
+        ``m``, summing to 1.
+    """
     n_actions = counts.shape[1]
     if unseen == "uniform":
         return np.full(n_actions, 1.0 / n_actions)
@@ -72,7 +84,22 @@ def fallback_actions(counts: np.ndarray, unseen: str) -> np.ndarray:
 
 def cloned_policy(counts: np.ndarray, smoothing: float, fallback: np.ndarray) -> np.ndarray:
     """``pi[s, a]`` of Eq. (1) from visits ``N[s, a]``, ``alpha = smoothing`` and ``m``; a
-    state with ``N(s) + alpha = 0`` gets ``m``."""
+    state with ``N(s) + alpha = 0`` gets ``m``.
+
+    Parameters
+    ----------
+    counts : ndarray of shape (S, A)
+        ``N[s, a]``.
+    smoothing : float
+        ``alpha``, pseudo-visits per state, >= 0.
+    fallback : ndarray of shape (A,)
+        ``m``, what a state is smoothed toward.
+
+    Returns
+    -------
+    ndarray of shape (S, A)
+        ``pi[s, a] = (N[s, a] + alpha m[a]) / (N(s) + alpha)``; rows sum to 1.
+    """
     visits = counts.sum(axis=1, keepdims=True)
     total = visits + smoothing
     pi = np.broadcast_to(fallback, counts.shape).copy()
@@ -82,7 +109,18 @@ def cloned_policy(counts: np.ndarray, smoothing: float, fallback: np.ndarray) ->
 
 
 def greedy_actions(pi: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """``policy[s] = argmax_a pi[s, a]``, exact ties (to 1e-12) broken uniformly at random."""
+    """``policy[s] = argmax_a pi[s, a]``, exact ties (to 1e-12) broken uniformly at random.
+
+    Parameters
+    ----------
+    pi : ndarray of shape (S, A)
+    rng : numpy.random.Generator
+        Breaks the ties.
+
+    Returns
+    -------
+    ndarray of int, shape (S,)
+    """
     best = pi.max(axis=1, keepdims=True)
     ties = pi >= best - 1e-12 * np.maximum(best, 1.0)
     # a uniform key per pair; the largest key among the tied actions wins

@@ -57,6 +57,13 @@ Groups = dict[int, tuple[np.ndarray, np.ndarray]]
 def soft_backward(mdp: TabularMDP, reward: np.ndarray, horizon: int):
     """Finite-horizon soft value iteration (undiscounted).
 
+    Parameters
+    ----------
+    mdp : TabularMDP
+    reward : ndarray of shape (S, A)
+    horizon : int
+        Steps to go at the start, >= 1.
+
     Returns
     -------
     log_pi : ndarray of shape (horizon, S, A)
@@ -79,7 +86,22 @@ def time_indexed(log_pi: np.ndarray, length: int) -> np.ndarray:
 
 
 def expected_feature_counts(mdp: TabularMDP, log_pi: np.ndarray, D0: np.ndarray, horizon: int):
-    """``E[sum_{t < horizon} phi(s_t, a_t)]`` from start weights ``D0`` (need not sum to 1)."""
+    """``E[sum_{t < horizon} phi(s_t, a_t)]`` from start weights ``D0`` (need not sum to 1).
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    log_pi : ndarray of shape (>= horizon, S, A)
+        The time-indexed soft policy of :func:`soft_backward`.
+    D0 : ndarray of shape (S,)
+        Start-state weights.
+    horizon : int
+
+    Returns
+    -------
+    ndarray of shape (K,)
+        The expected feature counts, scaled as ``D0``.
+    """
     d = D0
     counts = np.zeros(mdp.n_features)
     for t in range(horizon):
@@ -91,7 +113,25 @@ def expected_feature_counts(mdp: TabularMDP, log_pi: np.ndarray, D0: np.ndarray,
 
 
 def mce_dual(mdp: TabularMDP, theta: np.ndarray, groups: Groups, l2: float):
-    """Value and gradient of the MCE dual ``J(theta)`` (see the module docstring)."""
+    """Value and gradient of the MCE dual ``J(theta)`` (see the module docstring).
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    theta : ndarray of shape (K,)
+    groups : dict of int to (ndarray, ndarray)
+        Per horizon ``H``, the start weights ``D0[s]`` and feature counts ``fbar[k]`` of the
+        demonstrated runs of that length, summed.
+    l2 : float
+        The L2 penalty's weight.
+
+    Returns
+    -------
+    value : float
+        ``J(theta)``, which the fit minimizes.
+    grad : ndarray of shape (K,)
+        Its gradient: expected minus demonstrated feature counts, plus ``l2 theta``.
+    """
     horizon = max(groups)
     log_pi, V = soft_backward(mdp, mdp.features @ theta, horizon)
     value = 0.5 * l2 * theta @ theta

@@ -35,7 +35,20 @@ OBJECTIVE_KEYS = ("value", "log_likelihood")
 
 def objective_curve(history) -> tuple[str | None, list[float]]:
     """The objective's key (the first of :data:`OBJECTIVE_KEYS` in ``history[0]``) and its value
-    per iteration, from a learner's ``history_``; ``(None, [])`` if it records neither."""
+    per iteration, from a learner's ``history_``; ``(None, [])`` if it records neither.
+
+    Parameters
+    ----------
+    history : list of dict
+        A fitted learner's ``history_``.
+
+    Returns
+    -------
+    key : str or None
+        ``"value"`` or ``"log_likelihood"``.
+    values : list of float
+        The objective per entry of ``history``.
+    """
     key = next((k for k in OBJECTIVE_KEYS if history and k in history[0]), None)
     return key, ([float(h[key]) for h in history] if key else [])
 
@@ -130,6 +143,23 @@ def maximize_lbfgs(
     ``ftol``); the projected-gradient tolerance is ``tol`` too. A non-finite value is a failed
     line-search step (see the module docstring). ``warn=False`` leaves the
     :class:`ConvergenceWarning` to the caller.
+
+    Parameters
+    ----------
+    objective : callable ``theta -> (value, gradient)``
+        The function to maximize and its gradient, shape (K,).
+    starts : list of ndarray of shape (K,)
+        At least one starting point.
+    max_iter : int
+        Iterations per start.
+    tol : float
+    warn : bool
+        Warn when the best start did not converge.
+
+    Returns
+    -------
+    OptimizationResult
+        The start of highest value, its iterations summed over every start.
     """
     if not starts:
         raise ValueError("starts must hold at least one starting point; got none")
@@ -198,6 +228,25 @@ def maximize_gradient_ascent(
     Stops a start when ``max_k |theta_new - theta|_k < threshold`` (Algorithm 1 uses
     ``threshold = epsilon (1 - gamma) / gamma``). A step to a point where the objective is not
     finite is undone and the step halved (it still counts as an iteration).
+
+    Parameters
+    ----------
+    objective : callable ``theta -> (value, gradient)``
+    starts : list of ndarray of shape (K,)
+        At least one starting point.
+    step_size : float
+        The first step's size.
+    decay : float in (0, 1]
+        The step's factor per iteration.
+    threshold : float
+        The stopping rule's bound on the largest weight change.
+    max_iter : int
+        Iterations per start.
+
+    Returns
+    -------
+    OptimizationResult
+        The start of highest value.
     """
     if not starts:
         raise ValueError("starts must hold at least one starting point; got none")

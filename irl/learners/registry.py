@@ -48,6 +48,12 @@ class LearnerSpec:
     build : callable ``(domain, *, seed) -> estimator``
         An unfitted estimator for ``domain`` (an :class:`irl.domains.Domain`); ``seed`` is an
         int, a ``numpy.random.Generator`` or None, and may be ignored by deterministic learners.
+
+    Attributes
+    ----------
+    name, description : str
+    build : callable
+        As given.
     """
 
     name: str
@@ -77,7 +83,30 @@ LEARNERS: Mapping[str, LearnerSpec] = MappingProxyType(_REGISTRY)
 
 
 def register_learner(spec: LearnerSpec) -> LearnerSpec:
-    """Add ``spec`` to :data:`LEARNERS`; a ``ValueError`` if its name is taken. Returns it."""
+    """Add ``spec`` to :data:`LEARNERS`; a ``ValueError`` if its name is taken.
+
+    A registered learner is a choice of ``onionsort learn --method`` and ``onionsort
+    experiment --methods``.
+
+    Parameters
+    ----------
+    spec : LearnerSpec
+
+    Returns
+    -------
+    LearnerSpec
+        ``spec``.
+
+    Examples
+    --------
+    >>> import irl
+    >>> spec = irl.LearnerSpec("map-birl-b3", "MAP-BIRL with beta 3.",
+    ...                        lambda dom, *, seed=None: irl.MAPBIRL(
+    ...                            dom.mdp, dom.observation_model, beta=3.0, seed=seed))
+    >>> irl.register_learner(spec) is spec, "map-birl-b3" in irl.LEARNERS
+    (True, True)
+    >>> _ = irl.learners.unregister_learner("map-birl-b3")
+    """
     if not isinstance(spec, LearnerSpec):
         raise TypeError(f"spec must be a LearnerSpec; got {type(spec).__name__}")
     if spec.name in _REGISTRY:
@@ -90,7 +119,18 @@ def register_learner(spec: LearnerSpec) -> LearnerSpec:
 
 
 def unregister_learner(name: str) -> LearnerSpec:
-    """Remove and return the learner named ``name``; a ``ValueError`` if there is none."""
+    """Remove and return the learner named ``name``; a ``ValueError`` if there is none.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`LEARNERS`.
+
+    Returns
+    -------
+    LearnerSpec
+        The learner removed.
+    """
     if name not in _REGISTRY:
         raise ValueError(f"name must be one of {tuple(_REGISTRY)}; got {name!r}")
     return _REGISTRY.pop(name)
@@ -116,6 +156,11 @@ def make_estimator(name: str, domain: Domain, *, seed=None, backend: str | None 
     ValueError
         If ``name`` is not in :data:`LEARNERS` (the message lists the registered names), or
         ``backend`` is not a backend or cannot run here (:func:`irl.inference.check_backend`).
+
+    Returns
+    -------
+    estimator
+        The learner's class, unfitted (``fit(demos)`` next).
     """
     spec = _REGISTRY.get(name) if isinstance(name, str) else None
     if spec is None:

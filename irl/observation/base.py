@@ -32,6 +32,12 @@ class ObservationModel(abc.ABC):
     :class:`~irl.observation.SparseObservationModel` and
     :class:`~irl.observation.StateObservationModel`.
 
+    Parameters
+    ----------
+    *args, **kwargs
+        Those of :class:`~irl.observation.DenseObservationModel` (``probs``, ``nominal``,
+        ``observation_names``), which ``ObservationModel(...)`` builds.
+
     Attributes
     ----------
     n_states, n_actions, n_observations : int
@@ -265,7 +271,14 @@ def safe_log(x: np.ndarray) -> np.ndarray:
 
 
 def check_compatible(mdp, observation_model) -> None:
-    """Raise ``ValueError`` unless the observation model was built for this MDP's (S, A)."""
+    """Raise ``ValueError`` unless the observation model was built for this MDP's (S, A).
+
+    Parameters
+    ----------
+    mdp : TabularMDP
+    observation_model : ObservationModel
+        A ``TypeError`` when either is not of its class.
+    """
     from irl.mdp import TabularMDP
 
     if not isinstance(mdp, TabularMDP):

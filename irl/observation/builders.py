@@ -27,6 +27,17 @@ def identity_observation_model(n_states: int, n_actions: int) -> ObservationMode
     """Noise-free observation of the pair: ``o = s * A + a`` with probability 1.
 
     With this model and no occlusion, MMAP-BIRL is exactly MAP-BIRL.
+
+    Parameters
+    ----------
+    n_states, n_actions : int
+        ``S`` and ``A``, each >= 1.
+
+    Returns
+    -------
+    ObservationModel
+        A :class:`~irl.observation.FactoredObservationModel` of identity confusions, with
+        ``S * A`` observations.
     """
     n_states = check_int(n_states, "n_states", low=1)
     n_actions = check_int(n_actions, "n_actions", low=1)
@@ -48,6 +59,13 @@ def pair_observation_model(
     action_confusion : ndarray of shape (A, A), optional
         ``C_A[a, a']``; the identity (actions observed exactly) when omitted, in which case
         ``n_actions`` is required.
+    n_actions : int, optional
+        ``A`` when ``action_confusion`` is omitted (keyword only).
+
+    Returns
+    -------
+    ObservationModel
+        A :class:`~irl.observation.FactoredObservationModel` with ``S * A`` observations.
     """
     C_S = as_float_array(state_confusion, "state_confusion")
     if C_S.ndim != 2 or C_S.shape[0] != C_S.shape[1] or C_S.shape[0] < 1:
@@ -60,10 +78,20 @@ def pair_observation_model(
 
 
 def state_observation_model(state_confusion, n_actions: int) -> ObservationModel:
-    """Observations of the state only: ``O[s, a, s'] = C_S[s, s']`` for every action.
+    """Observations of the state only: ``O[s, a, o] = C_S[s, o]`` for every action.
 
-    ``state_confusion`` has shape (S, n_observations), dense or ``scipy.sparse``; see
-    :class:`~irl.observation.StateObservationModel`.
+    Parameters
+    ----------
+    state_confusion : ndarray or scipy.sparse matrix of shape (S, n_observations)
+        ``C_S[s, o] = P(o | s)``; each row sums to 1. Square (``o = s'``, the state read) or
+        not (observations of another kind, e.g. a detector's classes).
+    n_actions : int
+        ``A``: the actions are not observed.
+
+    Returns
+    -------
+    ObservationModel
+        A :class:`~irl.observation.StateObservationModel`.
     """
     return StateObservationModel(state_confusion, n_actions)
 
@@ -78,5 +106,19 @@ def factored_observation_model(
     observed through its own confusion matrix ``C_f[true, observed]``, so the state confusion is
     their Kronecker product. This is what perception calibration measures. The model never
     forms that product (:class:`~irl.observation.FactoredObservationModel`).
+
+    Parameters
+    ----------
+    factor_confusions : sequence of ndarray, each of shape (n_f, n_f)
+        ``C_f[true, observed]`` of each state factor, in the order of the state encoding.
+    action_confusion : ndarray of shape (A, A), optional
+        ``C_A[a, a']``; the identity when omitted, then ``n_actions`` is required.
+    n_actions : int, optional
+        ``A`` when ``action_confusion`` is omitted (keyword only).
+
+    Returns
+    -------
+    FactoredObservationModel
+        With ``prod_f n_f * A`` observations, ``o = s' * A + a'``.
     """
     return FactoredObservationModel(factor_confusions, action_confusion, n_actions=n_actions)

@@ -28,6 +28,16 @@ class DenseObservationModel(ObservationModel, default=True):
         observations that report no action. Defaults to the maximum-likelihood pair
         ``argmax_{s, a} O[s, a, o]``.
     observation_names : sequence of str, optional
+
+    Attributes
+    ----------
+    probs : ndarray of shape (S, A, n_observations)
+        ``O`` as given (validated).
+    n_states, n_actions, n_observations : int
+        ``S``, ``A`` and the number of observations.
+    nominal : ndarray of int, shape (n_observations, 2)
+        The ``(s, a)`` each observation reports at face value (``a = -1``: no action).
+    observation_names : list of str or None
     """
 
     def __init__(

@@ -44,7 +44,22 @@ class FactoredObservationModel(ObservationModel):
         ``C_A[a, a']``; the identity (actions observed exactly) when omitted, in which case
         ``n_actions`` is required.
     n_actions : int, optional
+        ``A`` when ``action_confusion`` is omitted.
     observation_names : sequence of str, optional
+
+    Attributes
+    ----------
+    factor_confusions : list of ndarray
+        ``C_f`` of each state factor, validated.
+    action_confusion : ndarray of shape (A, A)
+        ``C_A`` (the identity when none was given).
+    sizes : tuple of int
+        ``n_f`` of each factor.
+    n_states, n_actions, n_observations : int
+        ``S``, ``A`` and the number of observations.
+    nominal : ndarray of int, shape (n_observations, 2)
+        The ``(s, a)`` each observation reports at face value (``a = -1``: no action).
+    observation_names : list of str or None
 
     Notes
     -----

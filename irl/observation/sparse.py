@@ -60,6 +60,16 @@ class SparseObservationModel(ObservationModel):
     nominal : ndarray of shape (n_observations, 2), optional
         Defaults to the maximum-likelihood pair of each observation.
     observation_names : sequence of str, optional
+
+    Attributes
+    ----------
+    matrix : scipy.sparse.csc_matrix of shape (S * A, n_observations)
+        ``M``, its explicit zeros dropped.
+    n_states, n_actions, n_observations : int
+        ``S``, ``A`` and the number of observations.
+    nominal : ndarray of int, shape (n_observations, 2)
+        The ``(s, a)`` each observation reports at face value (``a = -1``: no action).
+    observation_names : list of str or None
     """
 
     def __init__(self, matrix, n_actions: int, *, nominal: np.ndarray | None = None,
@@ -107,6 +117,14 @@ class StateObservationModel(ObservationModel):
         Defaults to ``(o, -1)`` (the state ``o``, no action) when C is square, else to
         ``(argmax_s C[s, o], 0)``.
     observation_names : sequence of str, optional
+
+    Attributes
+    ----------
+    n_states, n_actions, n_observations : int
+        ``S``, ``A`` and the number of observations.
+    nominal : ndarray of int, shape (n_observations, 2)
+        The ``(s, a)`` each observation reports at face value (``a = -1``: no action).
+    observation_names : list of str or None
     """
 
     def __init__(self, state_confusion, n_actions: int, *, nominal: np.ndarray | None = None,

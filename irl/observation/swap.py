@@ -78,7 +78,23 @@ class SessionSwap:
 def value_swap(task, factor: str, values: tuple[str, str], rate: float) -> SessionSwap:
     """The :class:`SessionSwap` of ``task``'s pair observations that exchanges two values of
     one state factor (for onion sorting, ``("prediction", ("good", "bad"))``: the onion's class
-    read backwards), everything else read as it was."""
+    read backwards), everything else read as it was.
+
+    Parameters
+    ----------
+    task : irl.TaskDescription
+        Whose pair observations ``o = s * A + a`` are permuted.
+    factor : str
+        The state factor read backwards.
+    values : tuple of two str
+        The two values of ``factor`` that are exchanged.
+    rate : float in (0, 1)
+        The prior probability that a demonstration was read swapped.
+
+    Returns
+    -------
+    SessionSwap
+    """
     a, b = (task.value_index(factor, v) for v in values)
     if a == b:
         raise ValueError(f"values must name two different values of {factor!r}; got {values}")

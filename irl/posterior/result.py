@@ -175,7 +175,17 @@ class Posterior:
 
 
 def load_posterior(path: Path) -> Posterior:
-    """Read a :meth:`Posterior.save` file; a one-line ``ValueError`` if it is not one."""
+    """Read a :meth:`Posterior.save` file; a one-line ``ValueError`` if it is not one.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``posterior.npz`` (what ``onionsort learn --posterior`` writes).
+
+    Returns
+    -------
+    Posterior
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such posterior file: {path}")

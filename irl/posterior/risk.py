@@ -71,7 +71,20 @@ def _sample_q_values(posterior: Posterior, mdp: TabularMDP) -> np.ndarray:
 
 
 def map_policy_risk(posterior: Posterior, mdp: TabularMDP) -> PolicyRisk:
-    """Score the MAP policy under every sample's reward (its value at risk)."""
+    """Score the MAP policy under every sample's reward (its value at risk).
+
+    Parameters
+    ----------
+    posterior : Posterior
+        Of a learner on ``mdp``.
+    mdp : TabularMDP
+
+    Returns
+    -------
+    PolicyRisk
+        Per sample: the MAP policy's ILE and normalized ILE against that sample's optimal
+        policy, and whether it is optimal there.
+    """
     _check_posterior(posterior, mdp)
     Q = _sample_q_values(posterior, mdp)
     states = np.arange(mdp.n_states)
@@ -92,6 +105,17 @@ def expected_regret(posterior: Posterior, mdp: TabularMDP) -> np.ndarray:
     reward units: the value of perfect information about the best action in ``s``, and so an
     upper bound on what a demonstration in ``s`` can gain the robot there. Zero where every
     sample agrees with the MAP action.
+
+    Parameters
+    ----------
+    posterior : Posterior
+        Of a learner on ``mdp``.
+    mdp : TabularMDP
+
+    Returns
+    -------
+    ndarray of shape (S,)
+        The expected regret of the MAP action in each state, >= 0.
     """
     _check_posterior(posterior, mdp)
     Q = _sample_q_values(posterior, mdp)

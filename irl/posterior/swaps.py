@@ -25,7 +25,19 @@ def swap_readings(p_swapped: np.ndarray) -> list[tuple[int, ...]]:
     """The readings of N demonstrations (which of them were read swapped) whose posterior
     weight :func:`sample_posterior` measures: the reading the MAP implies (each demonstration
     swapped where ``p_swapped`` is above 0.5), its complement (the same data explained by the
-    reward read backwards), and every reading one demonstration away from either."""
+    reward read backwards), and every reading one demonstration away from either.
+
+    Parameters
+    ----------
+    p_swapped : array of shape (N,)
+        Each demonstration's posterior probability of having been read swapped
+        (:meth:`irl.MMAPBIRL.swap_probabilities` at the MAP).
+
+    Returns
+    -------
+    list of tuple of int
+        Each reading as the indices of the demonstrations read swapped, without repeats.
+    """
     base = np.asarray(p_swapped) > 0.5
     readings: dict[tuple[int, ...], None] = {}
     for root in (base, ~base):

@@ -3,14 +3,19 @@
 Runs the detector and the state classifier on a held-out split of a labelled dataset and writes
 ``calibration.json`` (per-factor confusion counts, the models' hashes, the depth mode),
 ``observation_model.npz`` (``O[s, a, o]``) and ``confusion.png``. A calibration holds for the
-sensor mode it measured: calibrate with ``--no-depth --no-inspection`` for imported videos.
+sensor mode it measured, and ``learn`` refuses sessions of another: calibrate an imported
+video with ``--no-depth`` (a video has no depth; import its inspection view with it,
+``onionsort import --inspection``), and add ``--no-inspection`` only for a video without
+one. Without the inspection view the onion's class is unobserved, and which class goes where
+cannot be learned.
 
 Examples
 --------
     onionsort dataset --frames 1500 --seed 1 --out runs/heldout
     onionsort calibrate --data runs/heldout --split all --out runs/calibration
+    onionsort calibrate --data runs/heldout --split all --no-depth --out runs/calibration-video
     onionsort calibrate --data runs/heldout --split all --no-depth --no-inspection \\
-        --out runs/calibration-video
+        --out runs/calibration-video-no-inspection
 """
 
 from __future__ import annotations

@@ -22,9 +22,9 @@ Examples
     onionsort eval-perception --data runs/heldout --split all
     onionsort eval-perception --data runs/fresh-paper --split all --views 4 --plots runs/pr
     onionsort eval-perception --data runs/heldout --split all --no-depth --json
-    onionsort eval-perception --data runs/fresh-realistic --split all --views 5 \
+    onionsort eval-perception --data runs/fresh-realistic --split all --views 5 \\
         --camera-shift 11,12,13
-    onionsort eval-perception --data runs/fresh-realistic --split all --camera-shift 3737 \
+    onionsort eval-perception --data runs/fresh-realistic --split all --camera-shift 3737 \\
         --one-camera
 """
 

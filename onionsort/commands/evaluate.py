@@ -55,7 +55,8 @@ class EvaluateCommand(EvaluateConfig, ParallelOptions):
     run: tuple[Path, ...] = option((), positional=True, nargs="*", metavar="RUN_DIR",
                                    help="folder(s) of `onionsort learn` (not with --policy "
                                         "expert); several are sorted in parallel, each on the "
-                                        "same line-up, each writing into its own folder")
+                                        "same line-up, each writing into its own folder "
+                                        "(default: none, with --policy expert)")
     json: bool = option(False, after="mcap", help="print the result as JSON")
     cli_help: ClassVar[dict[str, str]] = {"pieces": "runs"}
 

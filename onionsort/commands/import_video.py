@@ -27,16 +27,16 @@ from dataclasses import dataclass
 
 from onionsort.commands import add_command
 from onionsort.configs import config_from_args, option
-from onionsort.configs.import_video import BAG, ImportConfig
+from onionsort.configs.import_video import ImportConfig
 
 
 @dataclass(frozen=True)
 class ImportCommand(ImportConfig):
     """The command's options: the stage's, and ``--list``."""
 
-    list: bool = option(False, group=BAG, after="max_seconds",
+    list: bool = option(False, exclusive="target", after="out",
                         help="print the bag's topics and which ones the import can use, and "
-                             "stop")
+                             "stop (instead of --out)")
 
 
 def register(subparsers) -> None:
@@ -50,8 +50,6 @@ def run(args) -> int:
 
     if args.list:
         return _print_topics(list_bag(args.video))
-    if args.out is None:
-        raise ValueError("--out is required: the session file to write")
     s = import_video(config_from_args(ImportConfig, args))
     print(f"imported {s.source}: {s.frames_read} frames read, {s.steps_written} step(s) of "
           f"{s.frames_per_step} frames written to {s.path}")

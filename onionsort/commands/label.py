@@ -1,42 +1,14 @@
 """``onionsort label``: labelled frames out to annotation tools and back in.
 
-``label export`` writes a dataset folder in the COCO 2017 layout (``annotations/
-instances_<split>.json`` beside ``<split>/`` images) or Ultralytics' YOLO layout (``data.yaml``,
-``images/<split>/``, ``labels/<split>/`` with lines ``class cx cy w h``, normalised), with the
-state labels in ``states.csv`` (split, image, session, step, frame, occluded, one column per
-factor of the task and action, in the task's words) and depth as 16-bit PNG in millimetres in
-``depth/<split>/``: the main camera's frames at the top, the inspection views in
-``inspection/`` in the same layout (the robot's line-up, onion and view numbers in
-``inspection/lineups.csv``). CVAT, Label Studio, FiftyOne and Ultralytics open it.
-
-``label select`` chooses the frames of recorded sessions where the models are least sure (the
-chance, by their own probabilities and what the sorter later did with the onion, that a step's
-state guess is wrong): the steps more likely wrong than right first, then in rounds over the
-sessions; it writes them as a labelling task
-pre-annotated with the models' boxes and state guesses: COCO with scores and a states.csv
-(what ``label import`` reads back once corrected), or Label Studio's import format with
-predictions. ``--recall``, on recorded sessions that carry the truth, also scores the choice:
-how many steps have a wrong state guess, how many of those chosen do, and each wrong step left
-out (the truth is read after choosing, never by the choice).
-
-``label import`` reads such a folder, or what CVAT, Label Studio or Roboflow export
-(``<split>/_annotations.coco.json``; one file without splits; ``--format labelstudio``: Label
-Studio's JSON export beside the images, its state choices as the state labels), into a
-dataset folder that
-``train``, ``calibrate`` and ``eval-perception`` read. Frames without a row in the states CSV
-are box-only: the detector and the inspection classifier learn from them, the state
-classifier and calibration do not. A set without splits is split by session, as ``onionsort
-dataset`` splits its sessions. Images may be JPEG or PNG of any size: larger ones are shrunk
-to the detector's 320x256 canvas, their boxes with them.
+``label export`` writes a dataset in the COCO or YOLO layout that CVAT, Label Studio,
+FiftyOne and Ultralytics open; ``label select`` chooses the frames of recorded sessions worth
+a person's time and writes them as a pre-annotated labelling task; ``label import`` reads
+what the tools export back as a dataset that ``train``, ``calibrate`` and ``eval-perception``
+read. Each action's ``--help`` gives it in full.
 
 Examples
 --------
     onionsort label export runs/data --format coco --out runs/data-coco
-    onionsort label import runs/data-coco --format coco --out runs/data-again
-    onionsort label import cvat-export --format coco --states lab-states.csv \\
-        --classes good=sound,blemished=rotten --out runs/lab
-    onionsort label import yolo-set --format yolo --depth yolo-set/depth --out runs/lab-yolo
-    onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
     onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
     onionsort label select runs/sel/*.mcap --frames 60 --recall --out runs/sel-task
     onionsort label import runs/ls --format labelstudio --out runs/lab
@@ -46,25 +18,82 @@ from __future__ import annotations
 
 import argparse
 
-from onionsort.commands import add_command
+from onionsort.commands import add_command, add_group
 from onionsort.configs import config_from_args
 from onionsort.configs.label import LabelExportConfig, LabelImportConfig, LabelSelectConfig
 
 __all__ = ["register"]
 
 
+EXPORT = """``onionsort label export``: a dataset folder in a layout annotation tools open.
+
+``--format coco`` writes the COCO 2017 layout (``annotations/instances_<split>.json`` beside
+``<split>/`` images), ``--format yolo`` Ultralytics' layout (``data.yaml``,
+``images/<split>/``, ``labels/<split>/`` with lines ``class cx cy w h``, normalised), each with
+the state labels in ``states.csv`` (split, image, session, step, frame, occluded, one column
+per factor of the task and action, in the task's words) and depth as 16-bit PNG in
+millimetres in ``depth/<split>/``: the main camera's frames at the top, the inspection views
+in ``inspection/`` in the same layout (the robot's line-up, onion and view numbers in
+``inspection/lineups.csv``). CVAT, Label Studio, FiftyOne and Ultralytics open it.
+
+Examples
+--------
+    onionsort label export runs/data --format coco --out runs/data-coco
+    onionsort label export runs/data --format yolo --out runs/data-yolo
+"""
+
+IMPORT = """``onionsort label import``: a labelled image set as a dataset folder.
+
+It reads the folder ``label export`` or ``label select`` wrote, or what CVAT, Label Studio or
+Roboflow export (``<split>/_annotations.coco.json``; one file without splits; ``--format
+labelstudio``: Label Studio's JSON export beside the images, its state choices as the state
+labels), into a new dataset folder that ``train``, ``calibrate`` and ``eval-perception`` read.
+Frames without a row in the states CSV are box-only: the detector and the inspection
+classifier learn from them, the state classifier and calibration do not. A set without splits
+is split by session, as ``onionsort dataset`` splits its sessions. Images may be JPEG or PNG
+of any size: larger ones are shrunk to the detector's 320x256 canvas, their boxes with them.
+
+Examples
+--------
+    onionsort label import runs/data-coco --format coco --out runs/data-again
+    onionsort label import cvat-export --format coco --states lab-states.csv \\
+        --classes good=sound,blemished=rotten --out runs/lab
+    onionsort label import yolo-set --format yolo --depth yolo-set/depth --out runs/lab-yolo
+    onionsort label import runs/ls --format labelstudio --out runs/lab
+"""
+
+SELECT = """``onionsort label select``: the frames worth labelling, as a pre-annotated task.
+
+It perceives recorded sessions and chooses the steps where the models are least sure (the
+chance, by their own probabilities and what the sorter later did with the onion, that a
+step's state guess is wrong): the steps more likely wrong than right first, then in rounds
+over the sessions, until ``--frames`` frames. It writes them pre-annotated with the models'
+boxes and state guesses: ``--format coco``, COCO with scores and a states.csv (what ``label
+import`` reads back once corrected), or ``--format labelstudio``, Label Studio's import format
+with predictions (``tasks.json``) and its labelling interface (``labeling_config.xml``).
+``--recall``, on recorded sessions that carry the truth, also scores the choice: how many
+steps have a wrong state guess, how many of those chosen do, and each wrong step left out (the
+truth is read after choosing, never by the choice).
+
+Examples
+--------
+    onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
+    onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
+    onionsort label select runs/sel/*.mcap --frames 60 --recall --out runs/sel-task
+"""
+
+
 def register(subparsers) -> None:
     """Add the ``label`` subcommand and its actions."""
-    parser = subparsers.add_parser("label", help="labelled frames in and out: COCO, YOLO and a "
-                                                 "states CSV", description=__doc__,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter)
-    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    add_command(actions, "export", None, "write a dataset as COCO or YOLO with states.csv",
+    actions = add_group(subparsers, "label", __doc__,
+                        "labelled frames in and out: COCO, YOLO and a states CSV",
+                        dest="action", metavar="ACTION")
+    add_command(actions, "export", EXPORT, "write a dataset as COCO or YOLO with states.csv",
                 LabelExportConfig, run_export)
-    add_command(actions, "import", None, "read COCO or YOLO (and a states CSV) as a dataset",
+    add_command(actions, "import", IMPORT, "read COCO or YOLO (and a states CSV) as a dataset",
                 LabelImportConfig, run_import)
-    add_command(actions, "select", None, "the frames of sessions where the models are least "
-                                         "sure, as a pre-annotated labelling task",
+    add_command(actions, "select", SELECT, "the frames of sessions where the models are least "
+                                           "sure, as a pre-annotated labelling task",
                 LabelSelectConfig, run_select)
 
 

@@ -44,9 +44,9 @@ class LearnCommand(LearnConfig, ParallelOptions):
 
     method: tuple[str, ...] = option(("mmap-birl",), type=methods_list(METHODS),
                                      metavar="METHOD[,METHOD...]",
-                                     help=f"the learner ({', '.join(METHODS)}; default "
-                                          "mmap-birl); several, comma-separated, learn in "
-                                          "parallel, each into OUT/METHOD")
+                                     help=f"the learner ({', '.join(METHODS)}); several, "
+                                          "comma-separated, learn in parallel, each into "
+                                          "OUT/METHOD")
     cli_help: ClassVar[dict[str, str]] = {"pieces": "methods"}
 
 

@@ -1,33 +1,28 @@
 """``onionsort train``: train perception models on a dataset from ``onionsort dataset``.
 
+``MODEL`` is one of the state classifier, the detector, the inspection classifier, or
+``robot-fusion``, the calibration of the robot's fused inspection; each model's ``--help``
+says what it writes. Every network is trained with photometric augmentation unless
+``--no-augment``: each training sample is seen through a camera of its own
+(``perception.photometric``); evaluation never is. ``--data`` may be repeated to pool several
+datasets (a lab's frames from ``onionsort label import`` and rendered ones), each weighted by
+``--data-weights``; ``--init`` fine-tunes a checkpoint instead of training from scratch.
+
 Examples
 --------
     onionsort dataset --frames 3000 --out runs/data
     onionsort train state-classifier --data runs/data --out runs/perception
     onionsort train detector --data runs/data --out runs/perception
-    onionsort train detector --data runs/data --out runs/perception --resume
     onionsort train inspection --data runs/data --out runs/perception
-    onionsort train robot-fusion --data runs/heldout-a --data runs/heldout-b \\
-        --models runs/perception --out runs/perception
-    onionsort train state-classifier --data runs/data --out runs/plain --no-augment
-    onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \
+    onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \\
         --init runs/perception/detector.pt --epochs 6 --lr 5e-4 --out runs/lab-models
-
-Every model is trained with photometric augmentation unless ``--no-augment``: each training
-sample is seen through a camera of its own (``perception.photometric``); evaluation never is.
-
-``robot-fusion`` trains no network: it fits the calibration of the robot's fused P(blemished)
-(a temperature on each side of the fused evidence's 0: monotone, and the call unchanged) on
-held-out robot onions and writes ``robot_fusion_calibration.json``, which the robot's
-inspection then applies. ``train inspection --camera robot`` writes one too, fitted on its
-validation onions.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from onionsort.commands import add_command
+from onionsort.commands import add_command, add_group
 from onionsort.configs import config_from_args
 from onionsort.configs.inspection import FusionCalibrationConfig, InspectionTrainStageConfig
 from onionsort.configs.train import ClassifierTrainConfig, DetectorTrainConfig
@@ -35,22 +30,85 @@ from onionsort.configs.train import ClassifierTrainConfig, DetectorTrainConfig
 __all__ = ["register"]
 
 
+STATE_CLASSIFIER = """``onionsort train state-classifier``: the SA-Net-style classifier.
+
+It reads the onion's and the hand's locations, the sorter's action, whether an onion waits
+at the stop gate, and whether the camera was blocked, off a step's colour frames and depth
+(zeroed at random in training, ``--depth-dropout``, so the model also reads sessions without
+depth), and keeps the epoch of best validation score. Writes ``state_classifier.pt`` into
+``--out`` and prints each head's accuracy on the test split, with and without depth.
+
+Examples
+--------
+    onionsort train state-classifier --data runs/data --out runs/perception
+    onionsort train state-classifier --data runs/data --out runs/plain --no-augment
+    onionsort train state-classifier --data runs/lab --data runs/data --data-weights 3,1 \\
+        --init onionsort/models/state_classifier.pt --lr 3e-4 --out runs/lab-models
+"""
+
+DETECTOR = """``onionsort train detector``: the YOLO-style, anchor-free onion detector.
+
+It finds good and blemished onions in the main camera's frames and the inspection views,
+trained from scratch (or from ``--init``) on ``--images-per-epoch`` images an epoch, and
+keeps the epoch of best validation score. Writes ``detector.pt`` into ``--out`` (with a
+checkpoint each epoch, which ``--resume`` continues from) and prints its COCO mAP on the test
+split.
+
+Examples
+--------
+    onionsort train detector --data runs/data --out runs/perception
+    onionsort train detector --data runs/data --out runs/perception --resume
+    onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \\
+        --init runs/perception/detector.pt --epochs 6 --lr 5e-4 --out runs/lab-models
+"""
+
+INSPECTION = """``onionsort train inspection``: the classifier of a held onion's views.
+
+It learns whether a view of the onion at the inspection spot (the sorter's) or in the
+Sawyer's gripper (the robot's) shows rot, calibrates its probability with a temperature, and
+chooses how the views of one onion are fused (``--fusion``, by default the rule of lower
+log-loss on the validation onions). With ``--camera both`` it writes
+``inspection_classifier.pt``, which both inspections read; with ``--camera robot``
+``robot_inspection_classifier.pt`` and ``robot_fusion_calibration.json``, which the Sawyer's
+inspection then reads instead. The validation views are found with ``--detector``'s model.
+
+Examples
+--------
+    onionsort train inspection --data runs/data --out runs/perception
+    onionsort train inspection --data runs/data-mix --level-weights clean=1,hard=2 \\
+        --fusion noisy-or --out runs/perception
+    onionsort train inspection --data runs/data-robot --camera robot --fusion noisy-or \\
+        --visibility 0.3 --out runs/perception
+"""
+
+ROBOT_FUSION = """``onionsort train robot-fusion``: calibrate the robot's fused P(blemished).
+
+It trains no network: it fits a temperature on each side of the fused evidence's 0 (monotone,
+so no call changes) on held-out robot onions, and writes ``robot_fusion_calibration.json``
+into ``--out``, which the robot's inspection then applies. Give it data that the calibration
+is not then measured on.
+
+Examples
+--------
+    onionsort train robot-fusion --data runs/heldout-a --data runs/heldout-b \\
+        --models runs/perception --out runs/perception
+    onionsort train robot-fusion --data runs/heldout-a --split val --views 4 --out runs/models
+"""
+
+
 def register(subparsers) -> None:
     """Add the ``train`` subcommand and its models."""
-    parser = subparsers.add_parser(
-        "train", help="train perception models", description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    models = parser.add_subparsers(dest="model", metavar="MODEL", required=True)
-    add_command(models, "state-classifier", None,
+    models = add_group(subparsers, "train", __doc__, "train perception models", dest="model",
+                       metavar="MODEL")
+    add_command(models, "state-classifier", STATE_CLASSIFIER,
                 "the SA-Net-style classifier: onion/hand location, occluded",
                 ClassifierTrainConfig, run_state_classifier)
-    add_command(models, "detector", None, "the YOLO-style onion detector (good / blemished)",
+    add_command(models, "detector", DETECTOR, "the YOLO-style onion detector (good / blemished)",
                 DetectorTrainConfig, run_detector)
-    add_command(models, "inspection", None,
+    add_command(models, "inspection", INSPECTION,
                 "the inspection classifier: does a view of the held onion show rot",
                 InspectionTrainStageConfig, run_inspection)
-    add_command(models, "robot-fusion", None,
+    add_command(models, "robot-fusion", ROBOT_FUSION,
                 "calibrate the robot's fused P(blemished) on held-out onions",
                 FusionCalibrationConfig, run_robot_fusion)
 

@@ -15,13 +15,19 @@ module re-exports its config from here. Options several stages share are field f
 :mod:`onionsort.configs.common`; where a stage's pieces run, the fields of
 :class:`onionsort.configs.parallel.ParallelOptions`.
 
+Every option's help says what it does and ends with its default, one way: ``(default:
+VALUE)``, which :func:`add_config_arguments` appends from the field's default, so a help never
+states it. Where the default is None, empty or worked out (the shipped models, one worker per
+core, 4 with ``--quick``), the help ends with ``(default: ...)`` in words instead. A switch
+(a ``bool`` field, off by default) and a required option show none.
+
 Example::
 
     @documented
     @dataclass(frozen=True, kw_only=True)
     class SuggestConfig:
         run: Path = option(positional=True, metavar="RUN_DIR", help="a folder of ...")
-        top: int = option(5, help="states to list (5)")
+        top: int = option(5, help="states to list")          # shown: states to list (default: 5)
 
     add_config_arguments(parser, SuggestConfig)        # RUN_DIR and --top
     config = config_from_args(SuggestConfig, args)     # SuggestConfig(run=..., top=...)
@@ -40,11 +46,32 @@ from dataclasses import dataclass
 from pathlib import PurePath
 from typing import Any
 
-__all__ = ["Option", "add_config_arguments", "config_from_args", "config_options",
-           "config_values", "documented", "option"]
+__all__ = ["DEFAULT", "Option", "add_config_arguments", "config_from_args", "config_options",
+           "config_values", "documented", "option", "shown_default"]
 
 #: the metadata key of a field's :class:`Option`
 _KEY = "onionsort.option"
+#: how every option's help shows its default: ``(default: VALUE)``, last
+DEFAULT = "(default: "
+
+
+def shown_default(value) -> str:
+    """A default as the help shows it, spelled as the command line would take it: a path as
+    given, a list or mapping joined by commas, ``on``/``off`` for a boolean; nothing for None
+    or an empty container (the help then says it in words)."""
+    if value is None or (isinstance(value, list | tuple | set | frozenset | dict) and not value):
+        return ""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    if isinstance(value, PurePath):
+        return value.as_posix()
+    if isinstance(value, dict):
+        return ",".join(f"{k}={shown_default(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ",".join(shown_default(v) for v in value)
+    if isinstance(value, set | frozenset):
+        return ",".join(sorted(shown_default(v) for v in value))
+    return str(value)
 
 
 @dataclass(frozen=True)
@@ -79,6 +106,19 @@ class Option:
         """The help with each ``{name}`` replaced by ``words[name]`` (a config's
         ``cli_help``)."""
         return self.help.format(**words) if self.help and "{" in self.help else self.help
+
+    def shown(self, words: dict[str, str], default, *, switch: bool, required: bool
+              ) -> str | None:
+        """The help as the command line shows it: :meth:`text`, and ``(default: VALUE)``
+        after it where the option takes a value (or is argparse's
+        ``BooleanOptionalAction``), is not required, and the help does not say its default in
+        words already (``VALUE`` is :func:`shown_default` of ``default``, its ``%`` doubled
+        for argparse)."""
+        text = self.text(words)
+        if text is None or switch or required or self.positional or DEFAULT in text:
+            return text
+        shown = shown_default(default)
+        return f"{text} {DEFAULT}{shown.replace('%', '%%')})" if shown else text
 
 
 def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = None,
@@ -116,7 +156,8 @@ def option(default=dataclasses.MISSING, *, help: str | None, flag: str | None = 
         ``argparse.BooleanOptionalAction`` (the flag, and the same with ``no-`` before the
         name).
     exclusive
-        The options of one name are mutually exclusive.
+        The options of one name are mutually exclusive; where one of them is required, one
+        of them must be given (argparse's required group: ``(--out OUT | --list)``).
     required
         Whether the option must be given, where that is not what the default says (an
         option whose absence the command itself answers).
@@ -176,14 +217,21 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
     groups: dict[str, Any] = {}
     exclusive: dict[str, Any] = {}
     words = getattr(config_cls, "cli_help", {})
-    for f, opt, annotation in config_options(config_cls):
+    options = config_options(config_cls)
+    # an exclusive group one of whose options is required: one of them must be given
+    one_of = {opt.exclusive for f, opt, _ in options
+              if opt.exclusive is not None and _required(f, opt)}
+    for f, opt, annotation in options:
         default = _default(f)
-        required = default is dataclasses.MISSING
-        default = None if required else default
-        kwargs: dict[str, Any] = {"help": opt.text(words)}
+        missing = default is dataclasses.MISSING
+        default = None if missing else default
+        switch = opt.action is None and opt.type is None and _text_type(annotation) is bool
+        required = _required(f, opt) and opt.exclusive is None
+        kwargs: dict[str, Any] = {"help": opt.shown(words, default, switch=switch,
+                                                    required=required or missing)}
         if not opt.positional:
             kwargs["dest"] = f.name
-        if opt.action is None and opt.type is None and _text_type(annotation) is bool:
+        if switch:
             kwargs["action"] = "store_false" if default is True else "store_true"
         else:
             if opt.action is not None:
@@ -193,10 +241,9 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
             for key in ("choices", "metavar", "nargs"):
                 if getattr(opt, key) is not None:
                     kwargs[key] = getattr(opt, key)
-            if not required:
+            if not missing:
                 kwargs["default"] = default
-            if not opt.positional and (opt.required if opt.required is not None
-                                       else required):
+            if required:
                 kwargs["required"] = True
         target = parser
         if opt.group is not None:
@@ -205,9 +252,18 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls) -> None:
             target = groups[opt.group]
         if opt.exclusive is not None:
             if opt.exclusive not in exclusive:
-                exclusive[opt.exclusive] = target.add_mutually_exclusive_group()
+                exclusive[opt.exclusive] = target.add_mutually_exclusive_group(
+                    required=opt.exclusive in one_of)
             target = exclusive[opt.exclusive]
         target.add_argument(*opt.flags(f.name, default), **kwargs)
+
+
+def _required(f: dataclasses.Field, opt: Option) -> bool:
+    """Whether the option ``f`` must be given on the command line (a positional argument is
+    required by argparse's own rule)."""
+    if opt.positional:
+        return False
+    return opt.required if opt.required is not None else _default(f) is dataclasses.MISSING
 
 
 def config_values(config_cls, args: argparse.Namespace) -> dict[str, Any]:

@@ -64,14 +64,14 @@ class CalibrateConfig(ParallelOptions):
     """
 
     data: Path = option(help="labelled dataset folder")
-    split: str = option("test", help="the held-out split to use: train, val, test or all "
-                                     "(test)")
+    split: str = option("test", help="the held-out split to use: train, val, test or all")
     out: Path = option(help="folder for the calibration")
-    smoothing: float = option(1.0, help="additive smoothing of the confusion counts (1.0)")
+    smoothing: float = option(1.0, help="additive smoothing of the confusion counts")
     depth: bool = option(True, help="measure the classifier on colour alone (for sessions "
                                     "without depth)")
-    inspection: bool = option(True, help="measure without the inspection view (imported "
-                                         "videos have none)")
+    inspection: bool = option(True, help="measure without the inspection view (for a video "
+                                         "imported without --inspection; the onion's class "
+                                         "is then unobserved)")
     overwrite: bool = option(False, help="replace a calibration.json already in --out")
     models: Path | None = common.models()
     device: str = common.device()
@@ -95,18 +95,19 @@ class PerceptionEvalConfig:
     one)."""
 
     data: Path = option(help="labelled dataset folder")
-    split: str = option("test", help="split to evaluate on: train, val, test or all (test)")
+    split: str = option("test", help="split to evaluate on: train, val, test or all")
     depth: bool = option(True, help="classifier on colour alone")
     inspection: bool = option(True, help="without the inspection view")
     views: int | None = option(None, help="fuse the Sawyer's first VIEWS views of each onion "
                                           "(default: all the dataset holds)")
     plots: Path | None = option(None, metavar="DIR",
-                                help="draw the inspection's precision-recall curves into DIR")
+                                help="draw the inspection's precision-recall curves into DIR "
+                                     "(default: none)")
     camera_shift: tuple[int, ...] | None = option(
         None, metavar="SEEDS", type=camera_seeds,
         help="measure through other cameras too, once per seed of SEEDS (ints >= 0, "
-             "comma-separated: 11,12,13; default: none), and print each figure unchanged, "
-             "through each seed's cameras, their mean and the worst drop")
+             "comma-separated: 11,12,13), and print each figure unchanged, through each seed's "
+             "cameras, their mean and the worst drop (default: none)")
     one_camera: bool = option(False, help="with --camera-shift: one camera per seed for every "
                                           "session and line-up (a lab's one camera), not one "
                                           "camera a session")

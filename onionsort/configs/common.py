@@ -40,28 +40,27 @@ SELECT_FORMATS = ("coco", "labelstudio")
 POSTERIOR_METHODS = ("mcmc", "laplace")
 
 
-def seed(help: str = "root seed (0)"):
+def seed(help: str = "root seed"):
     """``--seed``: the root seed, 0 by default."""
     return option(0, help=help)
 
 
 def occlusion(default: float):
     """``--occlusion``: the chance that the passer-by occludes a step."""
-    return option(default, help="probability that a step is occluded by the passer-by "
-                                f"({default})")
+    return option(default, help="probability that a step is occluded by the passer-by")
 
 
 def steps_per_session():
     """``--steps-per-session``."""
-    return option(20, help="abstract sorting steps per session (20)")
+    return option(20, help="abstract sorting steps per session")
 
 
-def frames_per_step(help: str = "frames rendered per step (3)"):
+def frames_per_step(help: str = "frames rendered per step"):
     """``--frames-per-step``."""
     return option(3, help=help)
 
 
-def difficulty(help: str = "perception difficulty of the world (clean)"):
+def difficulty(help: str = "perception difficulty of the world"):
     """``--difficulty``: one of the world's levels."""
     return option("clean", choices=DIFFICULTY_LEVELS, help=help)
 
@@ -77,21 +76,21 @@ def models():
 def device():
     """``--device {auto,cpu,cuda}``: where torch runs the perception models."""
     return option("auto", choices=DEVICES,
-                  help="where torch runs: auto (CUDA when present, else the CPU; default), cpu "
-                       "or cuda")
+                  help="where torch runs: auto (CUDA when present, else the CPU), cpu or cuda")
 
 
 def connect(what: str = "its Rerun recordings"):
     """``--connect URL``: also stream the command's Rerun recordings to a viewer over gRPC."""
     return option(None, metavar="URL",
                   help=f"also stream {what} to the Rerun viewer at URL, e.g. on another "
-                       "machine (rerun+http://HOST:9876/proxy; start it there with `rerun`)")
+                       "machine (rerun+http://HOST:9876/proxy; start it there with `rerun`) "
+                       "(default: none)")
 
 
 def inspection_views():
     """``--inspection-views``: views the Sawyer takes of every onion."""
     return option(INSPECTION_VIEWS, help="views the Sawyer takes of every onion, turning and "
-                                         f"tilting it ({INSPECTION_VIEWS})")
+                                         "tilting it")
 
 
 def miss_cost():
@@ -102,9 +101,9 @@ def miss_cost():
 
 def waste_cost():
     """``--waste-cost``."""
-    return option(None, help="cost of a good onion in the bin (default: from the task's "
-                             "reward, 8); the robot bins an onion when P(blemished) >= "
-                             "waste / (waste + miss)")
+    return option(None, help="cost of a good onion in the bin; the robot bins an onion when "
+                             "P(blemished) >= waste / (waste + miss) (default: from the task's "
+                             "reward, 8)")
 
 
 def sorting_threshold(miss: float | None = None, waste: float | None = None) -> float:
@@ -129,16 +128,16 @@ def fusion(help: str = "how the views are fused (default: the inspection classif
 def backend():
     """``--backend {numpy,numba}``: the forward-backward kernels."""
     return option("numpy", choices=BACKENDS,
-                  help="forward-backward kernels: numpy (default) or numba, compiled and equal "
-                       "to rounding (pip install -e \".[fast]\"); used by mmap-birl and bc-em; "
+                  help="forward-backward kernels: numpy, or numba, compiled and equal to "
+                       "rounding (pip install -e \".[fast]\"); used by mmap-birl and bc-em, "
                        "the other learners ignore it")
 
 
 def posterior_method():
     """``--posterior-method {mcmc,laplace}``: how the posterior over rewards is sampled."""
     return option("mcmc", choices=POSTERIOR_METHODS,
-                  help="HMC chains on the exact gradient (mcmc), or a Gaussian at the MAP "
-                       "(laplace, fast)")
+                  help="how the posterior is drawn: mcmc, HMC chains on the exact gradient, "
+                       "or laplace, a Gaussian at the MAP (fast)")
 
 
 def session_swaps():
@@ -156,7 +155,8 @@ def defer_below(needs: str):
                   help="defer to a person where the robot is less sure than P that its next "
                        f"action is right: the learned policy's confidence in it ({needs}), "
                        "weighed over what an inspected onion may be by the inspection's "
-                       "P(blemished); the onion goes to a check tray, counted apart")
+                       "P(blemished); the onion goes to a check tray, counted apart (default: "
+                       "never)")
 
 
 def check_device(device: str) -> str:

@@ -35,7 +35,7 @@ class DatasetConfig(ParallelOptions):
     images named after it (``s0003_0012.png``, ``l0001_0004.png``).
     """
 
-    frames: int = option(3000, help="frames in all (3000)")
+    frames: int = option(3000, help="frames in all")
     out: Path = option(help="new dataset folder")
     seed: int = common.seed()
     occlusion: float = common.occlusion(0.3)
@@ -44,18 +44,17 @@ class DatasetConfig(ParallelOptions):
     val: float = option(0.15, help="share of sessions for val")
     test: float = option(0.15, help="share of sessions for test")
     robot_onions: int = option(120, help="onions the Sawyer holds up to its inspection camera, "
-                                         "in line-ups of 10 split like the sessions (120; 0 "
-                                         "for none)")
-    robot_views: int = option(8, help="views the Sawyer takes of each of them (8)")
+                                         "in line-ups of 10 split like the sessions; 0 for "
+                                         "none")
+    robot_views: int = option(8, help="views the Sawyer takes of each of them")
     difficulty: str = option("clean", type=levels,
                              help="perception difficulty of the world: one of "
-                                  f"{', '.join(common.DIFFICULTY_LEVELS)} (clean), or several "
-                                  "joined by commas for a mix whose sessions take the levels "
-                                  "in turn")
+                                  f"{', '.join(common.DIFFICULTY_LEVELS)}, or several joined "
+                                  "by commas for a mix whose sessions take the levels in turn")
     randomize_look: bool = option(False, help="draw each session's and line-up's light, "
                                               "surface colours and camera exposure and white "
                                               "balance from its seed (training data across "
-                                              "cameras; default: today's look)")
+                                              "cameras; without it, one look for all)")
     #: Measure the rot each inspection view shows (the inspection classifier's labels; one more
     #: render of each view). Calibration needs none.
     rot_labels: bool = True

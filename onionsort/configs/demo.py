@@ -34,17 +34,17 @@ class DemoConfig(ParallelOptions):
     """
 
     seed: int = common.seed()
-    out: Path = option(Path("runs/demo"), help="run folder (runs/demo)")
+    out: Path = option(Path("runs/demo"), help="run folder")
     quick: bool = option(False, help="a small, fast run (smoke test)")
-    sessions: int | None = option(None, help="sessions recorded per repeat (12; quick 4)")
-    difficulty: str = common.difficulty("how hard the world makes perception (clean)")
+    sessions: int | None = option(None, help="sessions recorded per repeat (default: 12; 4 with "
+                                                "--quick)")
+    difficulty: str = common.difficulty("how hard the world makes perception")
     methods: tuple[str, ...] = option(METHODS, type=common.methods_list(common.METHODS),
                                       metavar="METHOD[,METHOD...]",
                                       help="the learners whose policies the Sawyer sorts with ("
-                                           + ", ".join(common.METHODS) + "; default "
-                                           "mmap-birl,map-birl,hidden-data-em)")
+                                           + ", ".join(common.METHODS) + ")")
     repeats: int = option(1, help="repeat with seeds SEED..SEED+K-1 and report 95%% "
-                                  "intervals (1)")
+                                  "intervals")
     models: Path | None = common.models()
     resume: bool = option(False, help="continue the interrupted demo in --out: skip its "
                                       "finished stages")

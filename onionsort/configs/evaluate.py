@@ -29,13 +29,13 @@ class EvaluateConfig:
     #: (the command's option takes several: commands/evaluate.py).
     run: Path | None = None
     policy: str = option("learned", choices=POLICIES,
-                         help="the run's learned policy (default), or the task's own: the "
+                         help="the run's learned policy, or the task's own (expert): the "
                               "robot's perception measured apart from learning")
     out: Path | None = option(None, help="folder for the outputs (default: RUN_DIR; needed with "
                                          "--policy expert)")
-    onions: int = option(50, help="onions on the line (50)")
-    blemished: int = option(30, help="how many are blemished (30)")
-    seed: int = common.seed(help=None)
+    onions: int = option(50, help="onions on the line")
+    blemished: int = option(30, help="how many are blemished")
+    seed: int = common.seed("the line-up's seed")
     models: Path | None = common.models()
     ground_truth_inspection: bool = option(False, help="perfect inspection instead of the "
                                                        "detector (for comparison)")

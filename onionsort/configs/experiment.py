@@ -38,12 +38,17 @@ class ExperimentConfig(ParallelOptions):
     sweep may be resumed with the other.
     """
 
-    domain: str = option(positional=True, choices=DOMAINS, help=None)
-    occlusion: tuple[float, ...] | None = option(None, type=common.floats,
-                                                 help="occlusion rates, e.g. 0.1,0.2,0.3")
-    noise: tuple[float, ...] | None = option(None, type=common.floats,
-                                             help="observation-noise levels, e.g. 0,0.3")
-    batches: int | None = option(None, help="batches per point (default 10; quick 3)")
+    domain: str = option(positional=True, choices=DOMAINS,
+                         help="the paper's domain: forestworld or sorting (onion sorting)")
+    occlusion: tuple[float, ...] | None = option(
+        None, type=common.floats,
+        help="occlusion rates, e.g. 0.1,0.2,0.3 (default: the paper's points; 0 when only "
+             "--noise is given)")
+    noise: tuple[float, ...] | None = option(
+        None, type=common.floats,
+        help="observation-noise levels, e.g. 0,0.3 (default: the paper's points; 0.3 when "
+             "only --occlusion is given)")
+    batches: int | None = option(None, help="batches per point (default: 10; 3 with --quick)")
     #: Demonstrations per batch; several values sweep them.
     trajectories: int | tuple[int, ...] | None = None
     #: Steps per demonstration; several values sweep them.
@@ -55,10 +60,10 @@ class ExperimentConfig(ParallelOptions):
     #: behaviour-cloning baselines ``bc`` and ``bc-em`` are asked for by name; a cloned policy
     #: is scored by its own actions).
     methods: tuple[str, ...] = common.IRL_METHODS
-    seed: int = common.seed(help=None)
+    seed: int = common.seed()
     quick: bool = option(False, help="a small sweep that takes seconds")
     backend: str = common.backend()
-    out: Path | None = option(None, help="run folder (default runs/experiment-DOMAIN)")
+    out: Path | None = option(None, help="run folder (default: runs/experiment-DOMAIN)")
     resume: bool = option(False, help="continue an interrupted sweep in --out: keep the trials "
                                       "in its results.csv.partial and run the rest (same "
                                       "options; --backend may differ)")

@@ -23,13 +23,13 @@ class ExportConfig:
 
     session: Path = option(positional=True, metavar="SESSION", help="a session file (.mcap)")
     format: str = option("ros2", choices=EXPORT_FORMATS,
-                         help="what to write: ros2, a rosbag2 folder (the default, and the only "
-                              "format for now)")
+                         help="what to write: ros2, a rosbag2 folder (the only format for "
+                              "now)")
     out: Path = option(help="the folder to create (refused if it exists)")
     raw_images: bool = option(False, help="decoded rgb8 sensor_msgs/Image instead of the "
                                           "session's JPEG and PNG bytes as CompressedImage")
     storage: str = option("mcap", choices=ROS2_STORAGES,
-                          help="the rosbag2 storage plugin: mcap (default) or sqlite3")
+                          help="the rosbag2 storage plugin: mcap or sqlite3")
 
     def __post_init__(self) -> None:
         if self.format not in EXPORT_FORMATS:

@@ -28,22 +28,26 @@ class ImportConfig:
     classifier reads 3 frames a step. An existing ``out`` is refused.
     """
 
-    out: Path = option(required=False, after="camera", help="the session file to write")
+    out: Path = option(exclusive="target", after="camera",
+                       help="the session file to write (or --list)")
     video: Path | None = option(None, positional=True, nargs="?", metavar="SOURCE",
-                                help="a video file, or a ROS 2 / ROS 1 bag")
-    camera: int | None = option(None, metavar="INDEX", help="record from a camera")
+                                help="a video file, or a ROS 2 / ROS 1 bag (default: none, "
+                                     "with --camera)")
+    camera: int | None = option(None, metavar="INDEX",
+                                help="record from the camera of this index instead of SOURCE "
+                                     "(default: none)")
     step_seconds: float | None = option(None, metavar="X",
                                         help="a step every X seconds (default: segment by "
                                              "perceived changes)")
-    debounce: int = option(2, help="windows a perceived change must hold to start a step (2)")
-    frames_per_step: int = common.frames_per_step("frames kept per step (3)")
+    debounce: int = option(2, help="windows a perceived change must hold to start a step")
+    frames_per_step: int = common.frames_per_step("frames kept per step")
     intrinsics: Path | None = option(None, metavar="FILE",
                                      help="camera intrinsics JSON (default: a bag's CameraInfo, "
                                           "else a 60-degree horizontal view)")
     inspection: Path | None = option(None, metavar="VIDEO",
                                      help="a video of the inspection spot, frame for frame "
-                                          "with VIDEO")
-    max_seconds: float = option(60.0, help="how long to record from --camera (60)")
+                                          "with SOURCE (default: none: no inspection view)")
+    max_seconds: float = option(60.0, help="how long to record from --camera, in seconds")
     #: The intrinsics JSON of ``inspection`` (None: a 60-degree horizontal view).
     inspection_intrinsics: Path | None = None
     color_topic: str | None = option(None, metavar="TOPIC", group=BAG,
@@ -51,17 +55,19 @@ class ImportConfig:
                                           "image topic)")
     depth_topic: str | None = option(None, metavar="TOPIC", group=BAG,
                                      help="depth images, 16UC1 millimetres or 32FC1 metres "
-                                          "(optional)")
+                                          "(default: none: no depth)")
     camera_info_topic: str | None = option(None, metavar="TOPIC", group=BAG,
                                            help="the colour camera's CameraInfo (default: the "
                                                 "one beside --color-topic, then --intrinsics)")
     inspection_topic: str | None = option(None, metavar="TOPIC", group=BAG,
-                                          help="images of the inspection spot (optional)")
+                                          help="images of the inspection spot (default: none: "
+                                               "no inspection view)")
     step_topic: str | None = option(None, metavar="TOPIC", group=BAG,
-                                    help="a topic whose messages mark step starts")
+                                    help="a topic whose messages mark step starts (default: "
+                                         "none: --step-seconds, else perceived changes)")
     sync_tolerance: float = option(0.05, metavar="SECONDS", group=BAG,
                                    help="how near in time depth and inspection images must be "
-                                        "to a colour frame (0.05)")
+                                        "to a colour frame, in seconds")
     models: Path | None = common.models()
 
     @property

@@ -45,14 +45,14 @@ class InspectionTrainStageConfig(train.TrainOptions):
     fine-tuning from ``init``.
     """
 
-    epochs: int = option(30, help=None)
-    batch_size: int = option(128, help=None)
+    epochs: int = option(30, help=train.EPOCHS)
+    batch_size: int = option(128, help=train.BATCH_SIZE)
     detector: Path | None = option(None, help="folder of the detector.pt that finds the onion "
                                               "in the validation views (default: the shipped "
                                               "one)")
     level_weights: dict = option(default_factory=dict, type=level_weights,
-                                 help="weights of difficulty levels, e.g. clean=2,hard=1 (each "
-                                      "1 by default)")
+                                 help="weights of difficulty levels, e.g. clean=2,hard=1 "
+                                      "(default: 1 each)")
     fusion: str | None = common.fusion("the classifier's fusion rule (default: the one of "
                                        "lower log-loss on the validation onions)")
     camera: str = option("both", choices=INSPECTION_CAMERAS,
@@ -95,7 +95,7 @@ class FusionCalibrationConfig:
                                                "(repeat it to pool several); never the data "
                                                "the calibration is then measured on")
     split: str = option("all", choices=("train", "val", "test", "all"),
-                        help="the split whose robot onions fit it (all)")
+                        help="the split whose robot onions fit it")
     views: int | None = option(None, help="the first VIEWS views of each onion (default: as "
                                           "many as the robot takes)")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "

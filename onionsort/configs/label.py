@@ -69,8 +69,8 @@ class LabelImportConfig:
                               "(Ultralytics, Roboflow) or labelstudio (Label Studio's JSON "
                               "export: boxes and state choices)")
     states: Path | None = option(None, metavar="FILE.csv",
-                                 help="the state labels (default: DIR/states.csv where there "
-                                      "is one); frames without a row are box-only")
+                                 help="the state labels; frames without a row are box-only "
+                                      "(default: DIR/states.csv where there is one)")
     depth: Path | None = option(None, metavar="DIR",
                                 help="16-bit PNG depth in millimetres, matched by file name "
                                      "(default: DIR/depth where there is one)")

@@ -28,14 +28,14 @@ class LearnConfig:
     """
 
     sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION.mcap",
-                                        help=None)
+                                        help="perceived sessions (`onionsort perceive`)")
     #: A learner of :data:`irl.experiments.METHODS` (the command's option takes several:
     #: commands/learn.py).
     method: str = "mmap-birl"
     calibration: Path = option(flag="--observation-model", metavar="FILE",
                                help="calibration.json written by `onionsort calibrate`")
     out: Path = option(help="run folder")
-    seed: int = common.seed("the learner's seed (0)")
+    seed: int = common.seed("the learner's seed")
     overwrite: bool = option(False, help="replace an earlier run in --out")
     allow_model_mismatch: bool = option(False, help="learn even if the sessions were perceived "
                                                     "by other models (or in another sensor "
@@ -43,7 +43,7 @@ class LearnConfig:
     posterior: bool = option(False, help="also sample the posterior over reward weights "
                                          "(mmap-birl, map-birl): posterior.npz, "
                                          "policy_confidence.json and .png")
-    samples: int = option(1000, metavar="N", help="posterior samples (1000)")
+    samples: int = option(1000, metavar="N", help="posterior samples")
     posterior_method: str = common.posterior_method()
     session_swaps: bool = common.session_swaps()
     backend: str = common.backend()

@@ -50,8 +50,8 @@ class ParallelOptions:
     ``workers`` None is :func:`default_workers` for the stage's ``piece_threads``."""
 
     executor: str = option("local", choices=EXECUTORS, group="parallel",
-                           help="run the {pieces} on local worker processes (default) or as "
-                                "Ray tasks (pip install -e \".[ray]\")")
+                           help="run the {pieces} on local worker processes or as Ray tasks "
+                                "(pip install -e \".[ray]\")")
     workers: int | None = option(None, metavar="N", group="parallel",
                                  help="{pieces} at a time: local worker processes, or the CPUs "
                                       "of a new local Ray instance (default: one per core, or "

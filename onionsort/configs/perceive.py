@@ -19,7 +19,7 @@ class PerceiveConfig(ParallelOptions):
     place, a piece each), with which models."""
 
     sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION.mcap",
-                                        help=None)
+                                        help="recorded or imported sessions")
     replace: bool = option(False, help="perceive sessions that already hold perception "
                                        "topics again")
     models: Path | None = common.models()

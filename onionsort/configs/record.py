@@ -22,21 +22,22 @@ class RecordConfig(ParallelOptions):
     viewer) or a viewer URL; ``resume``: see :mod:`onionsort.stages.record`.
     """
 
-    sessions: int = option(12, help="sessions to record (12)")
+    sessions: int = option(12, help="sessions to record")
     out: Path = option(help="folder for the .mcap files")
     seed: int = common.seed()
     occlusion: float = common.occlusion(0.2)
     steps_per_session: int = common.steps_per_session()
     frames_per_step: int = common.frames_per_step()
-    width: int = option(320, help="camera width in pixels (320)")
-    height: int = option(240, help="camera height in pixels (240)")
+    width: int = option(320, help="camera width in pixels")
+    height: int = option(240, help="camera height in pixels")
     overwrite: bool = option(False, exclusive="again",
                              help="replace existing session files in --out")
     resume: bool = option(False, exclusive="again",
                           help="keep the complete sessions in --out and record the others "
                                "(interrupted ones again, from their own seeds)")
     rerun: Path | str | None = option(None, type=Path, metavar="FILE.rrd", exclusive="viewer",
-                                      help="also log every session to this Rerun file")
+                                      help="also log every session to this Rerun file "
+                                           "(default: none)")
     connect: str | None = common.connect("every session")
     difficulty: str = common.difficulty()
     cli_help: ClassVar[dict[str, str]] = {"pieces": "sessions"}

@@ -17,7 +17,7 @@ class SuggestConfig:
 
     run: Path = option(positional=True, metavar="RUN_DIR",
                        help="a folder of `onionsort learn --posterior`")
-    top: int = option(5, help="states to list (5)")
+    top: int = option(5, help="states to list")
 
     def __post_init__(self) -> None:
         if isinstance(self.top, bool) or not isinstance(self.top, int) or self.top < 1:

@@ -14,6 +14,11 @@ __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augm
            "data_weights", "init", "weights"]
 
 
+#: The help of ``--epochs`` and ``--batch-size``, whose defaults differ by model
+EPOCHS = "passes over the training data; the epoch of best validation score is kept"
+BATCH_SIZE = "training samples per optimizer step"
+
+
 def weights(text: str) -> tuple[int, ...]:
     """Positive integers joined by commas, for argparse ``type=``."""
     try:
@@ -37,21 +42,20 @@ def data_weights():
     """``--data-weights W,W,...``: how many times each ``--data``'s training frames count."""
     return option((), type=weights, metavar="W,W,...",
                   help="how many times each --data's training frames count, in their order, "
-                       "e.g. 3,1 (1 each)")
+                       "e.g. 3,1 (default: 1 each)")
 
 
 def augment():
     """``--augment`` / ``--no-augment``: photometric augmentation at training (on)."""
     return option(True, action=argparse.BooleanOptionalAction,
                   help="see each training sample through a camera of its own (white balance, "
-                       "exposure, tone curve, defocus, noise, JPEG), never at evaluation "
-                       "(default: on)")
+                       "exposure, tone curve, defocus, noise, JPEG), never at evaluation")
 
 
 def init(what: str):
     """``--init CHECKPOINT``: ``what`` to fine-tune instead of training from scratch."""
     return option(None, metavar="CHECKPOINT",
-                  help=f"{what} to fine-tune instead of training from scratch")
+                  help=f"{what} to fine-tune instead of training from scratch (default: none)")
 
 
 @documented
@@ -64,9 +68,9 @@ class TrainOptions:
     data: Path | tuple[Path, ...] = data()
     data_weights: tuple[int, ...] = data_weights()
     out: Path = option(help="run folder for the checkpoints")
-    epochs: int = option(help=None)
-    batch_size: int = option(help=None)
-    seed: int = common.seed(help=None)
+    epochs: int = option(help=EPOCHS)
+    batch_size: int = option(help=BATCH_SIZE)
+    seed: int = common.seed("seed of the initial weights, the batches and the augmentation")
     augment: bool = augment()
     device: str = common.device()
 
@@ -91,7 +95,8 @@ class TrainOptions:
 
 def lr(default: float):
     """``--lr``: the peak learning rate (a smaller one suits fine-tuning from ``--init``)."""
-    return option(default, help=f"peak learning rate ({default:g})")
+    return option(default, help="peak learning rate (a smaller one suits fine-tuning from "
+                                "--init)")
 
 
 def check_lr(value: float) -> None:
@@ -113,11 +118,11 @@ class ClassifierTrainConfig(TrainOptions):
     (``depth_dropout``: :class:`state_abstraction.classifier.ClassifierConfig`'s); a smaller
     ``lr`` suits fine-tuning from ``init``."""
 
-    epochs: int = option(12, help=None)
-    batch_size: int = option(32, help=None)
+    epochs: int = option(12, help=EPOCHS)
+    batch_size: int = option(32, help=BATCH_SIZE)
     depth_dropout: float = option(0.5, help="probability that a training step's depth is "
                                             "zeroed, so the model also reads steps without "
-                                            "depth (0.5)")
+                                            "depth")
     init: Path | None = init("a state_classifier.pt")
     lr: float = lr(3e-3)
 
@@ -134,9 +139,10 @@ class DetectorTrainConfig(TrainOptions):
     """``onionsort train detector``: dataset folders, run folder, hyperparameters; a smaller
     ``lr`` suits fine-tuning from ``init``."""
 
-    epochs: int = option(24, help=None)
-    batch_size: int = option(16, help=None)
-    images_per_epoch: int = option(1600, help=None)
+    epochs: int = option(24, help=EPOCHS)
+    batch_size: int = option(16, help=BATCH_SIZE)
+    images_per_epoch: int = option(1600, help="training images drawn per epoch (weighted by "
+                                              "--data-weights)")
     init: Path | None = init("a detector.pt")
     lr: float = lr(2e-3)
     resume: bool = option(False, help="continue the run in --out from its last checkpoint")
