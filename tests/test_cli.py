@@ -161,6 +161,29 @@ def test_learn_backend_reaches_the_learner_and_agrees_with_numpy(tmp_path, built
     assert fast_model["n_iter"] == ref_model["n_iter"]
 
 
+def test_learn_assumes_the_beta_and_prior_it_is_given(tmp_path, built, perceived_sessions):
+    """``--beta`` and ``--prior-std`` reach the learner and model.json; their defaults are the
+    simulated sorter's (the domain's own)."""
+    from irl.domains.onion_sorting import onion_sorting
+    from onionsort.configs.learn import LearnConfig
+    from onionsort.stages.models import CALIBRATION_FILE, DEFAULT_MODELS
+
+    fields = LearnConfig.__dataclass_fields__
+    assert fields["beta"].default == onion_sorting().beta
+    assert fields["prior_std"].default == onion_sorting().prior.std
+    argv = ["learn", *map(str, perceived_sessions), "--observation-model",
+            str(DEFAULT_MODELS / CALIBRATION_FILE), "--allow-model-mismatch"]
+    assert main([*argv, "--out", str(tmp_path / "default")]) == 0
+    assert main([*argv, "--beta", "0.2", "--prior-std", "0.5", "--out", str(tmp_path / "b")]) == 0
+    default, assumed = built[-2], built[-1]
+    assert (default.beta, assumed.beta) == (1.5, 0.2)
+    assert float(np.ravel(assumed.prior.std)[0]) == 0.5
+    model = json.loads((tmp_path / "b" / "model.json").read_text())
+    assert (model["beta"], model["prior_std"]) == (0.2, 0.5)
+    # a tighter prior and a less rational demonstrator pull the weights toward 0
+    assert np.linalg.norm(assumed.theta_) < np.linalg.norm(default.theta_)
+
+
 @pytest.mark.parametrize("posterior_method", ["laplace", "mcmc"])
 def test_learn_posterior_writes_samples_confidence_plot_and_rerun(tmp_path, perceived_sessions,
                                                                   posterior_method, capsys):

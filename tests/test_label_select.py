@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from onionsort.cli import main
-from onionsort.stages.label_select import _choose
+from onionsort.stages.label_select import _choose, _draw
 from recordings.labels.dataset import read_records, split_sessions
 
 
@@ -32,6 +32,33 @@ def test_the_choice_takes_the_likely_wrong_first_then_rounds_over_sessions():
     assert _choose(scores, 3, 7) == [(0, 1), (0, 2), (1, 0)]  # whole steps up to 7 frames
     assert _choose([[0.1], [0.2, 0.3]], 1, 9) == [(1, 1), (0, 0), (1, 0)]  # then none left
     assert _choose([[0.6, 0.7], [0.9]], 3, 6) == [(1, 0), (0, 1)]  # the budget binds first
+
+
+def test_a_random_sample_is_whole_steps_drawn_uniformly_whatever_their_uncertainty():
+    scores = [[0.1, 0.9, 0.8, 0.2], [0.3, 0.0, 0.0, 0.0]]
+    drawn = _draw(scores, 3, 7, seed=5)
+    assert len(drawn) == 3 and len(set(drawn)) == 3  # whole steps up to 7 frames
+    assert drawn == _draw(scores, 3, 7, seed=5)  # reproducible from its seed
+    assert drawn == _draw([[0.0] * 4, [1.0] * 4], 3, 7, seed=5)  # the scores play no part
+    assert sorted(_draw(scores, 1, 99, seed=5)) == [(k, t) for k in (0, 1) for t in range(4)]
+    counts = np.zeros((2, 4))
+    for seed in range(4000):
+        for k, t in _draw(scores, 1, 2, seed=seed):
+            counts[k, t] += 1
+    # each of 8 steps drawn 2 times in 8: 1000 of 4000, binomial sd about 27
+    assert np.abs(counts - 1000).max() < 110, counts
+
+
+def test_label_select_draws_at_random_from_its_seed(sessions, tmp_path):
+    argv = ["label", "select", *map(str, sessions), "--frames", "12", "--device", "cpu",
+            "--sample", "random"]
+    picked = []
+    for name, seed in (("a", "3"), ("b", "3"), ("c", "4")):
+        assert main([*argv, "--seed", seed, "--out", str(tmp_path / name)]) == 0
+        doc = json.loads((tmp_path / name / "selection.json").read_text())
+        picked.append([(f["session"], f["step"], f["frame"]) for f in doc["frames"]])
+    assert len(picked[0]) == 12 and picked[0] == picked[1]
+    assert picked[0] != picked[2]
 
 
 def _step(onion, p_blemished=None, prediction=2, occluded=False, waiting=False):

@@ -71,7 +71,9 @@ over the sessions, until ``--frames`` frames. It writes them pre-annotated with 
 boxes and state guesses: ``--format coco``, COCO with scores and a states.csv (what ``label
 import`` reads back once corrected), or ``--format labelstudio``, Label Studio's import format
 with predictions (``tasks.json``) and its labelling interface (``labeling_config.xml``).
-``--recall``, on recorded sessions that carry the truth, also scores the choice: how many
+``--sample random`` draws the steps uniformly (from ``--seed``) instead: held-out frames
+to calibrate on must be a fair sample, not the hardest. ``--recall``, on recorded sessions that
+carry the truth, also scores the choice: how many
 steps have a wrong state guess, how many of those chosen do, and each wrong step left out (the
 truth is read after choosing, never by the choice).
 
@@ -80,6 +82,7 @@ Examples
     onionsort label select runs/line/*.mcap --frames 200 --out runs/to-label
     onionsort label select runs/line/*.mcap --frames 200 --format labelstudio --out runs/ls
     onionsort label select runs/sel/*.mcap --frames 60 --recall --out runs/sel-task
+    onionsort label select runs/heldout/*.mcap --frames 120 --sample random --out runs/cal-task
 """
 
 

@@ -37,6 +37,8 @@ LABEL_FORMATS = ("coco", "yolo")
 #: What ``label import`` reads: the export's layouts and Label Studio's JSON export.
 IMPORT_FORMATS = (*LABEL_FORMATS, "labelstudio")
 SELECT_FORMATS = ("coco", "labelstudio")
+#: How ``label select`` chooses steps: the least sure first, or uniformly at random.
+SELECT_SAMPLES = ("uncertain", "random")
 POSTERIOR_METHODS = ("mcmc", "laplace")
 
 

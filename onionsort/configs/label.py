@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs import common, documented, option
-from onionsort.configs.common import IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS
+from onionsort.configs.common import (IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS,
+                                      SELECT_SAMPLES)
 
 __all__ = ["IMPORT_FORMATS", "LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig",
            "LabelImportConfig", "LabelSelectConfig", "check_format", "classes"]
@@ -107,7 +108,8 @@ class LabelImportConfig:
 @dataclass(frozen=True, kw_only=True)
 class LabelSelectConfig:
     """``onionsort label select``: the sessions, how many frames, the output folder (new),
-    its format (``coco`` or ``labelstudio``), whether to score the choice against the
+    its format (``coco`` or ``labelstudio``), how steps are chosen (``sample``: the least
+    sure first, or uniformly at random from ``seed``), whether to score the choice against the
     sessions' truth (``recall``), the models (None: the shipped ones) and where torch runs
     them."""
 
@@ -121,6 +123,12 @@ class LabelSelectConfig:
                               "import reads back) or labelstudio (tasks.json with predictions "
                               "and labeling_config.xml)")
     out: Path = option(help="a new folder")
+    sample: str = option("uncertain", choices=SELECT_SAMPLES,
+                         help="uncertain (the steps the models are least sure of: frames "
+                              "worth labelling for training) or random (steps drawn uniformly "
+                              "with --seed: an unbiased sample, for calibrating on held-out "
+                              "sessions)")
+    seed: int = common.seed("the random sample's seed")
     recall: bool = option(False, help="sessions that carry ground truth: also count the steps "
                                       "whose state guess is wrong and how many of them the "
                                       "frames chosen hold (the truth is read after choosing, "
@@ -136,4 +144,6 @@ class LabelSelectConfig:
             raise ValueError(f"frames must be >= 1; got {self.frames}")
         if self.format not in SELECT_FORMATS:
             raise ValueError(f"format must be one of {SELECT_FORMATS}; got {self.format!r}")
+        if self.sample not in SELECT_SAMPLES:
+            raise ValueError(f"sample must be one of {SELECT_SAMPLES}; got {self.sample!r}")
         common.check_session_files(self.sessions)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +25,9 @@ class LearnConfig:
     ``model.json``, as is the ``backend`` (for every method) and, with ``session_swaps``
     (:meth:`state_abstraction.calibration.Calibration.session_swap`), each session's
     posterior probability of having been swapped. ``posterior_method``: see
-    :mod:`irl.posterior`.
+    :mod:`irl.posterior`. ``beta`` and ``prior_std`` are what the learner assumes of the
+    demonstrator and the reward (:func:`irl.domains.onion_sorting.onion_sorting`'s defaults
+    are the simulated sorter's); ``model.json`` records both.
     """
 
     sessions: tuple[Path, ...] = option(positional=True, nargs="+", metavar="SESSION.mcap",
@@ -36,6 +39,13 @@ class LearnConfig:
                                help="calibration.json written by `onionsort calibrate`")
     out: Path = option(help="run folder")
     seed: int = common.seed("the learner's seed")
+    beta: float = option(1.5, metavar="BETA",
+                         help="the demonstrator's rationality: how surely the person takes the "
+                              "best action (the Boltzmann policy's beta; only beta times the "
+                              "reward is identifiable; the default is the simulated sorter's)")
+    prior_std: float = option(3.0, metavar="STD",
+                              help="the standard deviation of the Gaussian prior on each reward "
+                                   "weight, around 0")
     overwrite: bool = option(False, help="replace an earlier run in --out")
     allow_model_mismatch: bool = option(False, help="learn even if the sessions were perceived "
                                                     "by other models (or in another sensor "
@@ -58,6 +68,10 @@ class LearnConfig:
 
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {self.method!r}")
+        for name in ("beta", "prior_std"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a finite number > 0; got {value}")
         if self.session_swaps and self.method != SWAP_METHOD:
             raise ValueError(f"session_swaps needs {SWAP_METHOD}, which marginalizes how each "
                              f"session was read; {self.method} does not")

@@ -10,7 +10,9 @@ inspection; a step whose guess the sorter's move contradicts counts as at least 
 wrong as right. Every step more likely wrong than right is taken, the least sure first; the rest
 of the budget is spread over the sessions by rounds that take each session's least-sure step
 left (the least sure first), until ``frames`` frames; every frame of a taken step is
-labelled, so the state classifier gets whole steps.
+labelled, so the state classifier gets whole steps. ``sample="random"`` draws the steps
+uniformly instead (:func:`_draw`, from ``seed``): frames chosen for being hard would overstate
+the error rates that a calibration on held-out sessions measures.
 
 The frames are written as a labelling task pre-annotated with the models' output:
 
@@ -190,6 +192,16 @@ def recall(steps: list, perceived: list, scores: list[list[float]],
                        for (k, t), w in sorted(wrong.items()) if w and (k, t) not in chosen]}
 
 
+def _draw(scores: list[list[float]], frames_per_step: int, budget: int, seed: int
+          ) -> list[tuple[int, int]]:
+    """``(session, step)`` of steps drawn uniformly without replacement from every step of
+    every session, in the order drawn, until ``budget`` frames: an unbiased sample (what a
+    confusion matrix measured on held-out sessions needs), reproducible from ``seed``."""
+    every = [(k, t) for k, s in enumerate(scores) for t in range(len(s))]
+    order = np.random.default_rng(seed).permutation(len(every))
+    return [every[i] for i in order[:max(1, -(-budget // frames_per_step))]] if every else []
+
+
 def select_frames(config: LabelSelectConfig, models=None) -> dict:
     """Choose and write the frames (see the module docstring); returns ``frames`` (the list
     of ``selection.json``) and ``steps_seen``, and with ``config.recall`` the choice scored
@@ -224,7 +236,8 @@ def select_frames(config: LabelSelectConfig, models=None) -> dict:
         steps.append(mine)
         perceived.append(seen)
         scores.append(step_uncertainties(seen))
-    taken = _choose(scores, fps, config.frames)
+    taken = (_choose(scores, fps, config.frames) if config.sample == "uncertain"
+             else _draw(scores, fps, config.frames, config.seed))
     if not taken:
         raise ValueError(f"{', '.join(map(str, config.sessions))} hold no complete step")
     chosen = []

@@ -87,6 +87,7 @@ def learn(config: LearnConfig) -> dict:
     from irl.domains.onion_sorting import onion_sorting
     from irl.experiments import make_estimator
     from irl.learners.optimize import objective_curve
+    from irl.priors import GaussianPrior
     from onionsort.plots import learning_curve_figure
     from recordings import open_session
     from state_abstraction.calibration import load_calibration
@@ -98,7 +99,8 @@ def learn(config: LearnConfig) -> dict:
 
         reach_viewer(config.connect)  # a wrong address fails now, not after the fit
     with output_folder(config.out) as out:  # checked before anything is read or fitted
-        base = onion_sorting()
+        base = dataclasses.replace(onion_sorting(beta=config.beta),
+                                   prior=GaussianPrior(mean=0.0, std=config.prior_std))
         calibration = load_calibration(config.calibration, task=base.task)
         if config.session_swaps and calibration.session_swaps is None:
             raise ValueError(f"{config.calibration} does not say how often a whole session's "
@@ -147,6 +149,7 @@ def learn(config: LearnConfig) -> dict:
             "observation_model": str(config.calibration),
             "state_error_rate": calibration.state_error_rate,
             "n_iter": int(getattr(estimator, "n_iter_", 0)),
+            "beta": config.beta, "prior_std": config.prior_std,
             "model_mismatch_allowed": mismatch,
         }
         if cloned is not None:
