@@ -8,8 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs import common, documented, option
-from onionsort.configs.common import (IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS,
-                                      SELECT_SAMPLES)
+from onionsort.configs.common import IMPORT_FORMATS, LABEL_FORMATS, SELECT_FORMATS, SELECT_SAMPLES
 
 __all__ = ["IMPORT_FORMATS", "LABEL_FORMATS", "SELECT_FORMATS", "LabelExportConfig",
            "LabelImportConfig", "LabelSelectConfig", "check_format", "classes"]
