@@ -67,7 +67,7 @@ from recordings.rerun.common import (
     value_labels,
 )
 from recordings.rerun.world import WorldLogger, scene_items, world_view
-from recordings.session.schema import CLASS_NAMES
+from recordings.session.schema import CLASS_COLORS, CLASS_NAMES
 from recordings.session.world import Pose, Robot
 from recordings.session.writer import SortingDecision
 
@@ -433,9 +433,9 @@ def _boxes(det: Detection, p_blemished: float | None = None,
     (blemished where ``p_blemished`` reaches ``threshold``) and the probability as its label;
     the detector's other boxes (the same onion under the other class, mostly) are left out.
     Where it gave none (no box scored enough for the inspection to read it), the detector's
-    boxes with their scores, grey and without a class: no call stands behind them. The
-    fields not given are cleared, so that nothing of an earlier onion's boxes (a class, a
-    colour) stays.
+    boxes with their scores, grey and without a class: no call stands behind them. Class,
+    colour and label are written every time (the colour of the class spelt out), so that
+    nothing of an earlier onion's boxes stays.
     """
     boxes = np.asarray(det.boxes, float).reshape(-1, 4)
     scores = np.asarray(det.scores, float).reshape(-1)
@@ -443,15 +443,13 @@ def _boxes(det: Detection, p_blemished: float | None = None,
         best = int(scores.argmax())
         boxes = boxes[best:best + 1]
         call = _view_call(p_blemished, threshold)
-        class_ids, colors = [call], None
+        class_ids, colors = [call], [CLASS_COLORS[call]]
         labels = [f"{CLASS_NAMES[call]}: P(blemished) {p_blemished:.2f}"]
     else:
-        class_ids, colors = None, [_UNREAD] * len(boxes)
+        class_ids, colors = [], [_UNREAD] * len(boxes)
         labels = [f"not read: onion {s:.2f}" for s in scores]
-    return rr.Boxes2D.from_fields(
-        clear_unset=True, centers=(boxes[:, :2] + boxes[:, 2:]) / 2,
-        half_sizes=(boxes[:, 2:] - boxes[:, :2]) / 2, class_ids=class_ids, colors=colors,
-        labels=labels)
+    return rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, class_ids=class_ids,
+                      colors=colors, labels=labels, show_labels=True)
 
 
 def _view_call(p_blemished: float, threshold: float) -> int:

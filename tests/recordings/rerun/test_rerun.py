@@ -443,7 +443,7 @@ def test_each_inspection_view_shows_its_own_call_and_the_fused_call_stands_besid
     assert [boxes[0, k]["labels"] for k in (0, 1)] == [["good: P(blemished) 0.10"],
                                                        ["blemished: P(blemished) 0.40"]]
     assert boxes[0, 0]["centers"] == [[5.0, 5.0]]
-    assert boxes[0, 0]["colors"] == []  # the class's colour, nothing of its own
+    assert boxes[0, 0]["colors"] == [0x28C83CFF]  # the colour of class good, (40, 200, 60)
     # no call in view 2: both boxes, grey, no class
     assert boxes[0, 2]["class_ids"] == [] and len(boxes[0, 2]["colors"]) == 2
     assert boxes[0, 2]["labels"] == ["not read: onion 0.80", "not read: onion 0.30"]
