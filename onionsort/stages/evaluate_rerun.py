@@ -317,10 +317,15 @@ class EvaluationLogger:
             f"{p}/arm/joints": [f"right_j{j}" for j in range(_N_JOINTS)],
         }
         names.update({f"{p}/counts/{n}": n.upper() for n in _COUNT_COLORS})
-        names.update({f"{p}/inspection/p_blemished": "fused P(blemished)",
-                      f"{p}/inspection/call": "fused call (1 blemished, 0 good)"})
         log_series_names(self.rec, names,
                          colors={f"{p}/counts/{n}": c for n, c in _COUNT_COLORS.items()})
+        # one point per inspection, not a line through the steps between
+        for entity, name, color, marker in (
+                ("p_blemished", "fused P(blemished)", (230, 150, 40), "Circle"),
+                ("call", "fused call (1 blemished, 0 good)", (120, 60, 200), "Cross")):
+            self.rec.log(f"{p}/inspection/{entity}",
+                         rr.SeriesPoints(names=name, colors=[color], markers=marker,
+                                         marker_sizes=4.0), static=True)
 
     def on_step(self, event: EvaluationEvent) -> None:
         """Log one action: images and the decision now, its scalars at :meth:`close`."""
