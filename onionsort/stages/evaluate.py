@@ -158,7 +158,7 @@ def evaluate(config: EvaluateConfig, models=None):
                                   config.connect), detector=detect,
                     camera_K=intrinsics(CameraSpec()), robot=station_robot(),
                     camera_pose=camera_pose(CameraSpec()),
-                    views=config.inspection_views,
+                    views=config.inspection_views, threshold=config.threshold,
                     inspection_K=intrinsics(ROBOT_INSPECTION_CAMERA),
                     inspection_pose=camera_pose(ROBOT_INSPECTION_CAMERA))).on_step)
             if config.mcap:

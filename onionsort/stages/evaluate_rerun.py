@@ -14,9 +14,16 @@ prefix per evaluated policy lets two share a recording)::
                                        the work cell (``max_depth``)
     <root>/inspection                  Pinhole (static), when the inspection camera's K is given
     <root>/inspection/view_K           Image of the robot's K-th view of the onion it inspects
-    <root>/inspection/view_K/detections  Boxes2D of the detector, when a detector is given,
-                                       labelled with the view's probability of a blemish
+    <root>/inspection/view_K/detections  Boxes2D, when a detector is given: the box the
+                                       inspection read, its class the view's own call (its
+                                       probability of a blemish against the threshold) and
+                                       its label that probability; where the view gave none,
+                                       the detector's boxes without a class (grey)
+    <root>/inspection/verdict          TextDocument: the robot's fused call on the onion, its
+                                       fused probability and each view's, at each inspection
     <root>/inspection/p_blemished      Scalars: the fused probability of each inspection
+    <root>/inspection/call             Scalars: the fused call of each inspection (1 blemished,
+                                       0 good; none where no view showed the onion)
     <root>/decisions                   TextLog: one line per action (WARN: perception wrong)
     <root>/metrics/{precision,recall}  Scalars: running precision and recall
     <root>/counts/{tp,fp,tn,fn}        Scalars: running counts
@@ -60,7 +67,7 @@ from recordings.rerun.common import (
     value_labels,
 )
 from recordings.rerun.world import WorldLogger, scene_items, world_view
-from recordings.session.schema import CLASS_NAMES
+from recordings.session.schema import CLASS_COLORS, CLASS_NAMES
 from recordings.session.world import Pose, Robot
 from recordings.session.writer import SortingDecision
 
@@ -82,6 +89,10 @@ _N_JOINTS = 7
 #: The factor of the task whose values an event's ``perceived`` holds, and the value that means
 #: the onion was seen blemished (a decision the truth contradicts is logged as a warning).
 _PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED = "prediction", "bad"
+#: The class ids of a call (:data:`~recordings.session.schema.CLASS_NAMES`: their colours too).
+_GOOD, _BLEMISHED = 0, 1
+#: The colour of a box no inspection call stands behind (the detector's, unread).
+_UNREAD = (150, 150, 150)
 
 
 class EvaluationEvent(SortingDecision, Protocol):
@@ -111,13 +122,12 @@ class EvaluationEvent(SortingDecision, Protocol):
 
 
 class Detection(Protocol):
-    """A detector's answer on one image: ``boxes`` (n, 4) XYXY pixels, ``classes`` (n,) class
-    ids, ``scores`` (n,)."""
+    """What the logger reads of a detector's answer on one image: ``boxes`` (n, 4) XYXY
+    pixels and their ``scores`` (n,) (its classes are not drawn: a box's class is the
+    inspection's call)."""
 
     @property
     def boxes(self) -> Any: ...
-    @property
-    def classes(self) -> Any: ...
     @property
     def scores(self) -> Any: ...
 
@@ -127,12 +137,13 @@ Detect = Callable[[list[np.ndarray]], Sequence[Detection]]
 
 
 def evaluation_blueprint(prefix: str = EVALUATE_ROOT, views: int = 1, *, color: bool = True,
-                         depth: bool = True, p_blemished: bool = True,
+                         depth: bool = True, p_blemished: bool = True, verdict: bool = True,
                          camera_pinhole: bool = True, inspection_pinhole: bool = True,
                          world: bool = True) -> rrb.Blueprint:
     """The layout, with a view only for what the recording holds: the station's camera
-    (``color``, ``depth``), the work cell in 3D, the first ``views`` inspection views, the
-    decisions, the metrics, ``p_blemished`` per inspection, the counts and the arm's joints.
+    (``color``, ``depth``), the work cell in 3D, the first ``views`` inspection views with the
+    fused call beside them (``verdict``), the decisions, the metrics, ``p_blemished`` and the
+    fused call per inspection, the counts and the arm's joints.
 
     ``camera_pinhole``, ``inspection_pinhole``: the camera or the inspection camera has its
     intrinsics, so that its images show in 3D (an image without them stays out of the 3D
@@ -152,17 +163,22 @@ def evaluation_blueprint(prefix: str = EVALUATE_ROOT, views: int = 1, *, color: 
                               world=world))
     below = []
     if views > 0:
-        below.append(rrb.Grid(*(rrb.Spatial2DView(origin=f"{prefix}/inspection/view_{k}",
-                                                  name=f"view {k}") for k in range(views)),
-                              name="inspection"))
+        cells: list[Any] = [rrb.Spatial2DView(origin=f"{prefix}/inspection/view_{k}",
+                                              name=f"view {k}") for k in range(views)]
+        if verdict:
+            cells.append(rrb.TextDocumentView(origin=f"{prefix}/inspection/verdict",
+                                              name="fused call"))
+        below.append(rrb.Grid(*cells, name="inspection"))
     if depth:
         below.append(rrb.Spatial2DView(origin=f"{prefix}/camera", contents=["$origin/depth"],
                                        name="depth"))
     left = [rrb.Horizontal(*rows) for rows in (top, below) if rows]
     series = [rrb.TimeSeriesView(origin=f"{prefix}/metrics", name="precision / recall")]
     if p_blemished:
-        series.append(rrb.TimeSeriesView(origin=f"{prefix}/inspection/p_blemished",
-                                          name="P(blemished) at inspection"))
+        series.append(rrb.TimeSeriesView(
+            origin=f"{prefix}/inspection",
+            contents=["$origin/p_blemished", "$origin/call"] if verdict
+            else ["$origin/p_blemished"], name="P(blemished) at inspection"))
     series += [rrb.TimeSeriesView(origin=f"{prefix}/counts", name="TP / FP / TN / FN"),
                rrb.TimeSeriesView(origin=f"{prefix}/mdp", name="state / action"),
                rrb.TimeSeriesView(origin=f"{prefix}/arm", name="Sawyer joints (rad)")]
@@ -188,9 +204,9 @@ class EvaluationLogger:
     prefix : str
         The entity root of this evaluation.
     detector : callable or object with ``detect``, or None
-        ``detect(images) -> detections`` (each with ``boxes`` (n, 4) XYXY, ``classes``,
-        ``scores``), run on the inspection view to show the boxes behind a decision; an object
-        with a ``detect`` method (the perception detector) is taken too.
+        ``detect(images) -> detections`` (each with ``boxes`` (n, 4) XYXY and ``scores``), run
+        on the inspection views to show the box each view's call is about; an object with a
+        ``detect`` method (the perception detector) is taken too.
     camera_K : array-like of shape (3, 3) or None
         The main camera's intrinsics: ``<root>/camera`` becomes a pinhole.
     application_id : str
@@ -205,6 +221,10 @@ class EvaluationLogger:
         frustum and image in 3D.
     views : int
         Inspection views per onion (the layout's grid of them).
+    threshold : float in (0, 1)
+        The probability of a blemish from which the robot calls an onion blemished (its
+        inspection's threshold): each view's box is called blemished where the view's own
+        probability reaches it.
     inspection_K : array-like of shape (3, 3) or None
         The inspection camera's intrinsics: ``<root>/inspection`` becomes a pinhole, so that
         the views show in 3D in its frustum (the first view only, the others drawn there
@@ -234,10 +254,12 @@ class EvaluationLogger:
                  task: TaskDescription = SORTING_TASK, robot: Robot | None = None,
                  camera_pose: Pose | None = None, views: int = 1, inspection_K: Any = None,
                  inspection_pose: Pose | None = None,
-                 max_depth: float | None = WORK_CELL_DEPTH_M) -> None:
+                 max_depth: float | None = WORK_CELL_DEPTH_M, threshold: float = 0.5) -> None:
         prefix = str(prefix).strip("/")
         if not prefix:
             raise ValueError(f"prefix must name an entity path; got {prefix!r}")
+        if not isinstance(threshold, int | float) or not 0.0 < threshold < 1.0:
+            raise ValueError(f"threshold must be in (0, 1); got {threshold!r}")
         if detector is not None and not callable(detector):
             detect = getattr(detector, "detect", None)
             if not callable(detect):
@@ -250,6 +272,7 @@ class EvaluationLogger:
         self.prefix = prefix
         self.task = task
         self.views = max(1, int(views))
+        self.threshold = float(threshold)
         self.detect: Detect | None = detector
         self.camera_K = None if camera_K is None else np.asarray(camera_K, float)
         self.inspection_K = None if inspection_K is None else np.asarray(inspection_K, float)
@@ -275,6 +298,7 @@ class EvaluationLogger:
         # what the recording holds, for its blueprint, sent at close: views never used and
         # images never rendered get no panel
         self._held = {"views": 0, "color": False, "depth": False, "p_blemished": False,
+                      "verdict": False,
                       "camera_pinhole": False, "inspection_pinhole": False,
                       "world": self._robot_tree is not None}
 
@@ -295,6 +319,13 @@ class EvaluationLogger:
         names.update({f"{p}/counts/{n}": n.upper() for n in _COUNT_COLORS})
         log_series_names(self.rec, names,
                          colors={f"{p}/counts/{n}": c for n, c in _COUNT_COLORS.items()})
+        # one point per inspection, not a line through the steps between
+        for entity, name, color, marker in (
+                ("p_blemished", "fused P(blemished)", (230, 150, 40), "Circle"),
+                ("call", "fused call (1 blemished, 0 good)", (120, 60, 200), "Cross")):
+            self.rec.log(f"{p}/inspection/{entity}",
+                         rr.SeriesPoints(names=name, colors=[color], markers=marker,
+                                         marker_sizes=4.0), static=True)
 
     def on_step(self, event: EvaluationEvent) -> None:
         """Log one action: images and the decision now, its scalars at :meth:`close`."""
@@ -347,13 +378,21 @@ class EvaluationLogger:
             rec.log(f"{p}/inspection/view_{k}", rr.Image(view))
             if det is not None:
                 p_view = per_view[k] if k < len(per_view) else None
-                rec.log(f"{p}/inspection/view_{k}/detections", _boxes(det, p_view))
+                rec.log(f"{p}/inspection/view_{k}/detections",
+                        _boxes(det, p_view, self.threshold))
         for k in range(len(views), self.views):  # an onion settled early: no stale views
             rec.log(f"{p}/inspection/view_{k}", rr.Clear(recursive=True))
         p_bad = getattr(event, "p_blemished", None)
         if p_bad is not None:
             rec.log(f"{p}/inspection/p_blemished", rr.Scalars(float(p_bad)))
             held["p_blemished"] = True
+        call = _call(event, self.task)
+        if call is not None:
+            rec.log(f"{p}/inspection/call", rr.Scalars(float(call)))
+        rec.log(f"{p}/inspection/verdict",
+                rr.TextDocument(_verdict(event, call, per_view, self.threshold),
+                                media_type=rr.MediaType.MARKDOWN))
+        held["verdict"] = True
 
     def _buffer(self, event: EvaluationEvent) -> None:
         p = self.prefix
@@ -390,18 +429,72 @@ class EvaluationLogger:
             close_recording(self.rec)
 
 
-def _boxes(det: Detection, p_blemished: float | None = None) -> rr.Boxes2D:
-    """The detections of one view; the best box labelled with the view's probability of a
-    blemish where there is one (the others with the detector's class and score)."""
+def _boxes(det: Detection, p_blemished: float | None = None,
+           threshold: float = 0.5) -> rr.Boxes2D:
+    """The boxes of one view, with one verdict.
+
+    Where the view gave a probability of a blemish, the one box the inspection read (the
+    detector's best, :func:`perception.inspection.best_box`) with the view's call as its class
+    (blemished where ``p_blemished`` reaches ``threshold``) and the probability as its label;
+    the detector's other boxes (the same onion under the other class, mostly) are left out.
+    Where it gave none (no box scored enough for the inspection to read it), the detector's
+    boxes with their scores, grey and without a class: no call stands behind them. Class,
+    colour and label are written every time (the colour of the class spelt out), so that
+    nothing of an earlier onion's boxes stays.
+    """
     boxes = np.asarray(det.boxes, float).reshape(-1, 4)
-    classes = np.asarray(det.classes).astype(int).reshape(-1)
     scores = np.asarray(det.scores, float).reshape(-1)
-    labels = [f"{CLASS_NAMES.get(int(c), c)} {s:.2f}" for c, s in zip(classes, scores,
-                                                                       strict=True)]
     if p_blemished is not None and len(scores):
-        labels[int(scores.argmax())] = f"P(blemished) {p_blemished:.2f}"
-    return rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, class_ids=classes,
-                      labels=labels)
+        best = int(scores.argmax())
+        boxes = boxes[best:best + 1]
+        call = _view_call(p_blemished, threshold)
+        class_ids, colors = [call], [CLASS_COLORS[call]]
+        labels = [f"{CLASS_NAMES[call]}: P(blemished) {p_blemished:.2f}"]
+    else:
+        class_ids, colors = [], [_UNREAD] * len(boxes)
+        labels = [f"not read: onion {s:.2f}" for s in scores]
+    return rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, class_ids=class_ids,
+                      colors=colors, labels=labels, show_labels=True)
+
+
+def _view_call(p_blemished: float, threshold: float) -> int:
+    """The class id of one view's own call: blemished where its probability reaches
+    ``threshold``."""
+    return _BLEMISHED if p_blemished >= threshold else _GOOD
+
+
+def _call(event: EvaluationEvent, task: TaskDescription = SORTING_TASK) -> int | None:
+    """The class id of the robot's fused call on the onion ``event`` inspected (None if it
+    made none: no view showed the onion)."""
+    if event.perceived is None:
+        return None
+    bad = task.value_index(_PERCEIVED_FACTOR, _PERCEIVED_BLEMISHED)
+    return _BLEMISHED if int(event.perceived) == bad else _GOOD
+
+
+def _verdict(event: EvaluationEvent, call: int | None, per_view: Sequence[float | None],
+             threshold: float) -> str:
+    """The robot's fused call on the onion ``event`` inspected, as Markdown: the call and its
+    probability, each view's own call and probability, the onion's true class."""
+    onion = "" if event.onion is None else f"onion {event.onion}: "
+    head = (f"**{onion}no call** (no view showed the onion)" if call is None
+            else f"**{onion}fused call {CLASS_NAMES[call]}**")
+    p_bad = getattr(event, "p_blemished", None)
+    if p_bad is not None:
+        head += f", P(blemished) {float(p_bad):.2f} (threshold {threshold:.2f})"
+    parts = [head]
+    rows = []
+    for k, p in enumerate(per_view):
+        if p is None:
+            rows.append(f"- view {k}: no onion found")
+        else:
+            own = CLASS_NAMES[_view_call(p, threshold)]
+            rows.append(f"- view {k}: {own}, P(blemished) {float(p):.2f}")
+    if rows:
+        parts.append("\n".join(rows))
+    if event.blemished is not None:
+        parts.append(f"truth: {'blemished' if event.blemished else 'good'}")
+    return "\n\n".join(parts)
 
 
 def _describe(event: EvaluationEvent, task: TaskDescription = SORTING_TASK) -> tuple[str, str]:

@@ -311,6 +311,9 @@ class FakeStep:
     inspection: np.ndarray | None = field(default=None, repr=False)
     q: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
     world: object = field(default=None, repr=False)
+    views: tuple = field(default=(), repr=False)
+    p_blemished: float | None = None
+    view_p_blemished: tuple = ()
 
     @property
     def precision(self) -> float:
@@ -378,3 +381,83 @@ def test_evaluation(tmp_path):
     assert s["evaluate/decisions"]["rows"] == n
     assert s["/"]["static"] == {True}
     verify(out)
+
+
+def logged_boxes(path, root: str = "evaluate") -> dict[tuple[int, int], dict]:
+    """The inspection boxes each step logged, by ``(step, view)``: each ``Boxes2D`` column
+    (``class_ids``, ``labels``, ``colors``, ``centers``) as that row wrote it (None: not
+    written)."""
+    out = {}
+    prefix = f"{root}/inspection/view_"
+    for chunk in rr_chunk.RrdReader(path).store().stream():
+        entity = chunk.entity_path.strip("/")
+        if not (entity.startswith(prefix) and entity.endswith("/detections")):
+            continue
+        k = int(entity.removeprefix(prefix).split("/")[0])
+        batch = chunk.to_record_batch()
+        names = [n for n in batch.schema.names if n.startswith("Boxes2D:")]
+        for i, step in enumerate(batch.column("step").to_pylist()):
+            out[(step, k)] = {n.removeprefix("Boxes2D:"): batch.column(n)[i].as_py()
+                              for n in names}
+    return out
+
+
+def logged_verdicts(path, root: str = "evaluate") -> dict[int, dict]:
+    """The fused call each inspecting step logged, by step: ``text`` (the verdict beside the
+    views) and ``call`` (the scalar: 1 blemished, 0 good; None where none was logged)."""
+    out: dict[int, dict] = defaultdict(lambda: {"text": None, "call": None})
+    for step, text in rows(path, f"{root}/inspection/verdict", "TextDocument:text", "step"):
+        out[step]["text"] = text[0]
+    for step, call in rows(path, f"{root}/inspection/call", "Scalars:scalars", "step"):
+        out[step]["call"] = call[0]
+    return dict(out)
+
+
+def test_each_inspection_view_shows_its_own_call_and_the_fused_call_stands_beside(tmp_path):
+    """The box of a view is the one the inspection read, its class the view's own call at the
+    robot's threshold (never the detector's class), its label the view's probability; a view
+    with no call shows the detector's boxes grey and classless; the fused call and its
+    probability are logged beside the views at each inspection."""
+    out = tmp_path / "verdicts.rrd"
+
+    def detect(images):  # every view: the onion as "blemished" 0.8 and as "good" 0.3
+        return [FakeDetection(np.array([[1.0, 1.0, 9.0, 9.0], [1.5, 1.0, 9.0, 9.5]]),
+                              np.array([1, 0]), np.array([0.8, 0.3])) for _ in images]
+
+    image = np.zeros((12, 16, 3), np.uint8)
+    with EvaluationLogger(out, detector=detect, views=3, threshold=0.35) as log:
+        log.on_step(FakeStep(step=0, state=11, action=1, next_state=17, onion=4,
+                             blemished=False, perceived=0, views=(image,) * 3,
+                             p_blemished=0.2, view_p_blemished=(0.1, 0.4, None)))
+        log.on_step(FakeStep(step=1, state=17, action=2, next_state=11, onion=4,
+                             blemished=False, fate="line"))
+        log.on_step(FakeStep(step=2, state=11, action=1, next_state=18, onion=5, perceived=1,
+                             views=(image,) * 2, p_blemished=0.9, view_p_blemished=(0.3, 0.2)))
+        log.on_step(FakeStep(step=3, state=11, action=1, next_state=17, onion=6,
+                             perceived=None, views=(image,), view_p_blemished=(None,)))
+    boxes = logged_boxes(out)
+    assert set(boxes) == {(0, 0), (0, 1), (0, 2), (2, 0), (2, 1), (3, 0)}
+    # against the threshold given, 0.35: 0.1 good, 0.4 blemished (the detector said
+    # blemished for both); one box each, the one read
+    assert [boxes[0, k]["class_ids"] for k in (0, 1)] == [[0], [1]]
+    assert [boxes[0, k]["labels"] for k in (0, 1)] == [["good: P(blemished) 0.10"],
+                                                       ["blemished: P(blemished) 0.40"]]
+    assert boxes[0, 0]["centers"] == [[5.0, 5.0]]
+    assert boxes[0, 0]["colors"] == [0x28C83CFF]  # the colour of class good, (40, 200, 60)
+    # no call in view 2: both boxes, grey, no class
+    assert boxes[0, 2]["class_ids"] == [] and len(boxes[0, 2]["colors"]) == 2
+    assert boxes[0, 2]["labels"] == ["not read: onion 0.80", "not read: onion 0.30"]
+    assert [boxes[2, k]["class_ids"] for k in (0, 1)] == [[0], [0]]
+    assert boxes[3, 0]["class_ids"] == []  # nothing of step 0's class stays
+    verdicts = logged_verdicts(out)
+    assert set(verdicts) == {0, 2, 3}
+    assert [verdicts[t]["call"] for t in (0, 2, 3)] == [0.0, 1.0, None]
+    assert verdicts[0]["text"].startswith("**onion 4: fused call good**, P(blemished) 0.20 "
+                                          "(threshold 0.35)")
+    assert "- view 1: blemished, P(blemished) 0.40" in verdicts[0]["text"]
+    assert "- view 2: no onion found" in verdicts[0]["text"]
+    assert verdicts[2]["text"].startswith("**onion 5: fused call blemished**, P(blemished) 0.90")
+    assert verdicts[3]["text"].startswith("**onion 6: no call**")
+    verify(out)
+    with pytest.raises(ValueError, match="threshold must be in"):
+        EvaluationLogger(tmp_path / "bad.rrd", threshold=1.0)

@@ -147,12 +147,14 @@ def test_learning_recordings(tmp_path):
 
 @pytest.fixture(scope="module")
 def evaluation(tmp_path_factory):
-    """``onionsort evaluate --policy expert`` on a line-up of two onions, three views each."""
+    """``onionsort evaluate --policy expert`` on a line-up of two onions, three views each
+    (every view taken), with the shipped models; its session beside it."""
     from onionsort.cli import main
 
     out = tmp_path_factory.mktemp("evaluate") / "eval"
     assert main(["evaluate", "--policy", "expert", "--onions", "2", "--blemished", "1",
-                 "--inspection-views", "3", "--no-mcap", "--out", str(out)]) == 0
+                 "--inspection-views", "3", "--every-view", "--device", "cpu",
+                 "--out", str(out)]) == 0
     return out / "evaluation.rrd"
 
 
@@ -171,6 +173,50 @@ def test_evaluation_recording(evaluation):
     used = {e for e in held if e.startswith("evaluate/inspection/view_") and "/" not in
             e.removeprefix("evaluate/inspection/") and "Image" in held[e]}
     assert {v.origin for v in views.values() if v.name.startswith("view ")} == used
+
+
+def test_each_inspection_view_shows_its_own_call_and_the_fused_call_beside(evaluation):
+    """On every onion, each inspection view's box has the class of that view's own call (its
+    P(blemished), as the session recorded it, against the evaluation's threshold), not the
+    detector's; the fused call logged beside the views is the robot's decision."""
+    import json
+
+    from tests.recordings.rerun.test_rerun import logged_boxes, logged_verdicts
+
+    saved = json.loads((evaluation.parent / "evaluation.json").read_text())
+    threshold = saved["threshold"]
+    inspected = [d for d in open_session(evaluation.with_suffix(".mcap")).decisions.values()
+                 if d.get("view_p_blemished")]
+    assert sorted(d["onion"] for d in inspected) == [o["index"] for o in saved["onions"]]
+    boxes, verdicts = logged_boxes(evaluation), logged_verdicts(evaluation)
+    calls = {"good": 0, "bad": 1, None: None}
+    wrong, labels, views_seen = [], [], 0
+    for decision in inspected:
+        step = decision["step"]
+        for k, p in enumerate(decision["view_p_blemished"]):
+            logged, views_seen = boxes[step, k], views_seen + 1
+            if p is None:  # the inspection found no onion to read: no class drawn
+                want = []
+            elif abs(p - threshold) > 1e-5:  # the session rounds to 5 decimals
+                want = [int(p >= threshold)]
+                labels.append((logged["labels"], [f"{('good', 'blemished')[want[0]]}: "
+                                                  f"P(blemished) {p:.2f}"]))
+            else:
+                continue
+            if logged["class_ids"] != want:
+                wrong.append((step, k, p, logged["class_ids"], logged["labels"]))
+    assert views_seen >= 2 * 3 and wrong == []  # (step, view, P, class_ids, labels)
+    assert all(got == want for got, want in labels), labels
+    for decision in inspected:
+        step, call = decision["step"], calls[decision["perceived"]]
+        assert verdicts[step]["call"] == call, (step, decision, verdicts[step])
+        name = {0: "fused call good", 1: "fused call blemished", None: "no call"}[call]
+        assert name in verdicts[step]["text"]
+        if decision["p_blemished"] is not None:
+            assert f"P(blemished) {decision['p_blemished']:.2f}" in verdicts[step]["text"]
+    assert set(verdicts) == {d["step"] for d in inspected}
+    views = {v.name: v for v in blueprint_views(evaluation)}
+    assert views["fused call"].origin == "evaluate/inspection/verdict"
 
 
 def test_depth_beyond_the_work_cell_is_left_out(evaluation):
