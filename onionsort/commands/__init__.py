@@ -18,6 +18,7 @@ COMMAND_MODULES = [
     "onionsort.commands.eval_perception",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",
+    "onionsort.commands.score",
     "onionsort.commands.suggest",
     "onionsort.commands.demo",
     "onionsort.commands.report",
