@@ -163,8 +163,8 @@ class OnionOutcome:
     ----------
     index : int
         Position in the line-up.
-    blemished : bool
-        Its true class.
+    blemished : bool or None
+        Its true class (None where unknown: a lab's run scored afterwards).
     perceived : Prediction or None
         What the inspection called it (None if never inspected).
     fate : {"bin", "line", "tray"}
@@ -179,7 +179,7 @@ class OnionOutcome:
     """
 
     index: int
-    blemished: bool
+    blemished: bool | None
     perceived: Prediction | None
     fate: Fate
     decided: bool = True
@@ -371,6 +371,16 @@ class SortingTally:
             self.counts[_cell(self.is_blemished(index), fate)] += 1
         return True
 
+    def outcomes(self) -> tuple[OnionOutcome, ...]:
+        """What happened to each onion so far, in line-up order; an undecided onion counts as
+        left on the line, and its class is None where the tally was given no truth."""
+        return tuple(
+            OnionOutcome(index=i, blemished=None if self._blemished is None
+                         else self.is_blemished(i), perceived=self.calls.get(i),
+                         fate=self.fates[i] or "line", decided=self.fates[i] is not None,
+                         p_blemished=self.p_blemished.get(i), views=self.views.get(i, 0))
+            for i in range(self.n_onions))
+
     def result(self, n_steps: int) -> SortingResult:
         """The episode's :class:`SortingResult` after ``n_steps`` actions; onions still
         undecided count as left on the line.
@@ -380,17 +390,14 @@ class SortingTally:
         ValueError
             If the tally was given no truth.
         """
+        if self._blemished is None:
+            self.is_blemished(0)  # raises, naming what is missing
         n_onions = self.n_onions
         undecided = sum(f is None for f in self.fates)
         if undecided:
             logger.info("the episode ended after %d steps with %d of %d onions undecided (left "
                         "on the line)", n_steps, undecided, n_onions)
-        outcomes = tuple(
-            OnionOutcome(index=i, blemished=self.is_blemished(i), perceived=self.calls.get(i),
-                         fate=self.fates[i] or "line", decided=self.fates[i] is not None,
-                         p_blemished=self.p_blemished.get(i), views=self.views.get(i, 0))
-            for i in range(n_onions)
-        )
+        outcomes = self.outcomes()
         counts = count_fates([o.blemished for o in outcomes], [o.fate for o in outcomes])
         result = SortingResult(tp=counts.tp, fp=counts.fp, tn=counts.tn, fn=counts.fn,
                                n_steps=n_steps, undecided=undecided, onions=outcomes,

@@ -46,7 +46,6 @@ from onionsort.stages.lineup import (
     _classifier,
     _inspection_summary,
     evaluate_lineup,
-    tally_rows,
 )
 
 __all__ = ["POLICIES", "EvaluateConfig", "evaluate", "evaluate_runs"]
@@ -140,7 +139,7 @@ def evaluate(config: EvaluateConfig, models=None):
 
         reach_viewer(config.connect)
 
-    from recordings.labels.sorting_csv import TALLY_FILE, write_tally
+    from recordings.labels.sorting_csv import TALLY_FILE, tally_rows, write_tally
     from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
     from robot.station import station_robot
@@ -206,7 +205,7 @@ def evaluate(config: EvaluateConfig, models=None):
                **_inspection_summary(config, inspector), **result.to_dict()}
     if lineup is not None:
         summary["recorded_lineup"] = str(config.record_lineup)
-    write_tally(folder / TALLY_FILE, tally_rows(config.seed, result))
+    write_tally(folder / TALLY_FILE, tally_rows(config.seed, result.onions))
     write_json(folder / "evaluation.json", summary)
     return result, summary
 

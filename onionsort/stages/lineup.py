@@ -31,7 +31,7 @@ from onionsort.configs.score import ScoreConfig
 from onionsort.stages.base import check_output_folder, write_json
 
 __all__ = ["LineupRecorder", "RecordedLineup", "ScoreConfig", "evaluate_lineup", "match_truth",
-           "read_recording", "score", "tally_rows"]
+           "read_recording", "score"]
 
 logger = logging.getLogger(__name__)
 
@@ -176,25 +176,13 @@ def match_truth(onions: set[tuple[int, int]], truth: dict[tuple[int, int], bool]
         raise ValueError(f"{truth_path} names {_onions(unknown)}, which {what} does not hold")
 
 
-def tally_rows(lineup: int, result) -> list:
-    """The tally CSV's rows (:class:`recordings.labels.sorting_csv.TallyRow`) of the
-    :class:`robot.tally.SortingResult` of line-up ``lineup``."""
-    from irl.domains.onion_sorting import Prediction
-    from recordings.labels.sorting_csv import TallyRow
-
-    names = {Prediction.GOOD: "good", Prediction.BAD: "blemished"}
-    return [TallyRow(lineup, o.index, o.fate,
-                     None if o.perceived is None else names[Prediction(o.perceived)],
-                     o.p_blemished) for o in result.onions]
-
-
 def evaluate_lineup(config: EvaluateConfig, actions: np.ndarray, doc: dict,
                     confidence: np.ndarray | None, models=None):
     """Replay the policy ``actions`` (48,) on the recorded line-up(s) of ``config.lineup``,
     each onion's class from ``config.truth``; write ``evaluation.json`` and ``tally.csv``
     into ``config.folder``. Returns ``(result, summary)``: the line-ups' pooled
     :class:`robot.tally.SortingResult` and the dict written."""
-    from recordings.labels.sorting_csv import TALLY_FILE, read_truth, write_tally
+    from recordings.labels.sorting_csv import TALLY_FILE, read_truth, tally_rows, write_tally
     from robot.cell import SortingRun, ViewReader
     from robot.replay import ReplayedLineup
     from robot.tally import SortingResult
@@ -218,7 +206,7 @@ def evaluate_lineup(config: EvaluateConfig, actions: np.ndarray, doc: dict,
         result = run.result()
         logger.info("line-up %d: %s", lineup.lineup, result.table().replace("\n", "; "))
         results.append((lineup.lineup, result))
-        rows.extend(tally_rows(lineup.lineup, result))
+        rows.extend(tally_rows(lineup.lineup, result.onions))
     pooled = SortingResult(
         tp=sum(r.tp for _, r in results), fp=sum(r.fp for _, r in results),
         tn=sum(r.tn for _, r in results), fn=sum(r.fn for _, r in results),

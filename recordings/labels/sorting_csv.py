@@ -21,11 +21,12 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from irl.domains.onion_sorting import Prediction
 from recordings.labels.annotated import BadAnnotations
 from recordings.labels.states_csv import csv_reader, write_csv
 
 __all__ = ["CLASSES", "FATES", "TALLY_COLUMNS", "TALLY_FILE", "TRUTH_COLUMNS", "TRUTH_FILE",
-           "TallyRow", "read_tally", "read_truth", "write_tally", "write_truth"]
+           "TallyRow", "read_tally", "read_truth", "tally_rows", "write_tally", "write_truth"]
 
 TRUTH_FILE = "truth.csv"
 TALLY_FILE = "tally.csv"
@@ -161,6 +162,17 @@ def read_tally(path: Path | str) -> list[TallyRow]:
     if not rows:
         raise BadAnnotations(f"{path} names no onion")
     return rows
+
+
+def tally_rows(lineup: int, onions: Iterable) -> list[TallyRow]:
+    """The rows of line-up ``lineup``'s ``onions``, each with its ``index``, ``fate``,
+    ``perceived`` (a :class:`~irl.domains.onion_sorting.Prediction`, or None if never
+    inspected) and ``p_blemished`` (``robot.tally.OnionOutcome``s: a sorting result's
+    ``onions``, or a tally's ``outcomes()``)."""
+    names = {Prediction.GOOD: "good", Prediction.BAD: "blemished"}
+    return [TallyRow(int(lineup), int(o.index), o.fate,
+                     None if o.perceived is None else names[Prediction(int(o.perceived))],
+                     o.p_blemished) for o in onions]
 
 
 def write_tally(path: Path | str, rows: Iterable[TallyRow]) -> Path:

@@ -131,7 +131,7 @@ def test_a_cell_that_does_not_reach_the_mdps_state_is_an_error():
                 super().execute(action)
 
     run = SortingRun(Stuck(2, lambda i: []), 2, ViewReader("ground-truth", max_views=1))
-    with pytest.raises(RuntimeError, match="after PICK .* the MDP says"):
+    with pytest.raises(RuntimeError, match=r"after PICK .* the MDP says"):
         run.run(EXPERT)
 
 
