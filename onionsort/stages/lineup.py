@@ -59,15 +59,14 @@ class RecordedLineup:
         ValueError
             Naming a file that is not an image.
         """
-        import cv2
+        from recordings.labels.dataset import read_rgb_png
 
         out = []
         for path in self.views[index]:
-            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if bgr is None:
-                raise ValueError(f"{path} is not an image (onion {index} of line-up "
-                                 f"{self.lineup})")
-            out.append(np.ascontiguousarray(bgr[..., ::-1]))
+            try:
+                out.append(read_rgb_png(path))
+            except ValueError as err:
+                raise ValueError(f"{err} (onion {index} of line-up {self.lineup})") from None
         return out
 
 
@@ -290,17 +289,14 @@ class LineupRecorder:
 
     def on_step(self, event) -> None:
         """Keep the views an evaluation step (:class:`robot.evaluation.EvaluationStep`) took."""
-        import cv2
-
+        from recordings.labels.dataset import write_rgb_png
         from recordings.labels.lineups_csv import LineupRow
 
         if not event.views:
             return
         for k, rgb in enumerate(event.views):
             name = f"lineup{self.lineup}-onion{event.onion:03d}-view{k}.png"
-            if not cv2.imwrite(str(self._tmp / "images" / name),
-                               np.ascontiguousarray(rgb[..., ::-1])):
-                raise OSError(f"could not write {self._tmp / 'images' / name}")
+            write_rgb_png(self._tmp / "images" / name, rgb)
             self._rows.append(LineupRow(None, name, self.lineup, int(event.onion), k))
         self.views[int(event.onion)] = len(event.views)
 
