@@ -68,7 +68,10 @@ def wilson_interval(successes: int, trials: int, z: float = _Z95) -> tuple[float
     k, n, z2 = float(successes), float(trials), z * z
     centre = (k + z2 / 2) / (n + z2)
     half = z * math.sqrt(k * (n - k) / n + z2 / 4) / (n + z2)
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # none or all succeeded: that edge is exact (the formula's rounding would miss it)
+    low = 0.0 if successes == 0 else max(0.0, centre - half)
+    high = 1.0 if successes == trials else min(1.0, centre + half)
+    return low, high
 
 
 def _ratio(num: int, den: int) -> float:

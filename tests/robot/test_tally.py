@@ -17,6 +17,10 @@ def test_the_wilson_interval_is_scipys(k, n):
     np.testing.assert_allclose(wilson_interval(k, n), (ci.low, ci.high), rtol=0, atol=1e-12)
 
 
+def test_the_wilson_interval_of_all_or_none_reaches_its_edge_exactly():
+    assert wilson_interval(30, 30)[1] == 1.0 and wilson_interval(0, 30)[0] == 0.0
+
+
 def test_the_wilson_interval_of_nothing_is_everything_and_bad_counts_are_refused():
     assert wilson_interval(0, 0) == (0.0, 1.0)
     for k, n in ((3, 2), (-1, 4), (1.5, 3), (True, 3)):
