@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 __all__ = ["DIFFICULTY_LEVELS", "Difficulty", "ImageEffects", "difficulty_rng",
-           "hand_patch", "resolve_difficulty", "tagged_rng"]
+           "hand_patch", "resolve_difficulty", "tagged_rng", "view_rng"]
 
 #: spawn-key tag of the difficulty's generator (kept apart from the session's own streams)
 _TAG = 0xD1FF
@@ -173,6 +173,24 @@ def difficulty_rng(seed: int | np.random.SeedSequence, stream: int = 0) -> np.ra
     independent streams (one per camera, so that whether one camera renders never changes
     another's noise)."""
     return tagged_rng(seed, _TAG, stream)
+
+
+def view_rng(seed: int | np.random.SeedSequence, onion: int, view: int
+             ) -> np.random.Generator:
+    """The difficulty's generator of one inspection view: view ``view`` of line-up onion
+    ``onion`` at the station seeded with ``seed``. A stream of its own for every view, so that
+    a view's noise (and the hand over it) depends on what the view is, never on what was
+    rendered before it: whichever policy sorts the line-up, each onion looks the same."""
+    for name, value in (("onion", onion), ("view", view)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+            raise ValueError(f"{name} must be an int >= 0; got {value!r}")
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    key = (*seq.spawn_key, _TAG, _VIEW_STREAM, int(onion), int(view))
+    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=key))
+
+
+#: the stream of :func:`view_rng` (after those of the station's cameras)
+_VIEW_STREAM = 3
 
 
 def tagged_rng(seed: int | np.random.SeedSequence, tag: int, stream: int = 0

@@ -1,11 +1,12 @@
 """The Sawyer sorting station as a Gymnasium environment, ``onionsort/Sorting-v0``.
 
 Importing :mod:`robot` registers it, so ``gymnasium.make("onionsort/Sorting-v0", ...)`` builds a
-:class:`SortingEnv` with the keyword arguments given. One episode is one run of
-:func:`robot.evaluation.evaluate_policy`: the same station (:class:`robot.station.SawyerStation`),
-line-up, seed, step budget and counting (:class:`robot.evaluation.SortingTally`), so a fixed
-policy rolled out here from ``reset(seed=k)`` gives the TP/FP/TN/FN of ``onionsort evaluate``
-with ``--seed k`` (and the same onions, inspection and difficulty).
+:class:`SortingEnv` with the keyword arguments given. One episode is one run of the sorting loop
+(:class:`robot.cell.SortingRun`), one action a step, as :func:`robot.evaluation.evaluate_policy`
+runs it: the same station (:class:`robot.station.SawyerStation`), line-up, seed, step budget
+and counting (:class:`robot.tally.SortingTally`), so a fixed policy rolled out here from
+``reset(seed=k)`` gives the TP/FP/TN/FN of ``onionsort evaluate`` with ``--seed k`` (and the
+same onions, inspection and difficulty).
 
 Spaces
 ------
@@ -35,9 +36,9 @@ is the episode's :class:`~robot.evaluation.SortingResult`, where undecided onion
 on the line.
 
 The first observation's image is rendered before any action; under a difficulty with image
-noise its noise comes from a stream of its own, so that the episode's inspection views (and so
-its counts) are exactly those of ``evaluate_policy(..., render=True)``, the way ``onionsort
-evaluate`` runs when it records to Rerun (its default).
+noise its noise comes from a stream of its own, so that the main camera's images are those of
+``evaluate_policy(..., render=True)``, the way ``onionsort evaluate`` runs when it records to
+Rerun (its default). The inspection views never depend on what the main camera rendered.
 """
 
 from __future__ import annotations
@@ -60,9 +61,9 @@ from irl.domains.onion_sorting import (
     onion_sorting,
 )
 from robot.camera import CameraSpec
+from robot.cell import SortingRun
 from robot.classifier import GROUND_TRUTH, Classifier, check_classifier
 from robot.difficulty import Difficulty, resolve_difficulty
-from robot.evaluation import SortingTally
 from robot.station import INSPECTION_VIEWS, SawyerStation
 
 __all__ = ["SortingEnv", "sorting_reward"]
@@ -200,9 +201,8 @@ class SortingEnv(gymnasium.Env):
             "state": spaces.MultiDiscrete(np.array(FACTOR_SIZES, dtype=np.int64)),
         })
         self._station: SawyerStation | None = None
-        self._tally: SortingTally | None = None
+        self._run: SortingRun | None = None
         self._image: np.ndarray | None = None
-        self._n_steps = 0
         self._over = True
 
     # -- Gymnasium API -----------------------------------------------------------------------
@@ -218,21 +218,22 @@ class SortingEnv(gymnasium.Env):
         self._close_station()
         station = SawyerStation(self.classify, n_onions=self.n_onions,
                                 n_blemished=self.n_blemished, seed=station_seed,
-                                move_steps=self.move_steps, render_every_step=True,
+                                move_steps=self.move_steps,
                                 camera=self.camera, difficulty=self.difficulty,
                                 inspection_views=self.inspection_views)
         self._station = station.__enter__()
-        self._tally = SortingTally(station.blemished)
-        self._n_steps, self._over = 0, False
+        self._run = SortingRun(station, self.n_onions, station.reader, truth=station.blemished,
+                               max_steps_per_onion=self.max_steps_per_onion)
+        self._over = False
         self._image = self._first_image(station_seed)
         state = station.state
-        info = {**self._tally.counts, "state_index": encode_state(state), "onion": None,
+        info = {**self._run.tally.counts, "state_index": encode_state(state), "onion": None,
                 "perceived": None, "fate": None}
         return self._observation(state, self._image), info
 
     def step(self, action) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Execute one abstract action on the station."""
-        if self._station is None or self._tally is None:
+        if self._station is None or self._run is None:
             raise RuntimeError("call reset() before step()")
         if self._over:
             raise RuntimeError("the episode is over; call reset() to start another")
@@ -240,20 +241,17 @@ class SortingEnv(gymnasium.Env):
             raise ValueError(f"action must be an int in [0, {N_ACTIONS}) (a SortAction); got "
                              f"{action!r}")
         a = SortAction(int(action))
-        done = self._station.step(a)
-        fate = self._tally.record(done)
-        self._n_steps += 1
+        done, fate = self._run.act(a)
         reward = float(self.reward_table[encode_state(done.state), int(a)])
-        terminated = self._tally.complete
-        truncated = not terminated and self._n_steps >= self.budget
-        self._image = done.image.rgb
-        info: dict[str, Any] = {**self._tally.counts,
+        terminated = self._run.tally.complete
+        truncated = not terminated and self._run.n_steps >= self.budget
+        self._image = self._station.render().rgb
+        info: dict[str, Any] = {**self._run.tally.counts,
                                 "state_index": encode_state(done.next_state),
                                 "onion": done.onion, "perceived": done.perceived, "fate": fate}
         if terminated or truncated:
             self._over = True
-            perceived = [self._station.perceived(i) for i in range(self.n_onions)]
-            info["result"] = self._tally.result(self._n_steps, perceived)
+            info["result"] = self._run.result()
         return (self._observation(done.next_state, self._image), reward, terminated, truncated,
                 info)
 

@@ -8,7 +8,10 @@ arm's motions on the station's belt (:mod:`robot.belt`).
   lifts the onion to the hover pose;
 - INSPECT holds the onion up in front of the inspection camera and shows it from every side:
   the wrist turns it through the inspection poses about its own centre, every other view tilted
-  so that its underside faces the camera (:func:`robot.inspection_poses.inspection_poses`);
+  so that its underside faces the camera (:func:`robot.inspection_poses.inspection_poses`).
+  Each view is taken with the arm exactly at its pose (:meth:`robot.sawyer.Sawyer.snap`) and
+  the onion held as the pick aimed to hold it: a view depends on the onion and the pose, never
+  on where the arm came from;
 - PLACE_ON_CONVEYOR sets the onion on the belt downstream of the gate, where it rides away (or,
   if it was never inspected, back at the gate, where it waits to be picked again), and returns
   above the pick spot;
@@ -22,7 +25,7 @@ place in the bin. Positions are world metres, shape (3,).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -118,39 +121,43 @@ class MotionPrimitives:
         if np.linalg.norm(self.arm.end_effector()[0] - _above(grip)) > 0.01:
             errs.append(self.move(_above(grip)))
         errs.append(self.move(grip, self.move_steps // 2))
-        self.arm.grasp(onion.body, kinematic=True)
+        self.arm.grasp(onion.body, kinematic=True, flange=(grip, flange_down(0.0)))
         onion.place = "held"
         self.gate.set(False)
         errs.append(self.move(_above(grip), self.move_steps // 2))
         errs.append(self.move(ROBOT_TARGETS[Location.HOVER]))
         return errs
 
-    def inspect(self, onion: LineUpOnion, poses: tuple[tuple[float, float], ...],
-                view: Callable[[int], bool]) -> list[float]:
-        """Hold the onion up to the inspection camera and show it from every side.
+    def hold_up(self) -> list[float]:
+        """Bring the held onion to the inspection pose, in front of the inspection camera."""
+        return [self.move(ROBOT_TARGETS[Location.FACE])]
 
-        The onion arrives at the inspection pose; unless it was inspected before (it is only
-        held up again), the wrist turns (and tilts) it through ``poses`` ``(yaw, tilt)`` about
-        its own centre, calling ``view(k)`` at the ``k``-th, and brings it back to the
-        inspection pose. The showing ends early where ``view`` returns True.
+    def show(self, onion: LineUpOnion, poses: tuple[tuple[float, float], ...],
+             errs: list[float]) -> Iterator[int]:
+        """Show the held ``onion``, at the inspection pose (:meth:`hold_up`), from every side.
+
+        The wrist turns (and tilts) it through ``poses`` ``(yaw, tilt)`` about its own centre;
+        yields ``k`` with the arm exactly at the ``k``-th pose (:meth:`Sawyer.snap
+        <robot.sawyer.Sawyer.snap>`). Once closed, or past the last pose, it brings the onion
+        back to the inspection pose. The motions' errors go to ``errs``.
         """
-        target = ROBOT_TARGETS[Location.FACE]
-        errs = [self.move(target)]
-        if onion.perceived is not None:
-            return errs
+        self.arm.snap()
         centre = self.belt.position(onion.index)
         shown = 0
-        for k, (yaw, tilt) in enumerate(poses):
-            if k:
-                turn = flange_down(yaw, tilt)
-                errs.append(self.move(self.arm.flange_holding_at(centre, turn),
-                                      self.move_steps // 2, orientation=turn, seed=self.arm.q))
-            shown += 1
-            if view(k):
-                break
-        if shown > 1:
-            errs.append(self.move(target, self.move_steps // 2, seed=self.arm.q))
-        return errs
+        try:
+            for k, (yaw, tilt) in enumerate(poses):
+                if k:
+                    turn = flange_down(yaw, tilt)
+                    errs.append(self.move(self.arm.flange_holding_at(centre, turn),
+                                          self.move_steps // 2, orientation=turn,
+                                          seed=self.arm.q))
+                    self.arm.snap()
+                shown += 1
+                yield k
+        finally:
+            if shown > 1:
+                errs.append(self.move(ROBOT_TARGETS[Location.FACE], self.move_steps // 2,
+                                      seed=self.arm.q))
 
     def place_on_conveyor(self, onion: LineUpOnion) -> list[float]:
         inspected = onion.perceived is not None

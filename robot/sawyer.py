@@ -82,6 +82,7 @@ class Sawyer:
         self._carried: tuple[list[float], list[float]] | None = None  # flange -> body pose
         self.grasped: int | None = None
         self.rest = HOME
+        self.goal: np.ndarray | None = None  # the last reach's joint solution
         self.reset(HOME)
 
     def reset(self, q: np.ndarray) -> None:
@@ -152,6 +153,7 @@ class Sawyer:
         as in :meth:`solve`."""
         position = np.asarray(position, float)
         q = self.solve(position, orientation, seed)
+        self.goal = q
         self.move_to_joints(q, steps=steps)
         err = float(np.linalg.norm(self.end_effector()[0] - position))
         for _ in range(_MAX_SETTLE):
@@ -163,6 +165,21 @@ class Sawyer:
             logger.warning("the Sawyer stopped %.3f m from %s", err,
                            np.round(position, 3).tolist())
         return err
+
+    def snap(self) -> None:
+        """Put the joints exactly at the last :meth:`reach`'s solution (what the motion ended
+        within :data:`_SETTLE_TOL` of), bringing a kinematically held body along: a pose the
+        arm repeats whatever it came from, as a real arm does to a tenth of a millimetre.
+
+        Raises
+        ------
+        RuntimeError
+            If the arm has reached for nothing yet.
+        """
+        if self.goal is None:
+            raise RuntimeError("the Sawyer has reached for nothing yet")
+        self.reset(self.goal)
+        self._carry()
 
     def move_to(self, position, orientation=_DOWN, *, steps: int = 240) -> float:
         """Drive the arm to a pose under position control, stepping the physics ``steps`` times.
@@ -188,16 +205,20 @@ class Sawyer:
             p.stepSimulation(physicsClientId=self.client)
             self._carry()
 
-    def grasp(self, body: int, *, kinematic: bool = False) -> None:
+    def grasp(self, body: int, *, kinematic: bool = False,
+              flange: tuple[np.ndarray, tuple[float, ...]] | None = None) -> None:
         """Suction: hold ``body`` at the flange where it is now.
 
         By default a fixed constraint welds it to the flange (for dynamic bodies); with
         ``kinematic=True`` the body follows the flange rigidly, its pose reset after every
-        physics step of :meth:`move_to_joints` (for static, mass-0 bodies).
+        physics step of :meth:`move_to_joints` (for static, mass-0 bodies). ``flange``, a
+        position (3,) and quaternion, holds the body as if the flange were there (the grasp
+        the motion aimed at, rather than where it stopped within its tolerance).
         """
         if self.grasped is not None:
             raise RuntimeError(f"already holding body {self.grasped}; release it first")
-        ee_pos, ee_orn = self.end_effector()
+        ee_pos, ee_orn = self.end_effector() if flange is None else \
+            (np.asarray(flange[0], float), np.asarray(flange[1], float))
         obj_pos, obj_orn = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
         inv_pos, inv_orn = p.invertTransform(ee_pos.tolist(), ee_orn.tolist())
         rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)

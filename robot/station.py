@@ -8,8 +8,18 @@ resolution, as a real cell would fit its inspection station with a sharper camer
 that watches the person; the difficulty's image effects apply to it as to every camera).
 Each :class:`~irl.domains.onion_sorting.SortAction` is a motion primitive of the Sawyer
 (:mod:`robot.primitives`) on the station's line-up and belt (:mod:`robot.belt`), seen through
-its cameras (:mod:`robot.station_cameras`). On INSPECT the classifier reads the views together
-and answers the onion's class (it may abstain only if no view shows the onion).
+its cameras (:mod:`robot.station_cameras`). The station is a :class:`robot.cell.SortingCell`:
+the sorting loop (:class:`robot.cell.SortingRun`) drives it, and on INSPECT reads the views it
+shows into the onion's call (:class:`robot.cell.ViewReader`; a classifier may abstain only if no
+view shows the onion). :meth:`SawyerStation.step` is one action of that loop with the station's
+own classifier.
+
+Each onion's inspection views are the same whichever policy sorts the line-up: the arm is
+exactly at each view's pose, holding the onion as its pick aimed to (:mod:`robot.primitives`);
+each view's noise and gripper come from a stream of the view's own
+(:func:`robot.difficulty.view_rng`); and its light drifts to the onion's slot on the line
+(:func:`inspection_time`), not to how long the policy took to get there. A line-up recorded
+with one policy therefore stands in for the arm with any other (:mod:`robot.replay`).
 
 For 3D logging, :meth:`SawyerStation.world_state` snapshots the work cell, the gate, the onions
 on the belt, held or in the bin (with their classes), both cameras and the Sawyer's joints
@@ -40,20 +50,14 @@ from irl.domains.onion_sorting import (
     SortAction,
     SortingState,
     encode_state,
-    next_state,
     onion_sorting,
 )
 from robot.assets import sawyer_urdf
 from robot.belt import Belt, LineUpOnion, in_world, make_lineup
 from robot.blemishes import BlemishProbe
 from robot.camera import CameraImage, CameraSpec, boxes_from_segmentation, sample_lighting
-from robot.classifier import (
-    GROUND_TRUTH,
-    Classifier,
-    SequentialClassifier,
-    check_classifier,
-    read_answer,
-)
+from robot.cell import START_STATE, Read, ViewReader, take_action
+from robot.classifier import GROUND_TRUTH, Classifier
 from robot.difficulty import DIFFICULTY_LEVELS, Difficulty, resolve_difficulty
 from robot.inspection_poses import INSPECTION_VIEWS, inspection_poses
 from robot.labels import OnionLabel
@@ -63,6 +67,7 @@ from robot.sawyer import Sawyer
 from robot.scene import StopGate, build_workcell, connect
 from robot.state_map import WorldSnapshot, state_of_world
 from robot.station_cameras import ROBOT_INSPECTION_CAMERA, InspectionLabel, StationCameras
+from robot.tally import Fate
 from robot.world import Pose, RobotState, WorldProbe, WorldState, camera_pose, robot_state
 
 __all__ = [
@@ -75,6 +80,7 @@ __all__ = [
     "SawyerStation",
     "StationStep",
     "inspection_poses",
+    "inspection_time",
     "robot_inspection_views",
     "station_robot",
 ]
@@ -92,9 +98,17 @@ STEP_DURATION_S = 2.0
 """The station's clock per action (s): action ``t`` runs from ``t * STEP_DURATION_S`` to
 ``(t + 1) * STEP_DURATION_S`` (the difficulty's lighting drift follows it)."""
 
-START_STATE = SortingState(Location.CONVEYOR, Location.CONVEYOR, Prediction.GOOD)
-"""The station's first state: the MDP's initial state with nothing in focus (as if an onion
-had just been left on the line), the flange above the pick spot. The policy must CLAIM."""
+#: Actions a sorting cycle takes an onion: claim, pick, inspect, place (the expert's).
+_CYCLE = 4
+#: Where each fate of :class:`robot.cell.SortingCell` is among an onion's places.
+_FATES: dict[str, Fate] = {"bin": "bin", "tray": "tray", "belt": "line", "gone": "line"}
+
+
+def inspection_time(index: int) -> float:
+    """The clock (s) the light of onion ``index``'s inspection views drifts to: the end of
+    action ``4 * index + 2``, when a cycle of four actions an onion (claim, pick, inspect,
+    place) inspects it. The light drifts along the line-up, whatever a policy's pace."""
+    return (_CYCLE * int(index) + 3) * STEP_DURATION_S
 
 
 def station_robot(positions: np.ndarray | None = None) -> RobotState:
@@ -184,11 +198,10 @@ class SawyerStation:
     inspection_views : int
         Views of every inspected onion (:func:`inspection_poses`): the most it takes.
     stop_when_settled : bool
-        With a :class:`~robot.classifier.SequentialClassifier`, stop showing an onion as soon
-        as its call can no longer change (under ``noisy-or``, a view that shows rot settles a
-        blemish at once): the call all its views would give, from fewer. The image noise is
-        one stream per run, so later onions' views draw it otherwise than with every view
-        taken. False: always take every view.
+        With a :class:`~robot.classifier.SequentialClassifier`, :meth:`step` stops showing an
+        onion as soon as its call can no longer change (under ``noisy-or``, a view that shows
+        rot settles a blemish at once): the call all its views would give, from fewer. False:
+        always take every view.
     label_blemishes : bool
         Measure the rot each inspection view shows, for :attr:`last_labels` (one more render
         per view; for datasets).
@@ -203,6 +216,9 @@ class SawyerStation:
 
     Attributes
     ----------
+    reader : ViewReader
+        How :meth:`step` reads an onion's views (``classify``, ``inspection_views``,
+        ``stop_when_settled``).
     lineup : tuple of OnionAppearance
         The onions in the order they arrive.
     blemished : ndarray of shape (n_onions,)
@@ -237,7 +253,8 @@ class SawyerStation:
         label_blemishes: bool = False,
         randomize_look: bool = False,
     ) -> None:
-        check_classifier(classify)
+        self.reader = ViewReader(classify, max_views=inspection_views,
+                                 stop_when_settled=stop_when_settled)
         if isinstance(move_steps, bool) or not isinstance(move_steps, int | np.integer) \
                 or move_steps < 2:
             raise ValueError(f"move_steps must be an int >= 2; got {move_steps!r}")
@@ -258,6 +275,7 @@ class SawyerStation:
         self.inspection = inspection
         self.client: int | None = None
         self.focus: int | None = None
+        self._errs: list[float] = []  # the arm's reach errors in the last action
 
     # -- lifecycle ---------------------------------------------------------------------------
     def __enter__(self) -> SawyerStation:
@@ -382,9 +400,16 @@ class SawyerStation:
                                   visible_pixels=0 if box is None else box[4]))
         return tuple(out)
 
+    def fate(self, index: int) -> Fate | None:
+        """What became of onion ``index``: ``"bin"``, ``"line"`` (set back on the belt after
+        inspection, or ridden away), ``"tray"``, or None while undecided."""
+        return _FATES.get(self.place_of(index))
+
     # -- acting ------------------------------------------------------------------------------
     def step(self, action: SortAction | int) -> StationStep:
-        """Execute ``action`` and check that the world reached the MDP's next state.
+        """Execute ``action`` with the station's own classifier (:attr:`reader`), as the sorting
+        loop does (:func:`robot.cell.take_action`), and check that the world reached the MDP's
+        next state.
 
         Raises
         ------
@@ -396,54 +421,90 @@ class SawyerStation:
             CLAIM finds the line-up exhausted.
         """
         self._require_client()
-        try:
-            a = SortAction(int(action))
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"action must be a SortAction in [0, {len(SortAction)}); got {action!r}"
-            ) from None
-        s = self.state
-        self.cameras.time_s += STEP_DURATION_S
-        applies = next_state(s, a, blemished=False) != s or next_state(s, a, blemished=True) != s
-        errs: list[float] = []
-        perceived, views, p_bad, per_view = None, (), None, ()
-        if applies:
-            onion = None if self.focus is None else self.belt.onions[self.focus]
-            if a == SortAction.CLAIM:
-                self.focus = self.motions.claim().index
-            elif a == SortAction.PICK:
-                errs = self.motions.pick(onion)
-            elif a == SortAction.INSPECT:
-                errs, shown, view_p = self._inspect(onion)
-                if shown:
-                    views = tuple(v.rgb for v in shown)
-                    perceived, p_bad, per_view = read_answer(
-                        self.classify, onion.appearance.blemished, list(views), view_p)
-                    if perceived is None:
-                        logger.warning("the classifier abstained on onion %d in all %d views; "
-                                       "it counts as GOOD", onion.index, len(views))
-                        perceived = Prediction.GOOD
-                    onion.perceived = perceived
-                    self.last_views = shown
-            elif a == SortAction.PLACE_ON_CONVEYOR:
-                errs = self.motions.place_on_conveyor(onion)
-            else:
-                errs = self.motions.place_in_bin(onion)
-        focus = None if self.focus is None else self.belt.onions[self.focus]
-        seen_bad = focus is not None and focus.perceived == Prediction.BAD
-        expected = next_state(s, a, blemished=seen_bad)
-        seen = self.state
-        if seen != expected:
-            raise RuntimeError(f"after {a.name} in {s} the world shows {seen}; the MDP says "
-                               f"{expected}")
-        logger.debug("%s: %s -> %s", a.name, s, seen)
+        self._errs = []
+        done = take_action(self, action, self.reader, self.blemished)
         return StationStep(
-            state=s, action=a, next_state=seen, onion=self.focus, perceived=perceived,
-            inspection=views[0] if views else None,
-            image=self.render() if self.render_every_step else None,
-            q=self.arm.q, reach_error=max(errs, default=0.0), views=views, p_blemished=p_bad,
-            view_p_blemished=per_view,
+            state=done.state, action=done.action, next_state=done.next_state, onion=done.onion,
+            perceived=done.perceived, inspection=done.views[0] if done.views else None,
+            image=self.render() if self.render_every_step else None, q=self.arm.q,
+            reach_error=max(self._errs, default=0.0), views=done.views,
+            p_blemished=done.p_blemished, view_p_blemished=done.view_p_blemished,
         )
+
+    def execute(self, action: SortAction | int) -> None:
+        """Carry out CLAIM, PICK, PLACE_ON_CONVEYOR or PLACE_IN_BIN, each a motion primitive
+        (:mod:`robot.primitives`), as :class:`robot.cell.SortingCell` asks; the loop sends only
+        actions that change the state. The station's clock advances by
+        :data:`STEP_DURATION_S`.
+
+        Raises
+        ------
+        ValueError
+            If ``action`` is INSPECT (:meth:`inspect`) or not a :class:`SortAction`.
+        RuntimeError
+            If a CLAIM finds the line-up exhausted, or another action finds no onion in focus.
+        """
+        self._require_client()
+        a = SortAction(int(action))
+        if a == SortAction.INSPECT:
+            raise ValueError("INSPECT reads the views: call inspect(read)")
+        if a != SortAction.CLAIM and self.focus is None:
+            raise RuntimeError(f"no onion is in focus to {a.name}")
+        self.cameras.time_s += STEP_DURATION_S
+        onion = None if self.focus is None else self.belt.onions[self.focus]
+        if a == SortAction.CLAIM:
+            self.focus = self.motions.claim().index
+        elif a == SortAction.PICK:
+            self._errs = self.motions.pick(onion)
+        elif a == SortAction.PLACE_ON_CONVEYOR:
+            self._errs = self.motions.place_on_conveyor(onion)
+        else:
+            self._errs = self.motions.place_in_bin(onion)
+
+    def inspect(self, read: Read) -> None:
+        """INSPECT: hold the onion in focus up to the inspection camera; the first time, show
+        it from every side (:meth:`MotionPrimitives.show
+        <robot.primitives.MotionPrimitives.show>`), rendering each view as ``read`` asks for it
+        (:attr:`last_views`), and keep the call ``read`` returns. The station's clock advances
+        by :data:`STEP_DURATION_S`; the views are lit as at :func:`inspection_time`.
+
+        Raises
+        ------
+        RuntimeError
+            If no onion is in focus.
+        """
+        self._require_client()
+        if self.focus is None:
+            raise RuntimeError("no onion is in focus to inspect")
+        onion = self.belt.onions[self.focus]
+        self.cameras.time_s += STEP_DURATION_S
+        self._errs = self.motions.hold_up()
+        if onion.perceived is not None:
+            return  # only held up again
+        shown = self._views(onion)
+        try:
+            call = read(shown)
+        finally:
+            shown.close()
+        onion.perceived = Prediction(int(call))
+
+    def _views(self, onion: LineUpOnion) -> Iterator[np.ndarray]:
+        """The held onion's inspection views (h, w, 3) uint8, each rendered as it is asked for
+        with the arm at its pose, kept in :attr:`last_views` (and, labelling, its ground truth
+        in :attr:`last_labels`)."""
+        self.last_views, self.last_labels = [], []
+        poses = self.motions.show(onion, self.poses, self._errs)
+        try:
+            for k in poses:
+                image = self.cameras.render_inspection(
+                    onion.body, view=(onion.index, k), time_s=inspection_time(onion.index))
+                self.last_views.append(image)
+                if self.label_blemishes:
+                    self.last_labels.append(self.cameras.inspection_labels(image,
+                                                                           self.belt.onions))
+                yield image.rgb
+        finally:
+            poses.close()
 
     def defer(self) -> int:
         """Set the onion in focus aside on the check tray for a person to sort (the robot was
@@ -463,34 +524,6 @@ class SawyerStation:
         self.motions.set_aside(onion)
         self.focus = None
         return onion.index
-
-    def _inspect(self, onion: LineUpOnion
-                 ) -> tuple[list[float], list[CameraImage], list[float | None] | None]:
-        """Show the onion to the inspection camera (:meth:`MotionPrimitives.inspect
-        <robot.primitives.MotionPrimitives.inspect>`), rendering each view; a
-        :class:`~robot.classifier.SequentialClassifier` reads each as it comes, and with
-        :attr:`stop_when_settled` the showing ends once the call is settled. Returns the
-        motions' errors, the views (none if the onion was inspected before: it is only held up
-        again) and, from a sequential classifier, each view's probability (else None)."""
-        sequential = isinstance(self.classify, SequentialClassifier)
-        views: list[CameraImage] = []
-        view_p: list[float | None] = []
-
-        def view(k: int) -> bool:
-            if not k:
-                self.last_labels = []
-            views.append(self.cameras.render_inspection(onion.body))
-            if self.label_blemishes:
-                self.last_labels.append(self.cameras.inspection_labels(views[-1],
-                                                                       self.belt.onions))
-            if sequential:
-                view_p.extend(self.classify.view_probabilities([views[-1].rgb]))
-                return self.stop_when_settled and self.classify.settled(
-                    view_p, len(self.poses) - k - 1)
-            return False
-
-        errs = self.motions.inspect(onion, self.poses, view)
-        return errs, views, view_p if sequential else None
 
 
 def _pedestal(client: int) -> int:

@@ -4,8 +4,9 @@ The main camera watches the cell; the inspection camera (:data:`ROBOT_INSPECTION
 spot where the Sawyer holds an onion up. Both render under the station's lighting, through its
 look's camera response (:mod:`robot.look`) and with the difficulty's image effects
 (:mod:`robot.difficulty`) at the station's clock; the inspection view may also show the gripper
-over part of the held onion. Each camera draws its noise from a stream of its own. Image layouts
-as in :mod:`robot.camera`.
+over part of the held onion. The main camera draws its noise from a stream of its own, and each
+inspection view from one of its own (:func:`robot.difficulty.view_rng`). Image layouts as in
+:mod:`robot.camera`.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from robot.belt import LineUpOnion
 from robot.blemishes import BlemishProbe
 from robot.camera import CameraImage, CameraSpec, Lighting, boxes_from_segmentation, render
-from robot.difficulty import Difficulty, ImageEffects, difficulty_rng
+from robot.difficulty import Difficulty, ImageEffects, difficulty_rng, view_rng
 from robot.look import Look
 
 __all__ = ["ROBOT_INSPECTION_CAMERA", "InspectionLabel", "StationCameras"]
@@ -83,8 +84,10 @@ class StationCameras:
         self.lighting, self.look, self.difficulty = lighting, look, difficulty
         self.cull, self.probe = cull, probe
         self.effects = ImageEffects(difficulty, difficulty_rng(seed))
-        # the inspection camera's noise is a stream of its own: whether the main camera renders
-        # (a Rerun log, a Gymnasium observation) never changes what the detector sees
+        # the inspection camera's noise is a stream of its own (and a named view's, one of its
+        # own): whether the main camera renders (a Rerun log, a Gymnasium observation) never
+        # changes what the detector sees
+        self.seed = seed
         self.inspection_effects = self.effects.with_rng(difficulty_rng(seed, 1))
         # and so has the view before the first action, rendered only for a recording of it
         self._initial_effects = self.effects.with_rng(difficulty_rng(seed, 2))
@@ -106,10 +109,17 @@ class StationCameras:
         return CameraImage(rgb=effects.color(image.rgb, self.time_s),
                            depth=effects.depth(image.depth), seg=image.seg)
 
-    def render_inspection(self, held: int | None) -> CameraImage:
+    def render_inspection(self, held: int | None, *, view: tuple[int, int] | None = None,
+                          time_s: float | None = None) -> CameraImage:
         """The inspection view now, as the classifier reads it: with the difficulty's image
         effects and, by chance, the gripper over part of the onion ``held`` (its body; None
-        where the Sawyer holds none up)."""
+        where the Sawyer holds none up).
+
+        ``view`` ``(onion, k)`` names the view (the ``k``-th of line-up onion ``onion``): its
+        noise and the gripper then come from the view's own stream
+        (:func:`robot.difficulty.view_rng`), else from the inspection camera's. ``time_s``
+        is the clock its light drifts to (the station's by default).
+        """
         image = render(self.client, self.inspection, self.lighting, cull=self.cull)
         if self.look is not None:
             image = replace(image, rgb=self.look.camera(image.rgb))
@@ -119,9 +129,11 @@ class StationCameras:
         if held is not None:
             boxes = boxes_from_segmentation(image.seg, [held])
             box = next(iter(boxes.values()))[:4] if boxes else None
-        rgb, covered = self.inspection_effects.hand_and_cover(image.rgb, box, _GRIPPER_RGB)
-        return CameraImage(rgb=self.inspection_effects.color(rgb, self.time_s), depth=image.depth,
-                           seg=image.seg, covered=covered)
+        effects = self.inspection_effects if view is None else \
+            self.effects.with_rng(view_rng(self.seed, *view))
+        rgb, covered = effects.hand_and_cover(image.rgb, box, _GRIPPER_RGB)
+        return CameraImage(rgb=effects.color(rgb, self.time_s if time_s is None else time_s),
+                           depth=image.depth, seg=image.seg, covered=covered)
 
     def inspection_labels(self, image: CameraImage, onions: Sequence[LineUpOnion]
                           ) -> list[InspectionLabel]:

@@ -26,6 +26,7 @@ COMMAND_MODULES = [
     "onionsort.commands.eval_posterior",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",
+    "onionsort.commands.score",
     "onionsort.commands.suggest",
     "onionsort.commands.demo",
     "onionsort.commands.report",

@@ -20,6 +20,14 @@ With ``--ground-truth-inspection`` the robot knows each onion's class (learning 
 from perception); with ``--policy expert`` it sorts by the task's policy (perception measured
 apart from learning): together they split any loss in two.
 
+Precision and recall come with their 95% Wilson intervals, and each onion's fate, call and
+probability go to ``tally.csv`` beside ``evaluation.json`` (``onionsort score`` counts it
+against a truth CSV). ``--record-lineup DIR`` records the simulated line-up (every view of every
+onion, ``lineups.csv``, ``truth.csv``); ``--lineup SOURCE --truth FILE.csv`` replays the policy
+on a recorded line-up instead of the simulator (a lab's robot's views: docs/robot.md), each
+inspected onion's views from the recording, its fate the policy's place decision; it writes
+``evaluation.json`` and ``tally.csv``.
+
 Examples
 --------
     onionsort evaluate runs/learn-mmap --onions 50 --blemished 30 --seed 0
@@ -32,6 +40,9 @@ Examples
     onionsort evaluate runs/learn-mmap --defer-below 0.9
         # (a RUN_DIR of `onionsort learn --posterior`) unsure states send the onion to a
         # check tray, counted apart (deferred, deferral_rate)
+    onionsort evaluate --policy expert --seed 7 --record-lineup runs/lineup-7 --out runs/eyes
+    onionsort evaluate runs/learn/mmap-birl runs/learn/map-birl --lineup runs/lineup-7 \\
+        --truth runs/lineup-7/truth.csv
 """
 
 from __future__ import annotations
@@ -90,16 +101,25 @@ def run(args) -> int:
 def _report(args, config, result, out: dict) -> None:
     if args.json:
         print(json.dumps({k: out[k] for k in ("method", "tp", "fp", "tn", "fn", "precision",
-                                              "recall", "deferred", "deferral_rate")}))
+                                              "recall", "precision_ci", "recall_ci",
+                                              "deferred", "deferral_rate")}))
         return
     how = ("ground truth" if args.ground_truth_inspection else
-           f"{'' if args.every_view else 'up to '}{out['inspection_views']} views "
+           f"{'' if config.every_view else 'up to '}{out['inspection_views']} views "
            f"({out['views_taken'] / max(sum(o['views'] > 0 for o in out['onions']), 1):.1f} "
            f"an onion) fused by {out['fusion']}, binned from P(blemished) >= "
            f"{out['threshold']:.2f}")
-    print(f"{out['method']}: {args.onions} onions ({args.blemished} blemished), "
-          f"{args.difficulty} camera, inspection by {how}")
+    n_bad = sum(o["blemished"] for o in out["onions"])
+    where = (f"{args.difficulty} camera" if config.lineup is None else
+             f"the recorded line-up {config.lineup}")
+    print(f"{out['method']}: {out['n_onions']} onions ({n_bad} blemished), {where}, "
+          f"inspection by {how}")
     print(result.table())
-    written = ["evaluation.json", *(["evaluation.rrd"] if args.rerun else []),
-               *(["evaluation.mcap"] if args.mcap else [])]
+    written = ["evaluation.json", "tally.csv"]
+    if config.lineup is None:
+        written += [*(["evaluation.rrd"] if args.rerun else []),
+                    *(["evaluation.mcap"] if args.mcap else [])]
     print(f"wrote {', '.join(str(config.folder / name) for name in written)}")
+    if config.record_lineup is not None:
+        print(f"recorded the line-up into {config.record_lineup} (its truth: "
+              f"{config.record_lineup / 'truth.csv'})")

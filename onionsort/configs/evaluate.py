@@ -22,7 +22,10 @@ class EvaluateConfig:
     its call is settled (no further view could change it). ``mcap`` writes the run as a
     session (Foxglove, ``rerun mcap convert``, :func:`recordings.open_session`).
     ``defer_below`` reads the confidence of the run's ``policy_confidence.json``
-    (:func:`robot.evaluation.confidence_in`); None never defers.
+    (:func:`robot.cell.confidence_in`); None never defers. With ``lineup`` the recorded
+    views stand in for the arm (:mod:`onionsort.stages.lineup`): the line-up's size, seed and
+    difficulty are the recording's, and only ``evaluation.json`` and ``tally.csv`` are
+    written.
     """
 
     #: A folder written by ``learn`` (the ``learned`` policy's); None with ``policy="expert"``
@@ -48,9 +51,20 @@ class EvaluateConfig:
     waste_cost: float | None = common.waste_cost()
     fusion: str | None = common.fusion()
     every_view: bool = option(False, help="take every inspection view of every onion, even once "
-                                          "its call is settled (each onion's call is what its "
-                                          "first views settled; later onions see the image "
-                                          "noise drawn otherwise)")
+                                          "its call is settled (the call is the same; the "
+                                          "probability is every view's)")
+    lineup: Path | None = option(None, metavar="SOURCE",
+                                 help="replay the policy on a recorded line-up instead of the "
+                                      "simulator: a folder of inspection views with "
+                                      "lineups.csv (as `label export` writes inspection/, or "
+                                      "--record-lineup); needs --truth")
+    truth: Path | None = option(None, metavar="FILE.csv",
+                                help="the --lineup's onions' classes: lineup, index, class "
+                                     "(good or blemished)")
+    record_lineup: Path | None = option(None, metavar="DIR",
+                                        help="record the simulated line-up into DIR for "
+                                             "--lineup: every view of every onion (as "
+                                             "--every-view), lineups.csv and truth.csv")
     defer_below: float | None = common.defer_below("a RUN_DIR of `onionsort learn --posterior`")
     device: str = common.device()
 
@@ -92,6 +106,22 @@ class EvaluateConfig:
                 raise ValueError("--defer-below reads a learned policy's confidence; the expert "
                                  "policy has none (evaluate a RUN_DIR of `onionsort learn "
                                  "--posterior`)")
+        for name in ("lineup", "truth", "record_lineup"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, Path(value))
+        if (self.lineup is None) != (self.truth is None):
+            raise ValueError("--lineup SOURCE and --truth FILE.csv go together: the recorded "
+                             "views, and each onion's class" if self.lineup is not None else
+                             "--truth names the classes of a recorded line-up; give it "
+                             "with --lineup SOURCE (a simulated line-up knows its own)")
+        if self.lineup is not None and self.record_lineup is not None:
+            raise ValueError("--record-lineup records a simulated line-up; --lineup replays a "
+                             "recorded one: give one of them")
+        if self.lineup is not None and self.connect is not None:
+            raise ValueError("--connect streams the simulated run; a --lineup replay has none")
+        if self.record_lineup is not None:
+            object.__setattr__(self, "every_view", True)
         if self.onions < 1:
             raise ValueError(f"onions must be >= 1; got {self.onions}")
         if not 0 <= self.blemished <= self.onions:

@@ -12,7 +12,9 @@ train              ``ClassifierTrainConfig``,   ``train_state_classifier``, ``tr
 perceive           :class:`PerceiveConfig`      :func:`perceive`
 calibrate          :class:`CalibrateConfig`     :func:`calibrate`, :func:`eval_perception`
 learn              :class:`LearnConfig`         :func:`learn` -> model.json content
-evaluate           :class:`EvaluateConfig`      :func:`evaluate`
+evaluate           :class:`EvaluateConfig`      :func:`evaluate` (a simulated or a recorded
+                                                line-up: :mod:`onionsort.stages.lineup`)
+score              :class:`ScoreConfig`         :func:`score` -> a tally's counts
 suggest            :class:`SuggestConfig`       :func:`suggest` -> states worth a demonstration
 demo               :class:`DemoConfig`          :func:`demo` (composes the stages above)
 experiment         :class:`ExperimentConfig`    :func:`run_experiment` (synthetic sweeps)
@@ -38,6 +40,7 @@ from onionsort.stages.experiment import ExperimentConfig, run_experiment
 from onionsort.stages.export import ExportConfig, export_session
 from onionsort.stages.import_video import ImportConfig, import_video, list_bag
 from onionsort.stages.learn import LearnConfig, learn
+from onionsort.stages.lineup import ScoreConfig, score
 from onionsort.stages.models import PerceptionModels
 from onionsort.stages.perceive import PerceiveConfig, perceive
 from onionsort.stages.record import RecordConfig, record
@@ -58,6 +61,7 @@ __all__ = [
     "PerceptionModels",
     "RecordConfig",
     "ReportConfig",
+    "ScoreConfig",
     "SuggestConfig",
     "calibrate",
     "demo",
@@ -72,5 +76,6 @@ __all__ = [
     "record",
     "report",
     "run_experiment",
+    "score",
     "suggest",
 ]

@@ -17,7 +17,7 @@ import logging
 from collections.abc import Iterator
 from pathlib import Path
 
-from onionsort.configs.common import check_device
+from onionsort.perception_models import resolve_device
 
 __all__ = ["check_output_folder", "log_config", "output_folder", "refuse_existing",
            "resolve_device", "write_json", "write_text"]
@@ -105,24 +105,3 @@ def refuse_existing(path: Path, overwrite: bool) -> None:
     if Path(path).exists() and not overwrite:
         raise FileExistsError(f"{path} exists (an earlier run); choose another output folder "
                               "or allow overwriting (--overwrite)")
-
-
-def resolve_device(device: str = "auto"):
-    """The ``torch.device`` that ``device`` names: ``auto`` is CUDA when
-    ``torch.cuda.is_available()``, else the CPU.
-
-    Raises
-    ------
-    ValueError
-        If ``device`` is not one of :data:`onionsort.configs.common.DEVICES`, or is ``cuda``
-        where no CUDA device is available.
-    """
-    import torch
-
-    check_device(device)
-    if device == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device 'cuda' is not available here (torch finds no CUDA device); "
-                         "use --device cpu or auto")
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
-    return torch.device(device)

@@ -8,7 +8,9 @@ inspection classifier reads it, the views are fused, and the onion is called ble
 fused probability reaches the threshold of two costs (a blemished onion left on the line, a good
 one binned; by default the task's reward's). So perception errors count. Reports TP (blemished
 in bin), FP (good in bin), TN (good left on the line), FN (blemished left on the line),
-precision and recall into ``OUT/evaluation.json``, with a Rerun recording of the sort
+precision and recall with their 95% Wilson intervals into ``OUT/evaluation.json``, each
+onion's fate, call and probability into ``OUT/tally.csv`` (``onionsort score`` counts it
+against a truth), with a Rerun recording of the sort
 (``OUT/evaluation.rrd``: the camera, the inspection views, the decisions, the counts, and the
 work cell and the Sawyer in 3D) and the run as a session (``OUT/evaluation.mcap``,
 :mod:`recordings`): one frame per action, showing the station at rest before it (camera,
@@ -16,7 +18,9 @@ depth, ground truth, ``/tf``, ``/joint_states``, ``/scene``), the first inspecti
 classifier read, and each step's decision (with the inspection's probabilities) and running
 TP/FP/TN/FN (``/evaluation/decision``, ``/evaluation/counts``). ``OUT`` is the run folder
 unless another is given. Both files are written under temporary names and renamed once
-complete.
+complete. ``record_lineup`` also records the line-up (:class:`onionsort.stages.lineup.
+LineupRecorder`), and ``lineup`` replays the policy on a recorded one instead of the simulator
+(:func:`onionsort.stages.lineup.evaluate_lineup`).
 
 Example::
 
@@ -32,9 +36,17 @@ import logging
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from onionsort.configs.evaluate import POLICIES, EvaluateConfig
+from onionsort.policy import load_confidence, load_policy
 from onionsort.stages.base import check_output_folder, log_config, write_json
-from onionsort.stages.learn import load_policy
+from onionsort.stages.lineup import (
+    LineupRecorder,
+    _classifier,
+    _inspection_summary,
+    evaluate_lineup,
+)
 
 __all__ = ["POLICIES", "EvaluateConfig", "evaluate", "evaluate_runs"]
 
@@ -110,9 +122,16 @@ def evaluate(config: EvaluateConfig, models=None):
     actions, doc = _policy(config)
     confidence = None
     if config.defer_below is not None:
-        from onionsort.stages.learn import load_confidence
-
         confidence = load_confidence(config.run, policy=actions, per_action=True)
+    import torch
+
+    from onionsort.stages.parallel import torch_threads
+
+    torch.set_num_threads(torch_threads())
+    if config.lineup is not None:
+        return evaluate_lineup(config, actions, doc, confidence, models)
+    if config.record_lineup is not None:
+        LineupRecorder.check(config.record_lineup)
     folder = config.folder
     check_output_folder(folder, "--out" if config.out is not None else "RUN_DIR")
     if config.connect is not None:
@@ -120,30 +139,22 @@ def evaluate(config: EvaluateConfig, models=None):
 
         reach_viewer(config.connect)
 
-    import torch
-
-    from onionsort.stages.models import PerceptionModels
-    from onionsort.stages.parallel import torch_threads
+    from recordings.labels.sorting_csv import TALLY_FILE, tally_rows, write_tally
     from robot.camera import CameraSpec, intrinsics
     from robot.evaluation import evaluate_policy
     from robot.station import station_robot
     from robot.station_cameras import ROBOT_INSPECTION_CAMERA
     from robot.world import camera_pose
 
-    torch.set_num_threads(torch_threads())
-    inspector, detect = None, None
-    if config.ground_truth_inspection:
-        classify = "ground-truth"
-    else:
-        loaded = PerceptionModels.load(config.models, config.device) if models is None \
-            else models
-        inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold,
-                                     camera="robot")
-        classify = inspector
-
-        detect = inspector.detections  # the boxes the inspection found, for the Rerun log
+    classify, inspector = _classifier(config, models)
+    # the boxes the inspection found, for the Rerun log
+    detect = None if inspector is None else inspector.detections
 
     on_step, recorder = [], None
+    lineup = None if config.record_lineup is None else \
+        LineupRecorder(config.record_lineup, config.seed)
+    if lineup is not None:
+        on_step.append(lineup.on_step)
     session = folder / "evaluation.mcap"
     partial = session.with_name(session.name + ".partial")
     try:
@@ -181,20 +192,20 @@ def evaluate(config: EvaluateConfig, models=None):
                 inspection_views=config.inspection_views,
                 stop_when_settled=not config.every_view, confidence=confidence,
                 defer_below=config.defer_below or 0.0)
+            if lineup is not None:
+                lineup.finish(np.array([o.blemished for o in result.onions]))
         if recorder is not None:
             partial.replace(session)
     finally:
         partial.unlink(missing_ok=True)  # a run that failed leaves no session behind
+        if lineup is not None:
+            lineup.discard()
     summary = {"method": doc.get("method"), "policy": config.policy, "seed": config.seed,
-               "difficulty": config.difficulty,
-               "inspection": ("ground truth" if config.ground_truth_inspection else
-                              "detector + inspection classifier"),
-               "inspection_views": config.inspection_views,
-               "every_view": config.every_view,
-               "defer_below": config.defer_below,
-               "threshold": None if inspector is None else inspector.threshold,
-               "fusion": None if inspector is None else inspector.rule,
-               **result.to_dict()}
+               "difficulty": config.difficulty, "lineups": [config.seed],
+               **_inspection_summary(config, inspector), **result.to_dict()}
+    if lineup is not None:
+        summary["recorded_lineup"] = str(config.record_lineup)
+    write_tally(folder / TALLY_FILE, tally_rows(config.seed, result.onions))
     write_json(folder / "evaluation.json", summary)
     return result, summary
 
@@ -206,6 +217,9 @@ def evaluate_runs(configs: list[EvaluateConfig], options=None) -> list[tuple[Any
     from onionsort.stages.parallel import ParallelOptions, run_pieces
 
     folders = [c.folder.resolve() for c in configs]
+    if len(configs) > 1 and any(c.record_lineup is not None for c in configs):
+        raise ValueError("--record-lineup records one run's line-up; evaluate one RUN_DIR "
+                         "(or --policy expert) with it")
     if len(set(folders)) != len(folders):
         raise ValueError("each evaluation needs a folder of its own; got "
                          + ", ".join(str(c.folder) for c in configs))

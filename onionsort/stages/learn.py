@@ -29,30 +29,30 @@ import dataclasses
 import logging
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from onionsort.configs.learn import BAYESIAN_METHODS as BAYESIAN_METHODS
 from onionsort.configs.learn import SWAP_METHOD as SWAP_METHOD
 from onionsort.configs.learn import LearnConfig
+from onionsort.policy import (
+    CONFIDENCE_FILE,
+    CONFIDENCE_FORMAT,
+    MODEL_FILE,
+    MODEL_FORMAT,
+    load_confidence,
+    load_policy,
+)
 from onionsort.stages.base import log_config, output_folder, refuse_existing, write_json
 from onionsort.stages.models import model_mismatch
 from onionsort.stages.parallel import ParallelOptions
 
-if TYPE_CHECKING:
-    from irl.domains.task import TaskDescription
-
-__all__ = ["CONFIDENCE_FILE", "MODEL_FILE", "POSTERIOR_FILE", "LearnConfig", "learn",
-           "learn_methods", "load_confidence", "load_policy"]
+__all__ = ["CONFIDENCE_FILE", "MODEL_FILE", "MODEL_FORMAT", "POSTERIOR_FILE", "LearnConfig",
+           "learn", "learn_methods", "load_confidence", "load_policy"]
 
 logger = logging.getLogger(__name__)
 
-MODEL_FILE = "model.json"
-MODEL_FORMAT = "onionsort.learned-model/1"
 POSTERIOR_FILE = "posterior.npz"
-CONFIDENCE_FILE = "policy_confidence.json"
-CONFIDENCE_FORMAT = "onionsort.policy-confidence/1"
 def _check_provenance(session, calibration, calibration_path: Path) -> None:
     """Refuse a session perceived by other models, or in another mode, than the calibration."""
     record = session.perception_models or {}
@@ -236,70 +236,3 @@ def _sample_posterior(config: LearnConfig, estimator, demos, domain, out: Path) 
                 "%.3f, max R-hat %s", config.posterior_method, post.n_samples, risk.p_optimal,
                 risk.expected_ile, doc["diagnostics"]["r_hat"])
     return doc
-
-
-def _read_run_json(run_dir: Path, name: str, missing: str, what: str, read):
-    """``(path, read(document))`` of a run folder's JSON file ``name``, with one-line errors:
-    ``missing`` says how to make it, ``what`` names it when it cannot be read."""
-    import json
-
-    path = Path(run_dir) / name
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} holds no {missing}")
-    try:
-        return path, read(json.loads(path.read_text()))
-    except (json.JSONDecodeError, AttributeError, KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path} is not {what} ({exc})") from None
-
-
-def load_confidence(run_dir: Path, task: TaskDescription | None = None,
-                    policy: np.ndarray | None = None, *, per_action: bool = False
-                    ) -> np.ndarray:
-    """``confidence[s]`` (S,): a learning run's confidence in its policy's action in each
-    state, from ``policy_confidence.json`` (``onionsort learn --posterior``); with
-    ``per_action``, ``confidence[s, a]`` (S, A), each action's. With ``policy`` (the run's
-    actions per state), a file about another policy is refused."""
-    from irl.domains.onion_sorting import SORTING_TASK
-
-    task = SORTING_TASK if task is None else task
-
-    def read(doc: dict) -> tuple[np.ndarray, list[str]]:
-        if doc.get("format") != CONFIDENCE_FORMAT:
-            raise ValueError(f"format {doc.get('format')!r}")
-        if per_action:
-            conf = [[row["confidence"][a] for a in task.action_names] for row in doc["states"]]
-        else:
-            conf = [row["confidence"][row["map_action"]] for row in doc["states"]]
-        return np.array(conf, float), [row["map_action"] for row in doc["states"]]
-
-    path, (conf, named) = _read_run_json(
-        run_dir, CONFIDENCE_FILE,
-        f"posterior (no {CONFIDENCE_FILE}); learn with `onionsort learn ... --posterior` first",
-        "a policy confidence file", read)
-    if policy is not None and len(named) == len(policy) and \
-            named != [task.action_names[int(a)] for a in policy]:
-        raise ValueError(f"{path} is about another policy than {Path(run_dir) / MODEL_FILE}; "
-                         "learn again with `onionsort learn ... --posterior`")
-    if conf.shape[0] != task.n_states or np.any((conf < 0) | (conf > 1)):
-        raise ValueError(f"{path}: one confidence in [0, 1] per {task.name} state is needed; "
-                         f"got {conf.shape[0]}")
-    return conf
-
-
-def load_policy(run_dir: Path, task: TaskDescription | None = None):
-    """The greedy policy ``actions[s]`` (S,) of a learning run and its model.json, with clear
-    errors; ``task`` (the onion-sorting task by default) gives the numbers of states and
-    actions."""
-    from irl.domains.onion_sorting import SORTING_TASK
-
-    task = SORTING_TASK if task is None else task
-    n_states, n_actions = task.n_states, task.n_actions
-    path, (doc, actions) = _read_run_json(
-        run_dir, MODEL_FILE,
-        f"learned model (no {MODEL_FILE}); run `onionsort learn ... --out RUN_DIR` first",
-        "a learned model",
-        lambda doc: (doc, np.asarray(doc["policy_indices"], dtype=np.int64)))
-    if actions.shape != (n_states,) or actions.min() < 0 or actions.max() >= n_actions:
-        raise ValueError(f"{path}: the policy must give one action in [0, {n_actions}) for each "
-                         f"of the {n_states} {task.name} states; got shape {actions.shape}")
-    return actions, doc

@@ -58,7 +58,8 @@ from recordings.session.steps import group_steps
 
 __all__ = ["CLASSES", "SPLITS", "VIEWS", "DatasetPart", "DatasetStep", "DatasetWriter",
            "ImageMap", "LabelledFrame", "dataset_task", "read_metadata", "read_records",
-           "read_split", "read_steps", "split_names", "split_sessions", "write_rgb_png"]
+           "read_rgb_png", "read_split", "read_steps", "split_names", "split_sessions",
+           "write_rgb_png"]
 
 FORMAT = "onionsort.dataset/1"
 CLASSES = ("good", "blemished")
@@ -299,6 +300,20 @@ def write_rgb_png(path: Path, rgb: np.ndarray) -> None:
     """Write ``rgb`` (H, W, 3) uint8 as a PNG in ``path``'s existing folder, through a
     temporary name."""
     _write_png(path, cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+
+
+def read_rgb_png(path: Path) -> np.ndarray:
+    """The image in ``path`` (any format OpenCV reads), (H, W, 3) uint8 RGB.
+
+    Raises
+    ------
+    ValueError
+        If the file cannot be decoded as an image.
+    """
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{path} is not an image")
+    return np.ascontiguousarray(bgr[..., ::-1])
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

@@ -60,7 +60,7 @@ def robot_run(tmp_path_factory):
 
 def test_the_outputs_are_complete_and_nothing_temporary_is_left(evaluated):
     assert {p.name for p in evaluated.run.iterdir()} == {
-        "model.json", "evaluation.json", "evaluation.rrd", "evaluation.mcap"}
+        "model.json", "evaluation.json", "evaluation.rrd", "evaluation.mcap", "tally.csv"}
     assert evaluated.summary["n_steps"] == evaluated.n_steps == 12  # claim, pick, inspect, place
 
 
