@@ -57,14 +57,14 @@ class EvaluateConfig:
                                  help="replay the policy on a recorded line-up instead of the "
                                       "simulator: a folder of inspection views with "
                                       "lineups.csv (as `label export` writes inspection/, or "
-                                      "--record-lineup); needs --truth")
+                                      "--record-lineup); needs --truth (default: none)")
     truth: Path | None = option(None, metavar="FILE.csv",
                                 help="the --lineup's onions' classes: lineup, index, class "
-                                     "(good or blemished)")
+                                     "(good or blemished) (default: none)")
     record_lineup: Path | None = option(None, metavar="DIR",
                                         help="record the simulated line-up into DIR for "
                                              "--lineup: every view of every onion (as "
-                                             "--every-view), lineups.csv and truth.csv")
+                                             "--every-view), lineups.csv and truth.csv (default: none)")
     defer_below: float | None = common.defer_below("a RUN_DIR of `onionsort learn --posterior`")
     device: str = common.device()
 

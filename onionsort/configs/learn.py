@@ -42,7 +42,7 @@ class LearnConfig:
     beta: float = option(1.5, metavar="BETA",
                          help="the demonstrator's rationality: how surely the person takes the "
                               "best action (the Boltzmann policy's beta; only beta times the "
-                              "reward is identifiable; the default is the simulated sorter's)")
+                              "reward is identifiable), as the simulated sorter's")
     prior_std: float = option(3.0, metavar="STD",
                               help="the standard deviation of the Gaussian prior on each reward "
                                    "weight, around 0")
