@@ -294,6 +294,8 @@ CASES = [
      ["inspection_views must be >= 1", "got 0"]),
     (["evaluate", "--policy", "expert", "--out", "{d}/x", "--miss-cost", "-1"],
      ["miss_cost must be >= 0", "got -1"]),
+    (["score", "{d}/no-tally.csv", "--truth", "{d}/no-truth.csv"],
+     ["no-tally.csv: no such tally CSV", "columns lineup, index, fate"]),
     (["evaluate", "--policy", "expert", "--out", "{d}/x", "--fusion", "max"],
      ["--fusion", "invalid choice", "'max'"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x"],
@@ -518,7 +520,7 @@ _FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources/video.py", "-
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
                     "eval_posterior": ["eval-posterior"],
                     "calibrate": ["calibrate", "eval-perception"],
-                    "label_select": ["label"]}
+                    "label_select": ["label"], "lineup": ["evaluate", "score"]}
 _SHARED = {"base", "models", "parallel", "__init__", "_args"}
 #: Which commands run a stage module's refusals (``calibrate.py``'s come from calibrate alone).
 _CALLER_COMMANDS = {**_MODULE_COMMANDS, "calibrate": ["calibrate"], "inspection": ["train"]}

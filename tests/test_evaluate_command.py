@@ -43,8 +43,8 @@ def test_no_rerun_and_no_mcap_write_the_evaluation_only(tmp_path, capsys):
     run = _run_dir(tmp_path, onion_sorting().expert_policy().argmax(axis=1))
     assert main(["evaluate", str(run), "--onions", "2", "--blemished", "1",
                  "--ground-truth-inspection", "--no-rerun", "--no-mcap"]) == 0
-    assert f"wrote {run / 'evaluation.json'}\n" in capsys.readouterr().out
-    assert {p.name for p in run.iterdir()} == {"model.json", "evaluation.json"}
+    assert f"wrote {run / 'evaluation.json'}, {run / 'tally.csv'}\n" in capsys.readouterr().out
+    assert {p.name for p in run.iterdir()} == {"model.json", "evaluation.json", "tally.csv"}
 
 
 def test_run_folders_without_a_valid_model_are_refused(tmp_path, capsys):
