@@ -64,7 +64,8 @@ class EvaluateConfig:
     record_lineup: Path | None = option(None, metavar="DIR",
                                         help="record the simulated line-up into DIR for "
                                              "--lineup: every view of every onion (as "
-                                             "--every-view), lineups.csv and truth.csv (default: none)")
+                                             "--every-view), lineups.csv and truth.csv "
+                                             "(default: none)")
     defer_below: float | None = common.defer_below("a RUN_DIR of `onionsort learn --posterior`")
     device: str = common.device()
 
