@@ -50,7 +50,9 @@ import numpy as np
 
 __all__ = [
     "FUSION_RULES",
+    "calibration_within_chance",
     "chance_calibration_error",
+    "chance_calibration_errors",
     "check_calibration",
     "cost_threshold",
     "expected_calibration_error",
@@ -251,24 +253,88 @@ def expected_calibration_error(p, y, n_bins: int = 15) -> float:
     return float(total / p.size)
 
 
-def chance_calibration_error(p, n_bins: int = 15, draws: int = 200, seed: int = 0) -> float:
-    """The expected calibration error that a perfectly calibrated predictor shows by chance
-    on probabilities ``p`` (N,): the median of :func:`expected_calibration_error` over
-    ``draws`` label sets drawn from ``p`` itself (each label 1 with its probability; generator
-    seeded by ``seed``, so the figure is reproducible).
+def chance_calibration_errors(p, n_bins: int = 15, draws: int = 200, seed: int = 0
+                              ) -> np.ndarray:
+    """The expected calibration errors (draws,) that a perfectly calibrated predictor shows
+    by chance on probabilities ``p`` (N,): :func:`expected_calibration_error` of ``p``, in
+    ``n_bins`` bins, against each of ``draws`` label sets drawn from ``p`` itself (each label
+    1 with its probability), the generator seeded by ``seed`` so that the figures are
+    reproducible.
 
-    ECE is a biased figure on a few onions: with 60 of them a model whose probabilities are
-    exactly right still shows about 0.05-0.08. Read a measured ECE beside this floor; it says
-    how far below it a bar such as 0.05 can be checked on these onions at all.
+    Raises
+    ------
+    ValueError
+        If ``p`` is empty or holds a value outside [0, 1], or ``draws`` is not an int >= 1.
     """
     p = np.asarray(p, float).ravel()
     if p.size == 0 or not np.all((p >= 0) & (p <= 1)):
         raise ValueError(f"p must be a non-empty array of probabilities in [0, 1]; got "
                          f"{p.size} values" + ("" if p.size == 0 else
                                                f" in [{p.min():.3g}, {p.max():.3g}]"))
+    if isinstance(draws, bool) or not isinstance(draws, int | np.integer) or draws < 1:
+        raise ValueError(f"draws must be an int >= 1; got {draws!r}")
     rng = np.random.default_rng(seed)
-    return float(np.median([expected_calibration_error(p, rng.random(p.size) < p, n_bins)
-                            for _ in range(draws)]))
+    bins = np.minimum((p * n_bins).astype(int), n_bins - 1)
+    members = np.zeros((p.size, n_bins))
+    members[np.arange(p.size), bins] = 1.0  # each onion's bin, one-hot
+    p_sums = p @ members  # a bin's ECE term is |sum(y) - sum(p)| over its onions, / N
+    out = np.empty(int(draws))
+    for start in range(0, out.size, 256):  # label sets drawn in blocks: the same stream
+        labels = rng.random((min(256, out.size - start), p.size)) < p
+        out[start:start + len(labels)] = np.abs(labels @ members - p_sums).sum(1) / p.size
+    return out
+
+
+def chance_calibration_error(p, n_bins: int = 15, draws: int = 200, seed: int = 0,
+                             quantile: float = 0.5) -> float:
+    """The expected calibration error that a perfectly calibrated predictor shows by chance
+    on probabilities ``p`` (N,): the ``quantile`` (the median by default) of
+    :func:`chance_calibration_errors` over ``draws`` label sets drawn from ``p`` itself.
+
+    ECE is a biased figure on a few onions: with 60 of them a model whose probabilities are
+    exactly right still shows about 0.05-0.08. Read a measured ECE beside this floor; it says
+    how far below it a bar such as 0.05 can be checked on these onions at all.
+
+    Raises
+    ------
+    ValueError
+        As :func:`chance_calibration_errors`, or if ``quantile`` is not in [0, 1].
+    """
+    q = _check_probability(quantile, "quantile", open_interval=False)
+    return float(np.quantile(chance_calibration_errors(p, n_bins, draws, seed), q))
+
+
+def calibration_within_chance(p, y, *, quantile: float = 0.9, n_bins: int = 15,
+                              draws: int = 1000, seed: int = 0) -> dict:
+    """Whether probabilities ``p`` (N,) are as well calibrated on labels ``y`` (N,) as
+    chance allows: their :func:`expected_calibration_error` is at or under the ``quantile``
+    of the errors a perfectly calibrated predictor shows on the same ``p``
+    (:func:`chance_calibration_errors`: labels drawn from ``p`` itself, the same bins).
+
+    A perfectly calibrated predictor passes with probability about ``quantile``; a
+    miscalibrated one fails the more surely the more onions there are.
+
+    Returns
+    -------
+    dict
+        ``ece``; ``chance_median`` and ``chance_quantile``, the median and the ``quantile`` of
+        the errors by chance; ``quantile``; ``onions`` (N); ``within`` (bool).
+
+    Raises
+    ------
+    ValueError
+        If ``p`` and ``y`` are empty or of two lengths, ``y`` is not 0/1, or an argument is
+        out of range.
+    """
+    p, y = np.asarray(p, float).ravel(), np.asarray(y, float).ravel()
+    if not np.all((y == 0) | (y == 1)):
+        raise ValueError(f"y must hold labels 0 or 1; got {sorted(set(y.tolist()))[:5]}")
+    ece = expected_calibration_error(p, y, n_bins)
+    q = _check_probability(quantile, "quantile", open_interval=False)
+    chance = chance_calibration_errors(p, n_bins, draws, seed)
+    limit = float(np.quantile(chance, q))
+    return {"ece": ece, "chance_median": float(np.median(chance)), "chance_quantile": limit,
+            "quantile": q, "onions": int(p.size), "within": bool(ece <= limit)}
 
 
 def precision_recall_curve(p, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -41,6 +41,8 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
     assert robot["views"] == 30 * 2  # the first 2 of each onion's 3 views
     assert set(robot["fused"]) == {"noisy-or", "log-odds"}
     assert robot["fused"]["noisy-or"]["onions"] == 30
+    for fused in robot["fused"].values():  # ECE beside chance's median and 90th percentile
+        assert 0 < fused["ece_by_chance"] < fused["ece_by_chance_90"] < 1
 
 
 def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(dataset,

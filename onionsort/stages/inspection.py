@@ -464,12 +464,16 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     and, for each fusion rule, the fused call on each onion (the robot's views of it, the first
     ``views`` of them if given; the sorter's views of it in a session) at ``threshold`` (the
     task's cost threshold by default): accuracy, precision, recall, expected calibration error
-    and the points of the precision-recall curve. ``image_map`` changes each view as it is
+    (``ece``) beside the median (``ece_by_chance``) and the 90th percentile
+    (``ece_by_chance_90``) of what a perfectly calibrated model shows by chance on the same
+    onions (:func:`perception.fusion.calibration_within_chance`), and the points of the
+    precision-recall curve. ``image_map`` changes each view as it is
     read (:func:`inspection_views`).
     """
     from onionsort.configs.common import sorting_threshold
     from perception.fusion import (
         FUSION_RULES,
+        calibration_within_chance,
         chance_calibration_error,
         expected_calibration_error,
         precision_recall_curve,
@@ -532,6 +536,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                     "recall": tp / (tp + fn) if tp + fn else 0.0,
                     "ece": expected_calibration_error(fused, y),
                     "ece_by_chance": chance_calibration_error(fused),
+                    "ece_by_chance_90": calibration_within_chance(fused, y)[
+                        "chance_quantile"],
                     "pr_curve": {"precision": precision.round(4).tolist(),
                                  "recall": recall.round(4).tolist(),
                                  "threshold": cut.round(5).tolist()}}
