@@ -13,12 +13,14 @@ onions (:func:`perception.fusion.calibration_within_chance`), and the share of r
 Forms (parameters): ``slopes`` (2, :data:`perception.fusion.CALIBRATION_FORMS`), ``log`` (2,
 likewise), ``power`` (3: ``-low |E|^k`` below 0, ``high E^k`` above), ``jump`` (3: ``low E``
 below 0, ``c + high E`` above), ``power2`` (4: ``power`` with a ``k`` each side).
-``--calibration LOW,HIGH[,FORM]`` measures a given calibration too (a shipped one).
+``--calibration LOW,HIGH[,FORM]`` measures a given calibration too (a shipped one); ``--forms
+''`` with it measures given calibrations alone; ``--pool`` measures the sets pooled too.
 
 Example
 -------
     python bench/robot_fusion_forms.py --fit runs/fit-clean --fit runs/fit-hard \
-        --measure runs/d9105 --cache runs/E --calibration 2.6205,0.1503
+        --measure runs/d9105 --cache runs/E --calibration 2.6205,0.1503 \
+        --calibration 4.6186,1.3819,log
 """
 
 from __future__ import annotations
@@ -128,8 +130,10 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--models", type=Path, default=None)
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--forms", default=",".join(FORMS))
-    ap.add_argument("--calibration", default=None,
-                    help="LOW,HIGH[,FORM]: a given calibration measured too")
+    ap.add_argument("--calibration", action="append", default=[],
+                    help="LOW,HIGH[,FORM]: a given calibration measured too (repeatable)")
+    ap.add_argument("--pool", action="store_true",
+                    help="measure the --measure datasets pooled too")
     ap.add_argument("--cache", type=Path, default=None,
                     help="folder keeping each dataset's evidence (DATASET-NAME.npz)")
     ap.add_argument("--json", type=Path, default=None)
@@ -143,11 +147,14 @@ def main(argv: list[str] | None = None) -> dict:
     y = np.concatenate([f["y"] for f in fitted])
     print(f"fitted on {len(y)} onions ({int(y.sum())} blemished)")
     params = {form: (form, fit(form, E, y)) for form in forms}
-    if a.calibration:
-        parts = a.calibration.split(",")
-        params["given"] = (parts[2] if len(parts) == 3 else "slopes",
-                           np.array([float(x) for x in parts[:2]]))
-    measured = {d: read_evidence(d, a.models, a.views, a.cache) for d in a.measure}
+    for i, text in enumerate(a.calibration):
+        parts = text.split(",")
+        params[f"given {i + 1}"] = (parts[2] if len(parts) == 3 else "slopes",
+                                    np.array([float(x) for x in parts[:2]]))
+    measured = {str(d): read_evidence(d, a.models, a.views, a.cache) for d in a.measure}
+    if a.pool:
+        measured["pooled"] = {key: np.concatenate([m[key] for m in measured.values()])
+                              for key in ("E", "y", "level")}
     out = {}
     for name, (form, q) in params.items():
         row = {"form": form, "params": q.tolist()}
@@ -156,7 +163,7 @@ def main(argv: list[str] | None = None) -> dict:
             p = 1.0 / (1.0 + np.exp(-mapped(form, m["E"], q)))
             check = calibration_within_chance(p, m["y"])
             calls = float(np.mean((p >= 0.5) == (m["y"] == 1)))
-            row[str(d)] = {**check, "calls": calls}
+            row[d] = {**check, "calls": calls}
             print(f"    {d}: ECE {check['ece']:.4f}, by chance median "
                   f"{check['chance_median']:.4f}, 90th percentile {check['chance_quantile']:.4f}"
                   f" ({check['onions']} onions; within: {check['within']}); calls right "
