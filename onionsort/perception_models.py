@@ -268,8 +268,9 @@ def _hashes(folder: Path) -> dict[str, str]:
     return out
 
 
-def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float]]:
-    """The slopes ``(low, high)`` of each fusion rule in a :data:`ROBOT_FUSION_FILE`.
+def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float, str]]:
+    """The map ``(low, high, form)`` of each fusion rule in a :data:`ROBOT_FUSION_FILE`
+    (:func:`perception.fusion.check_calibration`; ``"slopes"`` where the file names no form).
 
     Raises
     ------
@@ -283,7 +284,8 @@ def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float]]:
     path = Path(path)
     try:
         rules = json.loads(path.read_text())["rules"]
-        out = {rule: check_calibration((value["low"], value["high"]))
+        out = {rule: check_calibration((value["low"], value["high"],
+                                        value.get("form", "slopes")))
                for rule, value in rules.items()}
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None

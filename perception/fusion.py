@@ -36,12 +36,17 @@ a call settles only once the views so far outweigh all those to come.
 stands: the views are not independent given the class, and ``noisy-or`` with a small
 ``visibility`` leaves a good onion near the prior odds times ``(1 - visibility)^K`` (about 0.2
 after 5 clean views), while a view of rot puts a blemished one near 1. A ``calibration``
-``(low, high)``, both ``> 0``, scales the fused evidence ``E`` (the sum of the views' terms) by
-one temperature on each side of 0: the log-odds become ``logit(prior) + low E`` where ``E < 0``
-and ``logit(prior) + high E`` where ``E >= 0``. It is monotone (more blemished evidence never
-lowers the probability) and leaves the sign of ``E`` alone: at a threshold equal to the
-prior, every call is the call uncalibrated; only how sure it is changes. :func:`settled`
-applies it to its bounds, so that a call settled under it stays settled.
+``(low, high)`` or ``(low, high, form)``, both slopes ``> 0``, maps the fused evidence ``E``
+(the sum of the views' terms) with one slope on each side of 0. Under ``form`` ``"slopes"``
+(the default) the log-odds become ``logit(prior) + low E`` where ``E < 0`` and
+``logit(prior) + high E`` where ``E >= 0``: a temperature a side. Under ``"log"`` they become
+``logit(prior) - low log(1 + |E|)`` and ``logit(prior) + high log(1 + E)``: strong evidence is
+compressed and weak evidence kept, so that one slope above 0 need not hedge a blemish seen
+weakly in one view in order to temper one seen strongly in many (:data:`CALIBRATION_FORMS`).
+Either is monotone (more blemished evidence never lowers the probability) and leaves the sign
+of ``E`` alone: at a threshold equal to the prior, every call is the call uncalibrated; only
+how sure it is changes. :func:`settled` applies it to its bounds, so that a call settled
+under it stays settled.
 """
 
 from __future__ import annotations
@@ -49,8 +54,11 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "CALIBRATION_FORMS",
     "FUSION_RULES",
+    "calibration_within_chance",
     "chance_calibration_error",
+    "chance_calibration_errors",
     "check_calibration",
     "cost_threshold",
     "expected_calibration_error",
@@ -62,6 +70,9 @@ __all__ = [
 ]
 
 FUSION_RULES = ("noisy-or", "log-odds")
+#: The forms of a fused ``calibration`` (:func:`fuse`): ``"slopes"``, a temperature each side of
+#: the evidence 0; ``"log"``, the slopes on ``log(1 + |E|)``.
+CALIBRATION_FORMS = ("log", "slopes")
 _EPS = 1e-6
 
 
@@ -82,26 +93,36 @@ def _check_probability(value, name: str, *, open_interval: bool = True) -> float
     return v
 
 
-def check_calibration(calibration) -> tuple[float, float] | None:
-    """``calibration`` as ``(low, high)`` floats (None stays None).
+def check_calibration(calibration) -> tuple[float, float, str] | None:
+    """``calibration`` as ``(low, high, form)``: two floats and one of
+    :data:`CALIBRATION_FORMS`, ``"slopes"`` where only ``(low, high)`` is given (None stays
+    None).
 
     Raises
     ------
     ValueError
-        Unless it is None or two finite numbers > 0 (a map that could lower the probability
-        as the evidence of a blemish grows is refused).
+        Unless it is None, two finite numbers > 0 or those and a form (a map that could lower
+        the probability as the evidence of a blemish grows is refused).
     """
     if calibration is None:
         return None
     try:
-        low, high = (float(x) for x in calibration)
+        parts = [calibration] if isinstance(calibration, str) else list(calibration)
+    except TypeError:
+        parts = []
+    form = parts.pop() if len(parts) == 3 else "slopes"
+    try:
+        low, high = (float(x) for x in parts)
     except (TypeError, ValueError):
-        raise ValueError(f"calibration must be two slopes (low, high); got {calibration!r}") \
-            from None
+        raise ValueError(f"calibration must be two slopes and an optional form (low, high"
+                         f"[, form]); got {calibration!r}") from None
     if not (np.isfinite(low) and np.isfinite(high) and low > 0 and high > 0):
         raise ValueError(f"calibration must be two finite slopes > 0 (monotone); got "
                          f"{calibration!r}")
-    return low, high
+    if form not in CALIBRATION_FORMS:
+        raise ValueError(f"calibration must be of a form in {CALIBRATION_FORMS}; got "
+                         f"{form!r}")
+    return low, high, form
 
 
 def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: float = 0.5,
@@ -122,9 +143,11 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
         to.
     visibility : float in (0, 1]
         The chance that a view of a blemished onion shows its rot (``"noisy-or"`` only).
-    calibration : (float, float) or None
-        ``(low, high)``, both ``> 0``: the fused evidence ``E`` scaled by ``low`` where it is
-        negative and by ``high`` where it is not (see the module docstring); None: as fused.
+    calibration : (float, float) or (float, float, str) or None
+        ``(low, high[, form])``, both slopes ``> 0``: the fused evidence ``E`` scaled by
+        ``low`` where it is negative and by ``high`` where it is not, under ``form``
+        ``"log"`` its size ``log(1 + |E|)`` first (see the module docstring); None: as
+        fused.
 
     Raises
     ------
@@ -173,13 +196,14 @@ def log_odds(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior:
                        check_calibration(calibration))
 
 
-def _calibrated(base: float, evidence, calibration: tuple[float, float] | None):
-    """``base + evidence`` as fused, or with ``evidence`` scaled by ``calibration``'s slope of
-    its side of 0."""
+def _calibrated(base: float, evidence, calibration: tuple[float, float, str] | None):
+    """``base + evidence`` as fused, or with ``evidence`` mapped by ``calibration``: its
+    side's slope times its size (under ``"log"``, ``log(1 + size)``), its sign kept."""
     if calibration is None:
         return base + evidence
-    low, high = calibration
-    return base + (low if evidence < 0 else high) * evidence
+    low, high, form = calibration
+    size = abs(evidence) if form == "slopes" else np.log1p(abs(evidence))
+    return base - low * size if evidence < 0 else base + high * size
 
 
 def settled(view_p, remaining: int, rule: str = "noisy-or", *, threshold: float = 0.5,
@@ -251,24 +275,88 @@ def expected_calibration_error(p, y, n_bins: int = 15) -> float:
     return float(total / p.size)
 
 
-def chance_calibration_error(p, n_bins: int = 15, draws: int = 200, seed: int = 0) -> float:
-    """The expected calibration error that a perfectly calibrated predictor shows by chance
-    on probabilities ``p`` (N,): the median of :func:`expected_calibration_error` over
-    ``draws`` label sets drawn from ``p`` itself (each label 1 with its probability; generator
-    seeded by ``seed``, so the figure is reproducible).
+def chance_calibration_errors(p, n_bins: int = 15, draws: int = 200, seed: int = 0
+                              ) -> np.ndarray:
+    """The expected calibration errors (draws,) that a perfectly calibrated predictor shows
+    by chance on probabilities ``p`` (N,): :func:`expected_calibration_error` of ``p``, in
+    ``n_bins`` bins, against each of ``draws`` label sets drawn from ``p`` itself (each label
+    1 with its probability), the generator seeded by ``seed`` so that the figures are
+    reproducible.
 
-    ECE is a biased figure on a few onions: with 60 of them a model whose probabilities are
-    exactly right still shows about 0.05-0.08. Read a measured ECE beside this floor; it says
-    how far below it a bar such as 0.05 can be checked on these onions at all.
+    Raises
+    ------
+    ValueError
+        If ``p`` is empty or holds a value outside [0, 1], or ``draws`` is not an int >= 1.
     """
     p = np.asarray(p, float).ravel()
     if p.size == 0 or not np.all((p >= 0) & (p <= 1)):
         raise ValueError(f"p must be a non-empty array of probabilities in [0, 1]; got "
                          f"{p.size} values" + ("" if p.size == 0 else
                                                f" in [{p.min():.3g}, {p.max():.3g}]"))
+    if isinstance(draws, bool) or not isinstance(draws, int | np.integer) or draws < 1:
+        raise ValueError(f"draws must be an int >= 1; got {draws!r}")
     rng = np.random.default_rng(seed)
-    return float(np.median([expected_calibration_error(p, rng.random(p.size) < p, n_bins)
-                            for _ in range(draws)]))
+    bins = np.minimum((p * n_bins).astype(int), n_bins - 1)
+    members = np.zeros((p.size, n_bins))
+    members[np.arange(p.size), bins] = 1.0  # each onion's bin, one-hot
+    p_sums = p @ members  # a bin's ECE term is |sum(y) - sum(p)| over its onions, / N
+    out = np.empty(int(draws))
+    for start in range(0, out.size, 256):  # label sets drawn in blocks: the same stream
+        labels = rng.random((min(256, out.size - start), p.size)) < p
+        out[start:start + len(labels)] = np.abs(labels @ members - p_sums).sum(1) / p.size
+    return out
+
+
+def chance_calibration_error(p, n_bins: int = 15, draws: int = 200, seed: int = 0,
+                             quantile: float = 0.5) -> float:
+    """The expected calibration error that a perfectly calibrated predictor shows by chance
+    on probabilities ``p`` (N,): the ``quantile`` (the median by default) of
+    :func:`chance_calibration_errors` over ``draws`` label sets drawn from ``p`` itself.
+
+    ECE is a biased figure on a few onions: with 60 of them a model whose probabilities are
+    exactly right still shows about 0.05-0.08. Read a measured ECE beside this floor; it says
+    how far below it a bar such as 0.05 can be checked on these onions at all.
+
+    Raises
+    ------
+    ValueError
+        As :func:`chance_calibration_errors`, or if ``quantile`` is not in [0, 1].
+    """
+    q = _check_probability(quantile, "quantile", open_interval=False)
+    return float(np.quantile(chance_calibration_errors(p, n_bins, draws, seed), q))
+
+
+def calibration_within_chance(p, y, *, quantile: float = 0.9, n_bins: int = 15,
+                              draws: int = 1000, seed: int = 0) -> dict:
+    """Whether probabilities ``p`` (N,) are as well calibrated on labels ``y`` (N,) as
+    chance allows: their :func:`expected_calibration_error` is at or under the ``quantile``
+    of the errors a perfectly calibrated predictor shows on the same ``p``
+    (:func:`chance_calibration_errors`: labels drawn from ``p`` itself, the same bins).
+
+    A perfectly calibrated predictor passes with probability about ``quantile``; a
+    miscalibrated one fails the more surely the more onions there are.
+
+    Returns
+    -------
+    dict
+        ``ece``; ``chance_median`` and ``chance_quantile``, the median and the ``quantile`` of
+        the errors by chance; ``quantile``; ``onions`` (N); ``within`` (bool).
+
+    Raises
+    ------
+    ValueError
+        If ``p`` and ``y`` are empty or of two lengths, ``y`` is not 0/1, or an argument is
+        out of range.
+    """
+    p, y = np.asarray(p, float).ravel(), np.asarray(y, float).ravel()
+    if not np.all((y == 0) | (y == 1)):
+        raise ValueError(f"y must hold labels 0 or 1; got {sorted(set(y.tolist()))[:5]}")
+    ece = expected_calibration_error(p, y, n_bins)
+    q = _check_probability(quantile, "quantile", open_interval=False)
+    chance = chance_calibration_errors(p, n_bins, draws, seed)
+    limit = float(np.quantile(chance, q))
+    return {"ece": ece, "chance_median": float(np.median(chance)), "chance_quantile": limit,
+            "quantile": q, "onions": int(p.size), "within": bool(ece <= limit)}
 
 
 def precision_recall_curve(p, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

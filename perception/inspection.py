@@ -295,7 +295,7 @@ class InspectionClassifier:
     rule : {"noisy-or", "log-odds"}
         The fusion rule chosen for this model (on validation onions).
     fused_calibration : dict
-        Per fusion rule, the slopes ``(low, high)`` that calibrate the fused probability
+        Per fusion rule, the map ``(low, high, form)`` that calibrates the fused probability
         (:func:`perception.fusion.fuse`'s ``calibration``; fitted on held-out onions by
         :func:`onionsort.stages.inspection.fit_fused_calibration`); a rule not in it is fused
         as it stands.
@@ -326,13 +326,13 @@ class InspectionClassifier:
         self.visibility = float(visibility)
         self.rule = rule
         self.metadata = dict(metadata or {})
-        self.fused_calibration: dict[str, tuple[float, float]] = {}
+        self.fused_calibration: dict[str, tuple[float, float, str]] = {}
         for key, value in (fused_calibration or {}).items():
             self.set_fused_calibration(key, value)
 
     def set_fused_calibration(self, rule: str, calibration) -> None:
-        """Calibrate the fused probability of ``rule`` by ``calibration`` ``(low, high)``, > 0
-        (None: fuse as it stands)."""
+        """Calibrate the fused probability of ``rule`` by ``calibration`` ``(low, high[,
+        form])`` (:func:`perception.fusion.check_calibration`; None: fuse as it stands)."""
         if rule not in FUSION_RULES:
             raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
         checked = check_calibration(calibration)

@@ -41,6 +41,8 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
     assert robot["views"] == 30 * 2  # the first 2 of each onion's 3 views
     assert set(robot["fused"]) == {"noisy-or", "log-odds"}
     assert robot["fused"]["noisy-or"]["onions"] == 30
+    for fused in robot["fused"].values():  # ECE beside chance's median and 90th percentile
+        assert 0 < fused["ece_by_chance"] < fused["ece_by_chance_90"] < 1
 
 
 def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(dataset,
@@ -67,7 +69,7 @@ def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(d
     assert "robot_inspection_sha256" in models.describe()
     if "fused_calibration" in metrics:  # fitted on the robot's val onions, applied on loading
         assert models.robot_inspection.fused_calibration == {
-            rule: (fit["low"], fit["high"])
+            rule: (fit["low"], fit["high"], fit["form"])
             for rule, fit in metrics["fused_calibration"]["rules"].items()}
         assert models.inspection.fused_calibration == {}
     # the robot's views are measured with its own classifier, the sorter's with the shared one
@@ -100,11 +102,12 @@ def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path
         InspectionTrainStageConfig(data=tmp_path, out=tmp_path, camera="sorter")
 
 
-def test_the_clis_fusion_rules_are_the_librarys():
+def test_the_clis_fusion_rules_and_calibration_forms_are_the_librarys():
     from onionsort.configs import common as _args
-    from perception.fusion import FUSION_RULES
+    from perception.fusion import CALIBRATION_FORMS, FUSION_RULES
 
     assert _args.FUSION_RULES == FUSION_RULES
+    assert _args.CALIBRATION_FORMS == CALIBRATION_FORMS
 
 
 def test_the_clis_inspection_cameras_are_the_stages():

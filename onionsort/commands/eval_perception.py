@@ -104,8 +104,9 @@ def _print_inspection(report: dict) -> None:
             for rule, f in m["fused"].items():
                 print(f"      fused by {rule:8s}: accuracy {f['accuracy']:.3f}, precision "
                       f"{f['precision']:.3f}, recall {f['recall']:.3f}, ECE {f['ece']:.3f} "
-                      f"({f['onions']} onions; a calibrated model's by chance: "
-                      f"{f['ece_by_chance']:.3f})")
+                      f"({f['onions']} onions; a calibrated model's by chance: median "
+                      f"{f['ece_by_chance']:.3f}, 90th percentile "
+                      f"{f['ece_by_chance_90']:.3f})")
 
 
 def _print_shift(shift: dict) -> None:

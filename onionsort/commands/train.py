@@ -154,7 +154,8 @@ def run_robot_fusion(args: argparse.Namespace) -> int:
 
     doc = fit_robot_fusion_stage(config_from_args(FusionCalibrationConfig, args))
     for rule, fit in doc["rules"].items():
-        print(f"  fused by {rule}: slopes {fit['low']:.3f} below 0, {fit['high']:.3f} above, on "
+        print(f"  fused by {rule}: {fit['form']} {fit['low']:.3f} below 0, {fit['high']:.3f} "
+              f"above, on "
               f"{fit['onions']} onions "
               f"({fit['blemished']} blemished); ECE here {fit['ece_before']:.3f} -> "
               f"{fit['ece_after']:.3f}")

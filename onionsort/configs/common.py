@@ -8,6 +8,7 @@ does, at start) imports neither ``irl`` (and scipy), torch, the robot's world no
 tests check that each tuple is the library's: :data:`irl.inference.BACKENDS`,
 :data:`irl.experiments.METHODS`, :data:`robot.difficulty.DIFFICULTY_LEVELS`,
 :data:`robot.inspection_poses.INSPECTION_VIEWS`, :data:`perception.fusion.FUSION_RULES`,
+:data:`perception.fusion.CALIBRATION_FORMS`,
 :data:`onionsort.stages.inspection.INSPECTION_CAMERAS`,
 :data:`onionsort.stages.label.LABEL_FORMATS` and
 :data:`onionsort.stages.label_select.SELECT_FORMATS`.
@@ -32,6 +33,7 @@ IRL_METHODS = METHODS[:4]
 DIFFICULTY_LEVELS = ("clean", "realistic", "paper", "hard")
 INSPECTION_VIEWS = 5
 FUSION_RULES = ("noisy-or", "log-odds")
+CALIBRATION_FORMS = ("log", "slopes")
 INSPECTION_CAMERAS = ("both", "robot")
 LABEL_FORMATS = ("coco", "yolo")
 #: What ``label import`` reads: the export's layouts and Label Studio's JSON export.

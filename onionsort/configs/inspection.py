@@ -8,10 +8,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs import common, documented, option, train
-from onionsort.configs.common import INSPECTION_CAMERAS
+from onionsort.configs.common import CALIBRATION_FORMS, INSPECTION_CAMERAS
 
-__all__ = ["INSPECTION_CAMERAS", "FusionCalibrationConfig", "InspectionTrainStageConfig",
-           "level_weights"]
+__all__ = ["CALIBRATION_FORMS", "INSPECTION_CAMERAS", "FusionCalibrationConfig",
+           "InspectionTrainStageConfig", "level_weights"]
 
 
 def level_weights(text: str) -> dict[str, float]:
@@ -98,6 +98,9 @@ class FusionCalibrationConfig:
                         help="the split whose robot onions fit it")
     views: int | None = option(None, help="the first VIEWS views of each onion (default: as "
                                           "many as the robot takes)")
+    form: str = option("log", choices=CALIBRATION_FORMS,
+                       help="log: a slope each side of the evidence 0 on log(1 + |evidence|) "
+                            "(default); slopes: on the evidence itself")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
                             "folder, for the robot to apply it)")
     models: Path | None = common.models()

@@ -376,6 +376,8 @@ def perception_figures(r: dict) -> dict[str, float | None]:
                 out[f"{who}: fused by {rule}, recall"] = f["recall"]
                 out[f"{who}: fused by {rule}, ECE"] = f["ece"]
                 out[f"{who}: fused by {rule}, ECE by chance"] = f.get("ece_by_chance")
+                out[f"{who}: fused by {rule}, ECE by chance, 90th percentile"] = f.get(
+                    "ece_by_chance_90")
     return out
 
 

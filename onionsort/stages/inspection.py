@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from onionsort.configs.inspection import (
+    CALIBRATION_FORMS,
     INSPECTION_CAMERAS,
     FusionCalibrationConfig,
     InspectionTrainStageConfig,
@@ -35,6 +36,7 @@ from onionsort.configs.inspection import (
 from onionsort.stages.base import check_output_folder, log_config, write_json
 
 __all__ = [
+    "CALIBRATION_FORMS",
     "INSPECTION_CAMERAS",
     "MIN_CROP_PIXELS",
     "FusionCalibrationConfig",
@@ -329,14 +331,15 @@ def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray
     return fused, classes, keys
 
 
-def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.ndarray]
-                          ) -> dict[str, dict]:
-    """Per fusion rule, the calibration ``(low, high)`` of the fused probability of
+def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.ndarray],
+                          form: str = "log") -> dict[str, dict]:
+    """Per fusion rule, the calibration ``(low, high, form)`` of the fused probability of
     ``classifier`` on the onions of ``views`` (found views only): each onion's fused evidence
-    ``E`` (its log-odds fused at prior 1/2, uncalibrated) is scaled by one temperature where
-    ``E < 0`` and by another where ``E >= 0`` (:func:`perception.fusion.fuse`), each fitted on
-    the onions of its side against their class with Platt's targets (``(n+ + 1) / (n+ + 2)``
-    and ``1 / (n- + 2)``, the counts of the side's classes, so that a side of one class gives a
+    ``E`` (its log-odds fused at prior 1/2, uncalibrated), or under ``form`` ``"log"`` its
+    size ``log(1 + |E|)`` with its sign, is scaled by one temperature where ``E < 0`` and by
+    another where ``E >= 0`` (:func:`perception.fusion.fuse`), each fitted on the onions of its
+    side against their class with Platt's targets (``(n+ + 1) / (n+ + 2)`` and
+    ``1 / (n- + 2)``, the counts of the side's classes, so that a side of one class gives a
     finite slope; :func:`perception.inspection.fit_temperature`). The sign of ``E`` is kept, so
     on a line of prior 1/2 every call at the cost threshold 1/2 stays as it was; only how sure
     it is changes. A side with no onion keeps slope 1. ``p``: per rule, each row's per-view
@@ -345,13 +348,15 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
     Returns
     -------
     dict
-        Per rule: ``low``, ``high``, ``onions``, ``blemished`` and the expected calibration
-        error on these onions before and after (``ece_before``, ``ece_after``; in-sample).
+        Per rule: ``low``, ``high``, ``form``, ``onions``, ``blemished`` and the expected
+        calibration error on these onions before and after (``ece_before``, ``ece_after``;
+        in-sample).
 
     Raises
     ------
     ValueError
-        If the views hold no onion of one class.
+        If the views hold no onion of one class, or ``form`` is not one of
+        :data:`CALIBRATION_FORMS`.
     """
     from perception.fusion import expected_calibration_error, fuse, log_odds
 
@@ -369,25 +374,31 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
         args = {"prior": 0.5, "train_prior": classifier._train_prior(rule),
                 "visibility": classifier.visibility}
         evidence = np.array([log_odds(probabilities[groups[k]], rule, **args) for k in keys])
-        low, high = fit_side_slopes(evidence, y)
+        low, high = fit_side_slopes(evidence, y, form)
         before = np.array([fuse(probabilities[groups[k]], rule, **args) for k in keys])
-        after = np.array([fuse(probabilities[groups[k]], rule, calibration=(low, high), **args)
-                          for k in keys])
-        out[rule] = {"low": low, "high": high, "onions": len(y), "blemished": int(y.sum()),
+        after = np.array([fuse(probabilities[groups[k]], rule, calibration=(low, high, form),
+                               **args) for k in keys])
+        out[rule] = {"low": low, "high": high, "form": form, "onions": len(y),
+                     "blemished": int(y.sum()),
                      "ece_before": expected_calibration_error(before, y),
                      "ece_after": expected_calibration_error(after, y)}
     return out
 
 
-def fit_side_slopes(evidence: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+def fit_side_slopes(evidence: np.ndarray, y: np.ndarray, form: str = "slopes"
+                    ) -> tuple[float, float]:
     """The slopes ``(low, high)`` of :func:`fit_fused_calibration` from each onion's fused
-    ``evidence`` (N,) (log-odds at prior 1/2) and class ``y`` (N,)."""
+    ``evidence`` (N,) (log-odds at prior 1/2) and class ``y`` (N,), under ``form`` (one of
+    :data:`CALIBRATION_FORMS`; ``"log"`` fits them on ``log(1 + |E|)``, its sign kept)."""
     from perception.inspection import fit_temperature
 
+    if form not in CALIBRATION_FORMS:
+        raise ValueError(f"form must be one of {CALIBRATION_FORMS}; got {form!r}")
     evidence, y = np.asarray(evidence, float), np.asarray(y, float)
+    mapped = evidence if form == "slopes" else np.sign(evidence) * np.log1p(np.abs(evidence))
     slopes = []
     for side in (evidence < 0, evidence >= 0):
-        e, c = evidence[side], y[side]
+        e, c = mapped[side], y[side]
         if not len(e) or not np.any(e):
             slopes.append(1.0)
             continue
@@ -438,11 +449,11 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
                          "--robot-onions N`")
     z = clf.logits(views.crops)
     fitted = fit_fused_calibration(clf, views, {rule: clf.calibrated(z, rule)
-                                                for rule in FUSION_RULES})
+                                                for rule in FUSION_RULES}, config.form)
     Path(config.out).mkdir(parents=True, exist_ok=True)
     return _write_fused_calibration(config.out, fitted, {
         "fitted_on": "held-out robot onions", "data": [str(d) for d in config.data],
-        "split": config.split, "views": shown,
+        "split": config.split, "views": shown, "form": config.form,
         "models": models.describe()})
 
 
@@ -464,12 +475,16 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     and, for each fusion rule, the fused call on each onion (the robot's views of it, the first
     ``views`` of them if given; the sorter's views of it in a session) at ``threshold`` (the
     task's cost threshold by default): accuracy, precision, recall, expected calibration error
-    and the points of the precision-recall curve. ``image_map`` changes each view as it is
+    (``ece``) beside the median (``ece_by_chance``) and the 90th percentile
+    (``ece_by_chance_90``) of what a perfectly calibrated model shows by chance on the same
+    onions (:func:`perception.fusion.calibration_within_chance`), and the points of the
+    precision-recall curve. ``image_map`` changes each view as it is
     read (:func:`inspection_views`).
     """
     from onionsort.configs.common import sorting_threshold
     from perception.fusion import (
         FUSION_RULES,
+        calibration_within_chance,
         chance_calibration_error,
         expected_calibration_error,
         precision_recall_curve,
@@ -532,6 +547,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                     "recall": tp / (tp + fn) if tp + fn else 0.0,
                     "ece": expected_calibration_error(fused, y),
                     "ece_by_chance": chance_calibration_error(fused),
+                    "ece_by_chance_90": calibration_within_chance(fused, y)[
+                        "chance_quantile"],
                     "pr_curve": {"precision": precision.round(4).tolist(),
                                  "recall": recall.round(4).tolist(),
                                  "threshold": cut.round(5).tolist()}}

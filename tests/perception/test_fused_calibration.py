@@ -15,7 +15,7 @@ from perception.fusion import (
     settled,
 )
 
-CALIBRATIONS = [None, (0.4, 0.4), (2.5, 1.0), (3.0, 0.2)]
+CALIBRATIONS = [None, (0.4, 0.4), (2.5, 1.0), (3.0, 0.2), (4.6, 1.4, "log"), (0.5, 0.7, "log")]
 
 
 @pytest.mark.parametrize("rule", FUSION_RULES)
@@ -43,6 +43,11 @@ def test_the_calibration_scales_the_fused_evidence_by_the_slope_of_its_side(rule
         assert log_odds(views, rule, calibration=(1.7, 0.2), **kw) == pytest.approx(want)
         assert fuse(views, rule, calibration=(1.7, 0.2), **kw) == pytest.approx(
             1 / (1 + np.exp(-want)))
+        # "log" scales log(1 + |E|), its sign kept; "slopes" is the default form
+        want = np.log(0.3 / 0.7) + slope * np.sign(evidence) * np.log1p(abs(evidence))
+        assert log_odds(views, rule, calibration=(1.7, 0.2, "log"), **kw) == pytest.approx(want)
+        assert log_odds(views, rule, calibration=(1.7, 0.2, "slopes"), **kw) == log_odds(
+            views, rule, calibration=(1.7, 0.2), **kw)
 
 
 @pytest.mark.parametrize("rule", FUSION_RULES)
@@ -79,8 +84,9 @@ def test_expected_calibration_error_on_a_hand_example():
 
 
 @pytest.mark.parametrize("bad", [(0.0, 1.0), (1.0, -1.0), (np.nan, 1.0), (1.0, np.inf),
-                                 (1.0,), "ab", 3.0])
-def test_a_calibration_that_is_not_monotone_or_not_two_numbers_is_refused(bad):
+                                 (1.0,), "ab", 3.0, (1.0, 1.0, "isotonic"), (1.0, 1.0, 0.5),
+                                 (1.0, 1.0, "log", "log"), (-1.0, 1.0, "log")])
+def test_a_calibration_that_is_not_monotone_or_not_two_slopes_and_a_form_is_refused(bad):
     with pytest.raises(ValueError, match="calibration must be") as err:
         check_calibration(bad)
     assert "\n" not in str(err.value)
@@ -120,7 +126,7 @@ def test_the_fit_sharpens_a_hedged_fusion_and_keeps_its_calls():
     assert fitted["low"] > 1 and fitted["high"] > 1
     assert fitted["ece_after"] < fitted["ece_before"]
     before = np.array([clf.fuse([x], "noisy-or") for x in p])
-    clf.set_fused_calibration("noisy-or", (fitted["low"], fitted["high"]))
+    clf.set_fused_calibration("noisy-or", (fitted["low"], fitted["high"], fitted["form"]))
     after = np.array([clf.fuse([x], "noisy-or") for x in p])
     np.testing.assert_array_equal(after >= 0.5, before >= 0.5)  # the same calls, surer
     assert expected_calibration_error(after, classes) == pytest.approx(fitted["ece_after"])
@@ -143,9 +149,10 @@ def test_the_robots_inspection_applies_the_calibration_its_models_folder_holds(t
     assert plain.robot_inspection.fused_calibration == {}
     doc = {"format": 1, "rules": {"noisy-or": {"low": 2.0, "high": 0.5}}}
     (folder / ROBOT_FUSION_FILE).write_text(json.dumps(doc))
-    assert read_fused_calibration(folder / ROBOT_FUSION_FILE) == {"noisy-or": (2.0, 0.5)}
+    assert read_fused_calibration(folder / ROBOT_FUSION_FILE) == {
+        "noisy-or": (2.0, 0.5, "slopes")}
     models = PerceptionModels.load(folder, "cpu")
-    assert models.robot_inspection.fused_calibration == {"noisy-or": (2.0, 0.5)}
+    assert models.robot_inspection.fused_calibration == {"noisy-or": (2.0, 0.5, "slopes")}
     assert models.inspection.fused_calibration == {}  # the sorter's fusion is left as it was
     inspector = models.inspector(camera="robot", rule="noisy-or")
     views = [0.02, 0.1, 0.05]
@@ -156,13 +163,45 @@ def test_the_robots_inspection_applies_the_calibration_its_models_folder_holds(t
     assert calibrated.p_blemished == pytest.approx(1 / (1 + np.exp(-2.0 * evidence)))
     assert calibrated.p_blemished < raw.p_blemished < 0.5
     assert calibrated.prediction == raw.prediction
+    doc["rules"]["noisy-or"]["form"] = "log"  # a form, where the file names one
+    (folder / ROBOT_FUSION_FILE).write_text(json.dumps(doc))
+    logged = PerceptionModels.load(folder, "cpu").inspector(camera="robot", rule="noisy-or")
+    assert logged.verdict(views).p_blemished == pytest.approx(
+        1 / (1 + np.exp(2.0 * np.log1p(-evidence))))
     # a file that is not one, or holds a map that is not monotone: one line naming it
     for text in ("not json", json.dumps({"rules": {"noisy-or": {"low": -1.0, "high": 1.0}}}),
+                 json.dumps({"rules": {"noisy-or": {"low": 1.0, "high": 1.0, "form": "max"}}}),
                  json.dumps({"rules": {"max": {"low": 1.0, "high": 1.0}}})):
         (folder / ROBOT_FUSION_FILE).write_text(text)
         with pytest.raises(ValueError, match=ROBOT_FUSION_FILE) as err:
             PerceptionModels.load(folder, "cpu")
         assert "\n" not in str(err.value)
+
+
+def test_the_log_form_lifts_weak_evidence_of_a_blemish_that_one_slope_hedges():
+    """Good onions near the evidence of 5 clean views, blemished ones from a weak view to many
+    strong ones, every call right (the robot at `hard`): one slope above 0 must temper the
+    strong evidence and so hedges the weak; on log(1 + |E|) the slopes are better calibrated,
+    with the same calls."""
+    from onionsort.stages.inspection import fit_side_slopes
+
+    rng = np.random.default_rng(4)
+    good = -1.8 + rng.uniform(0, 0.4, 300)
+    blemished = np.exp(rng.uniform(np.log(0.5), np.log(38), 300))
+    evidence, y = np.r_[good, blemished], np.r_[np.zeros(300), np.ones(300)]
+    assert fit_side_slopes(evidence, y) == fit_side_slopes(evidence, y, "slopes")
+
+    def calibrated(form):  # 3 views under log-odds at prior 1/2: their logits sum to E
+        c = (*fit_side_slopes(evidence, y, form), form)
+        return np.array([fuse([1 / (1 + np.exp(-e / 3))] * 3, "log-odds", calibration=c)
+                         for e in evidence])
+
+    ece_slopes = expected_calibration_error(calibrated("slopes"), y)
+    ece_log = expected_calibration_error(calibrated("log"), y)
+    assert ece_log < ece_slopes / 2
+    np.testing.assert_array_equal(calibrated("log") >= 0.5, evidence >= 0)
+    with pytest.raises(ValueError, match="form must be one of"):
+        fit_side_slopes(evidence, y, "isotonic")
 
 
 def test_robot_fusion_refuses_bad_inputs_in_one_line(tmp_path, capsys):

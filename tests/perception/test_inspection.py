@@ -134,6 +134,38 @@ def test_the_chance_calibration_error_is_what_a_calibrated_model_shows_on_so_few
         chance_calibration_error([])
 
 
+def test_the_check_against_chance_passes_a_calibrated_model_as_often_as_its_quantile():
+    """calibration_within_chance: a perfectly calibrated model (labels drawn from its own
+    probabilities) passes about as often as the quantile says, on 300 onions as on 60; one
+    that hedges (the probabilities of the section's robot: blemished onions at 0.6-0.9, all
+    of them blemished) fails on 300 onions; the figures are the chance errors' quantiles,
+    reproducible from the seed."""
+    from perception.fusion import calibration_within_chance, chance_calibration_errors
+
+    rng = np.random.default_rng(5)
+    for n in (60, 300):
+        p = np.r_[rng.uniform(0.0, 0.05, n // 2), rng.uniform(0.85, 1.0, n // 2)]
+        passed = [calibration_within_chance(p, rng.random(n) < p, draws=200, seed=i)["within"]
+                  for i in range(400)]
+        assert np.mean(passed) == pytest.approx(0.9, abs=0.045)
+    check = calibration_within_chance(p, rng.random(p.size) < p)
+    errors = chance_calibration_errors(p, draws=1000)
+    assert check["chance_quantile"] == pytest.approx(np.quantile(errors, 0.9))
+    assert check["chance_median"] == pytest.approx(np.median(errors))
+    assert check["chance_median"] < check["chance_quantile"] and check["onions"] == 300
+    assert chance_calibration_error(p, draws=1000, quantile=0.9) == check["chance_quantile"]
+    assert calibration_within_chance(p, rng.random(p.size) < p) != check  # fresh labels
+    hedged = np.r_[rng.uniform(0.0, 0.05, 150), rng.uniform(0.6, 0.9, 150)]
+    y = np.r_[np.zeros(150), np.ones(150)]
+    assert not calibration_within_chance(hedged, y)["within"]
+    with pytest.raises(ValueError, match="labels 0 or 1"):
+        calibration_within_chance([0.2, 0.4], [0, 2])
+    with pytest.raises(ValueError, match="quantile"):
+        calibration_within_chance([0.2, 0.4], [0, 1], quantile=1.5)
+    with pytest.raises(ValueError, match="draws"):
+        chance_calibration_errors([0.2, 0.4], draws=0)
+
+
 def test_expected_calibration_error_and_the_precision_recall_curve():
     rng = np.random.default_rng(0)
     p = rng.uniform(0, 1, 20_000)
