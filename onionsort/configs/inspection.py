@@ -99,8 +99,8 @@ class FusionCalibrationConfig:
     views: int | None = option(None, help="the first VIEWS views of each onion (default: as "
                                           "many as the robot takes)")
     form: str = option("log", choices=CALIBRATION_FORMS,
-                       help="log: a slope each side of the evidence 0 on log(1 + |evidence|) "
-                            "(default); slopes: on the evidence itself")
+                       help="log: a slope each side of the evidence 0 on log(1 + |evidence|); "
+                            "slopes: on the evidence itself")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
                             "folder, for the robot to apply it)")
     models: Path | None = common.models()
