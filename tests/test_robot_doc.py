@@ -2,8 +2,9 @@
 
 A learn run of two methods with their posteriors; a line-up recorded from the simulator (the
 page's command, fewer onions); the runtime on its views; the loop and the logging with a
-replayed line-up in the arm's place (the ROS 2 class is only parsed: it needs ROS 2);
-``evaluate --lineup`` and ``score`` as the page shows them; and a tally counted by hand.
+replayed line-up in the arm's place (the ROS 2 class, examples/ros2_arm.py, is only parsed:
+it needs ROS 2); ``evaluate --lineup`` and ``score`` as the page shows them; and a tally
+counted by hand.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from tests.doccheck import doc_commands, fenced_blocks
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "robot.md"
+#: the page's ROS 2 arm class, only parsed here (it needs ROS 2)
+ARM = ROOT / "examples" / "ros2_arm.py"
 #: the page's line-up, smaller
 SMALLER = {("--onions", "20"): ("--onions", "3"), ("--blemished", "10"): ("--blemished", "1")}
 
@@ -45,7 +48,8 @@ def _walk_commands() -> list[tuple[str, ...]]:
 
 
 def test_the_ros2_arm_class_is_python_and_a_complete_cell():
-    arm = next(code for code in _python_blocks() if "class Ros2Arm" in code)
+    arm = ARM.read_text()
+    assert f"]({ARM.relative_to(ROOT).as_posix()})" in PAGE.read_text().replace("../", "")
     tree = ast.parse(arm)
     (cls,) = [n for n in tree.body if isinstance(n, ast.ClassDef)]
     members = {n.name for n in cls.body if isinstance(n, ast.FunctionDef)}
@@ -70,8 +74,7 @@ def test_every_step_of_the_robot_walk_runs(tmp_path, monkeypatch, perceived_sess
 
     (lineup,) = read_recording(Path("runs/lineup-7"))
     assert lineup.lineup == 7 and lineup.n_onions == 3
-    runtime, loop, arm, logging = _python_blocks()
-    assert "class Ros2Arm" in arm
+    runtime, loop, logging = _python_blocks()
     scope: dict = {"views": lineup.load(0)}
     exec(compile(runtime, "docs/robot.md (the runtime)", "exec"), scope)
     assert scope["verdict"].p_blemished is not None
