@@ -473,11 +473,7 @@ class SawyerStation:
         RuntimeError
             If no onion is in focus.
         """
-        self._require_client()
-        if self.focus is None:
-            raise RuntimeError("no onion is in focus to inspect")
-        onion = self.belt.onions[self.focus]
-        self.cameras.time_s += STEP_DURATION_S
+        onion = self._step_on_focus("inspect")
         self._errs = self.motions.hold_up()
         if onion.perceived is not None:
             return  # only held up again
@@ -487,6 +483,21 @@ class SawyerStation:
         finally:
             shown.close()
         onion.perceived = Prediction(int(call))
+
+    def _step_on_focus(self, doing: str) -> LineUpOnion:
+        """The onion in focus, for a step that acts on it (``doing``, named by the error): the
+        station's clock advances by :data:`STEP_DURATION_S`.
+
+        Raises
+        ------
+        RuntimeError
+            If no onion is in focus.
+        """
+        self._require_client()
+        if self.focus is None:
+            raise RuntimeError(f"no onion is in focus to {doing}")
+        self.cameras.time_s += STEP_DURATION_S
+        return self.belt.onions[self.focus]
 
     def _views(self, onion: LineUpOnion) -> Iterator[np.ndarray]:
         """The held onion's inspection views (h, w, 3) uint8, each rendered as it is asked for
@@ -516,11 +527,7 @@ class SawyerStation:
         RuntimeError
             If no onion is in focus.
         """
-        self._require_client()
-        if self.focus is None:
-            raise RuntimeError("no onion is in focus to defer")
-        onion = self.belt.onions[self.focus]
-        self.cameras.time_s += STEP_DURATION_S
+        onion = self._step_on_focus("defer")
         self.motions.set_aside(onion)
         self.focus = None
         return onion.index

@@ -199,7 +199,7 @@ def _draw(scores: list[list[float]], frames_per_step: int, budget: int, seed: in
     confusion matrix measured on held-out sessions needs), reproducible from ``seed``."""
     every = [(k, t) for k, s in enumerate(scores) for t in range(len(s))]
     order = np.random.default_rng(seed).permutation(len(every))
-    return [every[i] for i in order[:max(1, -(-budget // frames_per_step))]] if every else []
+    return [every[i] for i in order[:-(-budget // frames_per_step)]]  # whole steps
 
 
 def select_frames(config: LabelSelectConfig, models=None) -> dict:
