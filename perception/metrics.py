@@ -66,6 +66,8 @@ def mean_average_precision(
     ground_truth: Sequence[tuple[np.ndarray, np.ndarray]],
     detections: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
     max_detections: int = 100,
+    *,
+    any_class: bool = False,
 ) -> dict[str, float]:
     """``{"map50": mAP@0.5, "map50_95": mAP@0.5:0.95, "map75": mAP@0.75}`` over images.
 
@@ -75,6 +77,9 @@ def mean_average_precision(
     detections : sequence of (boxes [D, 4], scores [D], classes [D]), one per image
     max_detections : int
         Detections kept per image and class (highest scores), as COCO's maxDets.
+    any_class : bool
+        Count every box as one class (COCO's ``useCats=0``): how well the objects are found,
+        whatever class each is called.
     """
     if len(ground_truth) != len(detections):
         raise ValueError(f"ground_truth and detections must cover the same images; got "
@@ -83,6 +88,9 @@ def mean_average_precision(
            for b, c in ground_truth]
     dts = [(np.asarray(b, float).reshape(-1, 4), np.asarray(s, float).reshape(-1),
             np.asarray(c, int).reshape(-1)) for b, s, c in detections]
+    if any_class:
+        gts = [(b, np.zeros_like(c)) for b, c in gts]
+        dts = [(b, s, np.zeros_like(c)) for b, s, c in dts]
     classes = sorted({int(c) for _, cs in gts for c in cs})
     ap = np.full((len(IOU_THRESHOLDS), len(classes)), np.nan)
     for k, cls in enumerate(classes):

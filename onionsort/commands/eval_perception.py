@@ -1,6 +1,7 @@
 """``onionsort eval-perception``: measure the perception models on a dataset.
 
-Prints mAP of the detector (per view); the accuracy of each factor of the state classifier on
+Prints mAP of the detector (per view; "any class" counts every box as one class: how well it
+finds the onions, whatever it calls them); the accuracy of each factor of the state classifier on
 unoccluded steps, and the recall and precision of occluded steps (``--no-depth``: on colour
 alone); and, per difficulty level, the inspection: how often the detector finds the onion, the
 accuracy of each view alone, and the fused call on each onion (the Sawyer's views of it, the
@@ -71,10 +72,12 @@ def _print_figures(r: dict) -> None:
     """One ``eval_perception`` result, as measured (no camera shift)."""
     from onionsort.stages.calibrate import describe_session_swaps
 
-    print(f"detector: mAP@0.5 {r['map50']:.3f}, mAP@0.5:0.95 {r['map50_95']:.3f}")
+    print(f"detector: mAP@0.5 {r['map50']:.3f}, mAP@0.5:0.95 {r['map50_95']:.3f}, "
+          f"mAP@0.5 any class {r['map_by_view']['all']['map50_any_class']:.3f}")
     for view, m in r["map_by_view"].items():
         if view != "all":
-            print(f"  {view:10s} mAP@0.5 {m['map50']:.3f}, mAP@0.5:0.95 {m['map50_95']:.3f}")
+            print(f"  {view:10s} mAP@0.5 {m['map50']:.3f}, mAP@0.5:0.95 {m['map50_95']:.3f}, "
+                  f"mAP@0.5 any class {m['map50_any_class']:.3f}")
     mode = "RGB-D" if r["depth"] else "colour only"
     print(f"state classifier ({mode}), unoccluded steps: " + ", ".join(
         f"{k} {v:.3f}" for k, v in r["accuracy"].items()))

@@ -102,3 +102,13 @@ def test_iou_and_argument_checks():
     np.testing.assert_allclose(box_iou(_arr([[0, 0, 10, 10]]), _arr([[5, 0, 15, 10]])), [[1 / 3]])
     with pytest.raises(ValueError, match="same images"):
         mean_average_precision(FIXED_GT, FIXED_DT[:2])
+
+
+def test_any_class_counts_the_boxes_whatever_class_they_are_called():
+    # every box found, every class called wrong: nothing per class, everything found
+    dts = [(gb, np.ones(len(gb)), 1 - gc) for gb, gc in FIXED_GT]
+    assert mean_average_precision(FIXED_GT, dts)["map50"] == pytest.approx(0.0)
+    assert mean_average_precision(FIXED_GT, dts, any_class=True)["map50"] == pytest.approx(1.0)
+    # a box missed counts against any_class as well
+    half = [(gb[:1], np.ones(1), gc[:1]) for gb, gc in FIXED_GT]
+    assert mean_average_precision(FIXED_GT, half, any_class=True)["map50"] < 0.9

@@ -136,6 +136,8 @@ def test_calibrate_and_eval_perception_commands(random_models, small_data, tmp_p
                  "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert {"map50", "map50_95", "accuracy", "occlusion_recall"} <= set(result)
+    for view in ("camera", "inspection", "all"):  # as measured per class and with any class
+        assert {"map50", "map50_any_class"} <= set(result["map_by_view"][view])
     assert set(result["accuracy"]) == {"onion", "end_effector", "prediction", "action"}
     assert "prediction_after_first_inspection" in result
     assert {"sessions", "swapped"} <= set(result["session_swaps"])
