@@ -7,7 +7,8 @@ value (each the mean over the datasets given), the difference (positive: the can
 better; for an ECE, lower is better) and the tolerance: two binomial standard errors at the
 figure's size, at least 0.02. A figure is ``worse`` when the candidate loses more than the
 tolerance. What a calibrated model's ECE would be by chance is a reference, not a figure of
-the models, and is left out. Through other cameras (``--camera-shift`` results) it prints the mean drops too.
+the models, and is left out. Through other cameras (``--camera-shift`` results) it prints the
+mean drops too.
 
 The size of a figure (summed over the datasets):
 
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from onionsort.stages.calibrate import perception_figures, shift_summary
+
 
 def figure_sizes(r: dict) -> dict[str, int]:
     """Each figure's size (see the module's text) in one result."""
@@ -100,7 +102,8 @@ def shift_rows(base: list[dict], candidate: list[dict]) -> list[dict]:
     dc = drops([r for r in candidate if "camera_shift" in r])
     rows = []
     for name in db:
-        if "by chance" in name or name not in dc or any(v is None for t in db[name] + dc[name] for v in t):
+        values = db[name] + dc.get(name, [])
+        if "by chance" in name or name not in dc or any(v is None for t in values for v in t):
             continue
         rows.append({"figure": name,
                      "base_mean": float(np.mean([t[0] for t in db[name]])),
