@@ -1,0 +1,65 @@
+"""scripts/compare_perception.py: two sets of models' figures side by side, with a tolerance
+the sets resolve (two binomial standard errors at each figure's size, at least 0.02)."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "compare_perception.py"
+
+
+@pytest.fixture(scope="module")
+def compare():
+    spec = importlib.util.spec_from_file_location("compare_perception", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def result(onion=0.9, ece=0.05, accuracy=0.9, camera=0.8):
+    fused = {"onions": 40, "accuracy": accuracy, "precision": 1.0, "recall": 0.8, "ece": ece,
+             "ece_by_chance": ece, "ece_by_chance_90": ece}
+    level = {"views": 200, "found": 1.0, "rot_accuracy": 0.9, "view_accuracy": 0.8,
+             "fused": {"noisy-or": fused}}
+    return {"map_by_view": {"camera": {"map50": camera}, "all": {"map50": camera}},
+            "accuracy": {"onion": onion}, "prediction_after_first_inspection": 0.95,
+            "occlusion_recall": 1.0, "occlusion_precision": 1.0, "n_steps": 400,
+            "session_swaps": {"sessions": 20, "swapped": 0},
+            "inspection_classifier": {"levels": {"hard": {"robot": level}}}}
+
+
+def test_a_loss_beyond_two_standard_errors_is_worse_and_one_within_is_not(compare):
+    rows = {r["figure"]: r for r in compare.compare(
+        [result()], [result(onion=0.85, ece=0.06, accuracy=0.88, camera=0.83)])}
+    onion = rows["state: onion"]  # 2 sqrt(0.09 / 400) = 0.03 < 0.05 lost
+    assert onion["tolerance"] == pytest.approx(0.03) and onion["verdict"] == "worse"
+    fused = rows["inspection hard robot: fused by noisy-or, accuracy"]  # 40 onions
+    assert fused["n"] == 40 and fused["verdict"] == "within"
+    ece = rows["inspection hard robot: fused by noisy-or, ECE"]  # lower is better
+    assert ece["gain"] == pytest.approx(-0.01) and ece["verdict"] == "within"
+    assert rows["detector mAP@0.5, camera"]["verdict"] == "within"
+    assert not any("by chance" in name for name in rows)  # a reference, not a figure
+
+
+def test_figures_are_averaged_over_the_datasets_and_sized_by_their_sum(compare):
+    rows = {r["figure"]: r for r in compare.compare(
+        [result(onion=0.9), result(onion=0.8)], [result(onion=0.9), result(onion=0.9)])}
+    onion = rows["state: onion"]
+    assert onion["base"] == pytest.approx(0.85) and onion["candidate"] == pytest.approx(0.9)
+    assert onion["n"] == 800 and onion["verdict"] == "better"
+
+
+def test_the_command_writes_its_rows_and_refuses_unpaired_results(compare, tmp_path, capsys):
+    base, cand = tmp_path / "a.json", tmp_path / "b.json"
+    base.write_text(json.dumps(result()))
+    cand.write_text(json.dumps(result(onion=0.8)))
+    assert compare.main(["--base", str(base), "--candidate", str(cand),
+                         "--json", str(tmp_path / "rows.json")]) == 0
+    assert "worse beyond tolerance: 1 of" in capsys.readouterr().out
+    rows = json.loads((tmp_path / "rows.json").read_text())["unchanged"]
+    assert [r["figure"] for r in rows if r["verdict"] == "worse"] == ["state: onion"]
+    assert compare.main(["--base", str(base), "--base", str(base),
+                         "--candidate", str(cand)]) == 2
+    assert "as many --candidate" in capsys.readouterr().err
