@@ -31,7 +31,8 @@ import numpy as np
 import torch
 
 from onionsort.perception_models import PerceptionModels
-from onionsort.stages.calibrate import SessionCameras
+from onionsort.stages.calibrate import SessionCameras, detector_map
+from perception.camera_shift import REFERENCE_TEMPERATURE_K
 
 PARTS = ("full", "colour", "degradation")
 
@@ -48,29 +49,9 @@ class PartCameras:
         if self.part == "colour":
             cam = dataclasses.replace(cam, defocus_px=0.0, noise=0.0, jpeg_quality=0)
         elif self.part == "degradation":
-            cam = dataclasses.replace(cam, temperature_k=6500.0, exposure_ev=0.0, gamma=1.0)
+            cam = dataclasses.replace(cam, temperature_k=REFERENCE_TEMPERATURE_K,
+                                      exposure_ev=0.0, gamma=1.0)
         return cam.apply(image)
-
-
-def camera_view_map(models: PerceptionModels, data: Path, image_map) -> dict[str, float]:
-    """Camera-view mAP@0.5 of the detector on every split, per class and class-agnostic."""
-    from perception.metrics import mean_average_precision
-    from perception.train_detector import EVAL_SCORE_THRESHOLD
-    from recordings.labels.dataset import read_split, split_names
-
-    frames = [f for name in split_names("all")
-              for f in read_split(data, name, view="camera", image_map=image_map)]
-    gts = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
-            np.asarray(f.record["classes"], int)) for f in frames]
-    dts = []
-    for i in range(0, len(frames), 32):
-        dts.extend(models.detector.detect([f.color for f in frames[i:i + 32]],
-                                          score_threshold=EVAL_SCORE_THRESHOLD))
-    per_class = mean_average_precision(gts, [(d.boxes, d.scores, d.classes) for d in dts])
-    agnostic = mean_average_precision(
-        [(b, np.zeros_like(c)) for b, c in gts],
-        [(d.boxes, d.scores, np.zeros_like(np.asarray(d.classes))) for d in dts])
-    return {"map50": per_class["map50"], "map50_agnostic": agnostic["map50"]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -91,13 +72,15 @@ def main(argv: list[str] | None = None) -> int:
                                         for s in seeds for part in PARTS]
         for key, image_map in keys:
             if key not in r:
-                r[key] = camera_view_map(models, args.data, image_map)
+                camera = detector_map(models, args.data, "all", image_map=image_map,
+                                      views=["camera"])["camera"]
+                r[key] = {k: camera[k] for k in ("map50", "map50_any_class")}
                 tmp = args.out.with_suffix(".partial")
                 tmp.write_text(json.dumps(res, indent=1))
                 tmp.replace(args.out)
                 print(m, key, r[key], flush=True)
         for part in PARTS:
-            for metric in ("map50", "map50_agnostic"):
+            for metric in ("map50", "map50_any_class"):
                 drop = np.mean([r["unchanged"][metric] - r[f"{part} {s}"][metric]
                                 for s in seeds])
                 print(f"{m}: {part:<12} {metric:<15} mean drop {drop:+.3f}")

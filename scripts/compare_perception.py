@@ -37,16 +37,14 @@ from onionsort.stages.calibrate import perception_figures, shift_summary
 
 def figure_sizes(r: dict) -> dict[str, int]:
     """Each figure's size (see the module's text) in one result."""
-    sizes = {}
-    for name in perception_figures(r):
-        sizes[name] = r["n_steps"]
+    sizes = dict.fromkeys(perception_figures(r), r["n_steps"])
     for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
         for source, m in sources.items():
-            who = f"inspection {level} {source}"
+            who = f"inspection {level} {source}:"
+            onions = next(iter(m["fused"].values()))["onions"]
             for name in sizes:
-                if name.startswith(who + ":"):
-                    sizes[name] = (m["fused"][next(iter(m["fused"]))]["onions"]
-                                   if ": fused by" in name else m["views"])
+                if name.startswith(who):
+                    sizes[name] = onions if ": fused by" in name else m["views"]
     return sizes
 
 

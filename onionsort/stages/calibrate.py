@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -220,9 +221,11 @@ def _mean_or_none(values: np.ndarray, where: np.ndarray) -> float | None:
 
 
 def detector_map(models: PerceptionModels, root: Path | str, split: str = "test",
-                 batch_size: int = 32, *, image_map=None) -> dict[str, dict[str, float]]:
+                 batch_size: int = 32, *, image_map=None,
+                 views: Sequence[str] | None = None) -> dict[str, dict[str, float]]:
     """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``
-    (each colour image changed by ``image_map`` first, if given). Besides COCO's figures,
+    (each colour image changed by ``image_map`` first, if given; ``views``: only these of the
+    dataset's views, ``"all"`` then being theirs). Besides COCO's figures,
     ``map50_any_class`` is mAP@0.5 with every box one class: whether the detector finds the
     onions, apart from the good/blemished call it puts on them, which nothing downstream reads
     (the inspection classifier makes the class call)."""
@@ -231,7 +234,7 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
     from perception.train_detector import EVAL_SCORE_THRESHOLD
     from recordings.labels.dataset import read_metadata, read_split, split_names
 
-    views = read_metadata(root).get("views", ["camera"])
+    views = list(read_metadata(root).get("views", ["camera"]) if views is None else views)
     gts: dict[str, list] = {}
     dts: dict[str, list] = {}
     frames: dict[str, list] = {}
