@@ -8,10 +8,10 @@ arm's motions on the station's belt (:mod:`robot.belt`).
   lifts the onion to the hover pose;
 - INSPECT holds the onion up in front of the inspection camera and shows it from every side:
   the wrist turns it through the inspection poses about its own centre, every other view tilted
-  so that its underside faces the camera (:func:`robot.inspection_poses.inspection_poses`).
-  Each view is taken with the arm exactly at its pose (:meth:`robot.sawyer.Sawyer.snap`) and
-  the onion held as the pick aimed to hold it: a view depends on the onion and the pose, never
-  on where the arm came from;
+  so that its underside faces the camera (:func:`robot.inspection_poses.inspection_poses`),
+  the flange at the pose's orientation. Each view is taken with the arm exactly at its pose
+  (:meth:`robot.sawyer.Sawyer.snap`) and the onion held as the pick aimed to hold it: a view
+  depends on the onion and the pose, never on where the arm came from;
 - PLACE_ON_CONVEYOR sets the onion on the belt downstream of the gate, where it rides away (or,
   if it was never inspected, back at the gate, where it waits to be picked again), and returns
   above the pick spot;
@@ -138,10 +138,14 @@ class MotionPrimitives:
 
         The wrist turns (and tilts) it through ``poses`` ``(yaw, tilt)`` about its own centre;
         yields ``k`` with the arm exactly at the ``k``-th pose (:meth:`Sawyer.snap
-        <robot.sawyer.Sawyer.snap>`). Once closed, or past the last pose, it brings the onion
-        back to the inspection pose. The motions' errors go to ``errs``.
+        <robot.sawyer.Sawyer.snap>`). Each turned pose is solved from the inspection pose's own
+        solution with the wrist already turned by the pose's yaw
+        (:meth:`Sawyer.wrist_turns <robot.sawyer.Sawyer.wrist_turns>`), so that the view is the
+        one designed, whatever the views before it. Once closed, or past the last pose, it
+        brings the onion back to the inspection pose. The motions' errors go to ``errs``.
         """
         self.arm.snap()
+        face = self.arm.goal  # the inspection pose's solution, solved from the arm's rest
         centre = self.belt.position(onion.index)
         shown = 0
         try:
@@ -150,14 +154,14 @@ class MotionPrimitives:
                     turn = flange_down(yaw, tilt)
                     errs.append(self.move(self.arm.flange_holding_at(centre, turn),
                                           self.move_steps // 2, orientation=turn,
-                                          seed=self.arm.q))
+                                          seed=self.arm.wrist_turns(face, yaw)))
                     self.arm.snap()
                 shown += 1
                 yield k
         finally:
             if shown > 1:
                 errs.append(self.move(ROBOT_TARGETS[Location.FACE], self.move_steps // 2,
-                                      seed=self.arm.q))
+                                      seed=face))
 
     def place_on_conveyor(self, onion: LineUpOnion) -> list[float]:
         inspected = onion.perceived is not None

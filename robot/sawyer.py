@@ -26,6 +26,14 @@ logger = logging.getLogger(__name__)
 HOME = np.array([0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161])
 _DOWN = p.getQuaternionFromEuler([np.pi, 0.0, 0.0])
 _SETTLE_TOL, _SETTLE_STEPS, _MAX_SETTLE = 0.005, 20, 8  # corrective motions after a reach
+_ORIENTATION_TOL = 0.01
+"""How far (radians) a :meth:`Sawyer.solve` solution may turn the flange from the pose asked
+for and still be kept among several starts."""
+
+
+def _angle(a, b) -> float:
+    """The angle (radians) between two orientations, quaternions (x, y, z, w)."""
+    return 2.0 * float(np.arccos(min(1.0, abs(float(np.dot(a, b))))))
 
 
 def flange_down(yaw: float, tilt: float = 0.0) -> tuple[float, ...]:
@@ -134,16 +142,47 @@ class Sawyer:
         """Joint positions (7,) putting the flange at ``position`` (3,), pointing down (turned by
         the quaternion ``orientation`` if given).
 
-        The IK starts from ``seed`` (7,), by default :attr:`rest`, so the answer does not depend
-        on where the arm happens to be (IK started from a folded or turned wrist can stall at a
-        joint limit). The arm ends where it was.
+        The IK starts from ``seed``, by default :attr:`rest`, so the answer does not depend on
+        where the arm happens to be (IK started from a folded or turned wrist can stall at a
+        joint limit). ``seed`` may hold several starts, shape (n, 7): each is tried in turn, and
+        the first solution within 1 mm and :data:`_ORIENTATION_TOL` of the pose is kept (else
+        the closest). The arm ends where it was.
         """
         start = self.q
-        self.reset(self.rest if seed is None else seed)
-        q = self.inverse_kinematics(np.asarray(position, float),
-                                    flange_down(0.0) if orientation is None else orientation)
+        position = np.asarray(position, float)
+        want = flange_down(0.0) if orientation is None else orientation
+        seeds = [self.rest] if seed is None else np.atleast_2d(np.asarray(seed, float))
+        best, best_err = None, np.inf
+        for s in seeds:
+            self.reset(s)
+            q = self.inverse_kinematics(position, want)
+            self.reset(q)
+            pos, orn = self.end_effector()
+            err = max(float(np.linalg.norm(pos - position)) / 1e-3,
+                      _angle(orn, want) / _ORIENTATION_TOL)
+            if err < best_err:
+                best, best_err = q, err
+            if err <= 1.0:
+                break
         self.reset(start)
-        return q
+        return best
+
+    def wrist_turns(self, q: np.ndarray, yaw: float) -> np.ndarray:
+        """Starts for :meth:`solve` (n, 7) turning the flange of configuration ``q`` (7,) by
+        ``yaw`` radians about its own axis (:func:`flange_down`'s ``yaw``): ``q`` with the last
+        joint, which turns the flange about that axis, at each of ``q[6] + yaw`` and its
+        turns by whole circles within the joint's limits, the smallest turn first. An IK
+        started from ``q`` itself turns the wrist by the shortest way, into its limit if that
+        way is out of reach.
+        """
+        q = np.asarray(q, float)
+        turns = yaw + 2 * np.pi * np.arange(-2, 3)
+        ends = q[6] + turns
+        keep = (ends >= self.lower[6]) & (ends <= self.upper[6])
+        order = np.argsort(np.abs(turns[keep]), kind="stable")
+        seeds = np.repeat(q[None], int(keep.sum()), axis=0)
+        seeds[:, 6] = ends[keep][order]
+        return seeds
 
     def reach(self, position, steps: int, *, orientation=None,
               seed: np.ndarray | None = None) -> float:

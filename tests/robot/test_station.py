@@ -197,6 +197,25 @@ def test_the_views_show_the_onion_from_every_side_and_from_below():
         assert st.step(PB).reach_error < 0.01
 
 
+def test_every_view_holds_the_onion_at_its_designed_pose():
+    # the flange at each pose's orientation, the onion's centre where the first view holds it:
+    # the wrist's own joint turns it, rather than an IK that stalls at the joint's limit
+    poses = inspection_poses(8)
+    with SawyerStation(GROUND_TRUTH, n_onions=2, n_blemished=1, seed=9209,
+                       difficulty="hard") as st:
+        st.step(C), st.step(P)
+        onion = st.belt.onions[st.focus]
+        st.motions.hold_up()
+        centre = None
+        for k in st.motions.show(onion, poses, []):
+            _, orn = st.arm.end_effector()
+            angle = 2 * np.arccos(min(1.0, abs(float(np.dot(orn, flange_down(*poses[k]))))))
+            assert angle < 0.01, (k, np.degrees(angle))
+            at = st.belt.position(onion.index)
+            centre = at if centre is None else centre
+            assert np.linalg.norm(at - centre) < 1e-3, k
+
+
 def test_the_poses_spread_around_the_onion_and_nest():
     poses = inspection_poses(8)
     assert inspection_poses(4) == poses[:4] and inspection_poses(1) == ((0.0, 0.0),)
