@@ -179,6 +179,9 @@ class Sawyer:
         turns = yaw + 2 * np.pi * np.arange(-2, 3)
         ends = q[6] + turns
         keep = (ends >= self.lower[6]) & (ends <= self.upper[6])
+        if not keep.any():  # the joint turns through more than a full circle: never here
+            raise ValueError(f"no turn of the wrist by {yaw!r} rad (whole circles apart) is "
+                             f"within its limits from {q[6]!r}")
         order = np.argsort(np.abs(turns[keep]), kind="stable")
         seeds = np.repeat(q[None], int(keep.sum()), axis=0)
         seeds[:, 6] = ends[keep][order]

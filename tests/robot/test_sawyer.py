@@ -52,3 +52,26 @@ def test_sawyer_loads_reaches_by_ik_and_grasps(world):
         p.stepSimulation(physicsClientId=world)
     dropped = np.array(p.getBasePositionAndOrientation(ball, physicsClientId=world)[0])
     assert dropped[2] == pytest.approx(0.04, abs=0.01)
+
+
+def test_a_turned_flange_is_solved_from_its_wrist_turned_within_the_joint_limits(world):
+    from robot.sawyer import Sawyer, _angle, flange_down
+
+    arm = Sawyer(world, base_position=(0.0, 0.0, 0.3))
+    target = np.array([0.55, 0.1, 0.45])
+    q = arm.solve(target)
+    near = q.copy()
+    near[6] = arm.upper[6] - 0.3  # a half turn the short way would cross the limit
+    seeds = arm.wrist_turns(near, np.pi)
+    turns = seeds[:, 6] - near[6]
+    assert np.all((seeds[:, 6] >= arm.lower[6]) & (seeds[:, 6] <= arm.upper[6]))
+    assert np.allclose(np.mod(turns - np.pi, 2 * np.pi), 0.0) and turns[0] == -np.pi
+    assert np.all(np.diff(np.abs(turns)) >= 0) and np.array_equal(seeds[:, :6], np.repeat(
+        near[None, :6], len(seeds), axis=0))
+    arm.reset(near)
+    _, start = arm.end_effector()
+    turned = np.array(p.multiplyTransforms([0, 0, 0], start, [0, 0, 0],
+                                           p.getQuaternionFromEuler([0, 0, np.pi]))[1])
+    arm.reset(arm.solve(arm.end_effector()[0], turned, seeds))
+    assert _angle(arm.end_effector()[1], turned) < 0.01
+    assert _angle(flange_down(0.0), flange_down(np.pi)) == pytest.approx(np.pi)
