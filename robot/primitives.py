@@ -31,7 +31,7 @@ import numpy as np
 
 from irl.domains.onion_sorting import Location
 from robot.belt import Belt, LineUpOnion, gate_stop_x
-from robot.sawyer import Sawyer, flange_down
+from robot.sawyer import Sawyer, flange_down, orientation_angle
 from robot.scene import GATE_X, StopGate
 from robot.state_map import BELT_TOP, BIN_CENTER, BIN_TOP, PICK_SPOT
 
@@ -63,12 +63,11 @@ def target_errors(arm: Sawyer) -> dict[Location, tuple[float, float]]:
     ``location -> (position error m, angle error rad)``. The arm is left where it was."""
     start = arm.q
     errors = {}
-    down = np.array(flange_down(0.0))
+    down = flange_down(0.0)
     for loc, target in ROBOT_TARGETS.items():
         arm.reset(arm.solve(target))
         pos, orn = arm.end_effector()
-        angle = 2 * np.arccos(min(1.0, abs(float(np.dot(orn, down)))))
-        errors[loc] = (float(np.linalg.norm(pos - target)), float(angle))
+        errors[loc] = (float(np.linalg.norm(pos - target)), orientation_angle(orn, down))
     arm.reset(start)
     return errors
 

@@ -18,7 +18,7 @@ import pybullet as p
 
 from robot.assets import sawyer_urdf
 
-__all__ = ["Sawyer", "flange_down"]
+__all__ = ["Sawyer", "flange_down", "orientation_angle"]
 
 logger = logging.getLogger(__name__)
 
@@ -31,7 +31,7 @@ _ORIENTATION_TOL = 0.01
 for and still be kept among several starts."""
 
 
-def _angle(a, b) -> float:
+def orientation_angle(a, b) -> float:
     """The angle (radians) between two orientations, quaternions (x, y, z, w)."""
     return 2.0 * float(np.arccos(min(1.0, abs(float(np.dot(a, b))))))
 
@@ -159,7 +159,7 @@ class Sawyer:
             self.reset(q)
             pos, orn = self.end_effector()
             err = max(float(np.linalg.norm(pos - position)) / 1e-3,
-                      _angle(orn, want) / _ORIENTATION_TOL)
+                      orientation_angle(orn, want) / _ORIENTATION_TOL)
             if err < best_err:
                 best, best_err = q, err
             if err <= 1.0:

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from onionsort.perception_models import PerceptionModels
+from onionsort.stages.base import write_json
 from onionsort.stages.calibrate import SessionCameras, detector_map
 from perception.camera_shift import REFERENCE_TEMPERATURE_K
 
@@ -75,9 +76,7 @@ def main(argv: list[str] | None = None) -> int:
                 camera = detector_map(models, args.data, "all", image_map=image_map,
                                       views=["camera"])["camera"]
                 r[key] = {k: camera[k] for k in ("map50", "map50_any_class")}
-                tmp = args.out.with_suffix(".partial")
-                tmp.write_text(json.dumps(res, indent=1))
-                tmp.replace(args.out)
+                write_json(args.out, res)
                 print(m, key, r[key], flush=True)
         for part in PARTS:
             for metric in ("map50", "map50_any_class"):

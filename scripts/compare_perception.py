@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from onionsort.stages.base import write_json
 from onionsort.stages.calibrate import perception_figures, shift_summary
 
 
@@ -142,9 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {r['figure']:<70} {r['base_mean']:.3f}/{r['base_drop']:+.3f}  "
                   f"{r['candidate_mean']:.3f}/{r['candidate_drop']:+.3f}")
     if args.json:
-        tmp = args.json.with_suffix(".partial")
-        tmp.write_text(json.dumps({"unchanged": rows, "camera_shift": shifted}, indent=1))
-        tmp.replace(args.json)
+        write_json(args.json, {"unchanged": rows, "camera_shift": shifted})
     return 0
 
 

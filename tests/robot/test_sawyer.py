@@ -55,7 +55,7 @@ def test_sawyer_loads_reaches_by_ik_and_grasps(world):
 
 
 def test_a_turned_flange_is_solved_from_its_wrist_turned_within_the_joint_limits(world):
-    from robot.sawyer import Sawyer, _angle, flange_down
+    from robot.sawyer import Sawyer, flange_down, orientation_angle
 
     arm = Sawyer(world, base_position=(0.0, 0.0, 0.3))
     target = np.array([0.55, 0.1, 0.45])
@@ -68,10 +68,13 @@ def test_a_turned_flange_is_solved_from_its_wrist_turned_within_the_joint_limits
     assert np.allclose(np.mod(turns - np.pi, 2 * np.pi), 0.0) and turns[0] == -np.pi
     assert np.all(np.diff(np.abs(turns)) >= 0) and np.array_equal(seeds[:, :6], np.repeat(
         near[None, :6], len(seeds), axis=0))
+    centred = q.copy()
+    centred[6] = 0.0  # two turns by 2 rad are within the limits: +2, then 2 - 2 pi
+    np.testing.assert_allclose(arm.wrist_turns(centred, 2.0)[:, 6], [2.0, 2.0 - 2 * np.pi])
     arm.reset(near)
     _, start = arm.end_effector()
     turned = np.array(p.multiplyTransforms([0, 0, 0], start, [0, 0, 0],
                                            p.getQuaternionFromEuler([0, 0, np.pi]))[1])
     arm.reset(arm.solve(arm.end_effector()[0], turned, seeds))
-    assert _angle(arm.end_effector()[1], turned) < 0.01
-    assert _angle(flange_down(0.0), flange_down(np.pi)) == pytest.approx(np.pi)
+    assert orientation_angle(arm.end_effector()[1], turned) < 0.01
+    assert orientation_angle(flange_down(0.0), flange_down(np.pi)) == pytest.approx(np.pi)
