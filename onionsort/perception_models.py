@@ -14,9 +14,11 @@ calibration and the sessions it is used with can be checked to come from the sam
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import hashlib
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from onionsort.configs.common import check_device, sorting_threshold
@@ -32,6 +34,7 @@ __all__ = [
     "PerceptionModels",
     "model_mismatch",
     "read_fused_calibration",
+    "read_level_calibrations",
     "resolve_device",
     "torch_threads",
 ]
@@ -44,8 +47,10 @@ ROBOT_INSPECTION_FILE = "robot_" + INSPECTION_FILE  # the Sawyer's own, where th
 CALIBRATION_FILE = "calibration.json"
 ROBOT_FUSION_FILE = "robot_fusion_calibration.json"
 """Beside the robot's inspection classifier: the calibration of its fused P(blemished), per
-fusion rule (:func:`onionsort.stages.inspection.fit_fused_calibration`). Not among the hashed
-model files: the sorter's observation model (``calibration.json``) does not read it."""
+fusion rule (:func:`onionsort.stages.inspection.fit_fused_calibration`), and, where it was
+fitted by level (``onionsort train robot-fusion --by-level``), each difficulty level's own
+(:meth:`PerceptionModels.at_level`). Not among the hashed model files: the sorter's observation
+model (``calibration.json``) does not read it."""
 #: The keys of :meth:`PerceptionModels.describe` that identify the models.
 HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
 _FILES = {"state_classifier_sha256": CLASSIFIER_FILE, "detector_sha256": DETECTOR_FILE,
@@ -101,6 +106,9 @@ class PerceptionModels:
     inspection: object = None
     device: str = "cpu"
     robot_inspection: object = None
+    #: Per difficulty level, the robot's fused calibration fitted on that level's own onions
+    #: (:func:`read_level_calibrations`); :meth:`at_level` applies one.
+    robot_fusion_levels: dict = field(default_factory=dict)
 
     @classmethod
     def load_cached(cls, folder: Path | str | None = None, device: str = "auto"
@@ -144,16 +152,38 @@ class PerceptionModels:
         robot = folder / ROBOT_INSPECTION_FILE
         robot_inspection = (InspectionClassifier.load(robot, device=where) if robot.is_file()
                             else None)
+        levels = {}
         if robot_inspection is not None and (folder / ROBOT_FUSION_FILE).is_file():
             for rule, calibration in read_fused_calibration(folder / ROBOT_FUSION_FILE).items():
                 robot_inspection.set_fused_calibration(rule, calibration)
+            levels = read_level_calibrations(folder / ROBOT_FUSION_FILE)
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
                    detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
                    hashes=_hashes(folder),
                    inspection=InspectionClassifier.load(folder / INSPECTION_FILE,
                                                         device=where),
                    device=str(where),
-                   robot_inspection=robot_inspection)
+                   robot_inspection=robot_inspection, robot_fusion_levels=levels)
+
+    def at_level(self, level) -> PerceptionModels:
+        """These models on a line of difficulty ``level`` (a level's name or a
+        :class:`robot.difficulty.Difficulty`): the Sawyer's fused P(blemished) calibrated by
+        that level's own calibration where :data:`ROBOT_FUSION_FILE` holds one, else these
+        models as loaded (the calibration pooled over every level). Only how sure the fused
+        probability is changes; the networks are shared, not copied."""
+        name = getattr(level, "name", level)
+        own = self.robot_fusion_levels.get(name)
+        if own is None or self.robot_inspection is None:
+            return self
+        robot = copy.copy(self.robot_inspection)
+        robot.fused_calibration = {**self.robot_inspection.fused_calibration, **own}
+        return dataclasses.replace(self, robot_inspection=robot)
+
+    def fused_calibration_of(self, level) -> str:
+        """Which calibration :meth:`at_level` applies on ``level``: the level's name, or
+        ``"pooled"``."""
+        name = getattr(level, "name", level)
+        return name if name in self.robot_fusion_levels else "pooled"
 
     @staticmethod
     def check_folder(folder: Path | str | None = None) -> Path:
@@ -270,7 +300,8 @@ def _hashes(folder: Path) -> dict[str, str]:
 
 def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float, str]]:
     """The map ``(low, high, form)`` of each fusion rule in a :data:`ROBOT_FUSION_FILE`
-    (:func:`perception.fusion.check_calibration`; ``"slopes"`` where the file names no form).
+    (:func:`perception.fusion.check_calibration`; ``"slopes"`` where the file names no form):
+    the calibration pooled over every level it was fitted on.
 
     Raises
     ------
@@ -279,21 +310,55 @@ def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float, st
     """
     import json
 
-    from perception.fusion import FUSION_RULES, check_calibration
-
     path = Path(path)
     try:
         rules = json.loads(path.read_text())["rules"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
+    return _rules(path, rules, "")
+
+
+def _rules(path: Path, rules, where: str) -> dict[str, tuple[float, float, str]]:
+    """The checked calibrations of one ``rules`` entry of the file ``path`` (``where``: which
+    entry, for the error)."""
+    from perception.fusion import FUSION_RULES, check_calibration
+
+    at = f" ({where})" if where else ""
+    try:
         out = {rule: check_calibration((value["low"], value["high"],
                                         value.get("form", "slopes")))
                for rule, value in rules.items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path} is not a fused-probability calibration{at} ({exc})"
+                         ) from None
     unknown = sorted(set(out) - set(FUSION_RULES))
     if unknown:
-        raise ValueError(f"{path} names unknown fusion rules {unknown}; the rules are "
+        raise ValueError(f"{path} names unknown fusion rules {unknown}{at}; the rules are "
                          f"{FUSION_RULES}")
     return out
+
+
+def read_level_calibrations(path: Path | str) -> dict[str, dict[str, tuple[float, float, str]]]:
+    """Per difficulty level, the map ``(low, high, form)`` of each fusion rule fitted on that
+    level's own onions, from a :data:`ROBOT_FUSION_FILE` (``{}`` where it was not fitted by
+    level).
+
+    Raises
+    ------
+    ValueError
+        Naming the file and the level, if an entry is not such a calibration.
+    """
+    import json
+
+    path = Path(path)
+    try:
+        levels = json.loads(path.read_text()).get("levels", {})
+        if not isinstance(levels, dict):
+            raise TypeError(f"'levels' is a {type(levels).__name__}, not a mapping")
+    except (OSError, ValueError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
+    return {str(level): _rules(path, rules, f"level {level!r}")
+            for level, rules in levels.items()}
 
 
 def model_mismatch(a: dict | None, b: dict | None) -> list[str]:

@@ -82,10 +82,12 @@ def _fake_models(detector):
 
     torch.manual_seed(0)
     classifier = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)))
-    return SimpleNamespace(
+    models = SimpleNamespace(
         detector=detector,
         inspector=lambda rule=None, threshold=0.5, camera="sorter": Inspector(
             detector, classifier, rule=rule, threshold=threshold))
+    models.at_level = lambda level: models  # one calibration for every level
+    return models
 
 
 def test_the_rerun_log_draws_the_inspections_boxes_without_running_the_detector_again(
@@ -117,6 +119,11 @@ def test_the_experts_policy_runs_without_a_learning_run(tmp_path, capsys):
     assert not saved["every_view"]
     assert saved["views_taken"] == sum(o["views"] for o in saved["onions"])
     assert saved["threshold"] == 0.5 and saved["fusion"] in ("log-odds", "noisy-or")
+    # the robot's P(blemished) calibrated for a line of the level it ran at, as recorded
+    from onionsort.stages.models import PerceptionModels
+
+    paper = PerceptionModels.load(device="cpu").at_level("paper").robot_inspection
+    assert saved["fused_calibration"] == list(paper.fused_calibration[saved["fusion"]])
     assert len(saved["onions"]) == 3 and (out / "evaluation.mcap").is_file()
     for onion in saved["onions"]:  # every inspected onion carries the probability behind it
         assert (onion["perceived"] is None) == (onion["p_blemished"] is None)

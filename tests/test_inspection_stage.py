@@ -115,3 +115,39 @@ def test_the_clis_inspection_cameras_are_the_stages():
     from onionsort.stages.inspection import INSPECTION_CAMERAS
 
     assert _args.INSPECTION_CAMERAS == INSPECTION_CAMERAS
+
+
+def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_path):
+    import shutil
+
+    from onionsort.configs.inspection import FusionCalibrationConfig
+    from onionsort.stages.inspection import fit_robot_fusion_stage
+    from onionsort.stages.models import DEFAULT_MODELS, ROBOT_FUSION_FILE
+
+    folder = tmp_path / "models"
+    shutil.copytree(DEFAULT_MODELS, folder)
+    plain = fit_robot_fusion_stage(FusionCalibrationConfig(data=dataset, out=tmp_path / "one",
+                                                           models=folder, device="cpu"))
+    assert plain["format"] == 1 and "levels" not in plain
+    doc = fit_robot_fusion_stage(FusionCalibrationConfig(data=dataset, out=folder,
+                                                         models=folder, device="cpu",
+                                                         by_level=True))
+    assert doc["format"] == 2 and set(doc["levels"]) == {"clean"}  # the data's one level
+    assert doc["levels"]["clean"] == doc["rules"] == plain["rules"]  # the same onions
+    models = PerceptionModels.load(folder, "cpu")
+    assert models.at_level("clean").robot_inspection.fused_calibration == \
+        models.robot_inspection.fused_calibration
+    report = measure_inspection(models, dataset, "all", views=3)
+    assert report["levels"]["clean"]["robot"]["fused_calibration"] == "clean"
+    # the measurement on a level's onions applies that level's calibration: a sharper one
+    # written for `clean` moves the robot's fused ECE, the pooled one left as it was
+    saved = json.loads((folder / ROBOT_FUSION_FILE).read_text())
+    for fit in saved["levels"]["clean"].values():
+        fit.update(low=fit["low"] * 4, high=fit["high"] * 4)
+    (folder / ROBOT_FUSION_FILE).write_text(json.dumps(saved))
+    sharper = measure_inspection(PerceptionModels.load(folder, "cpu"), dataset, "all", views=3)
+    before = report["levels"]["clean"]["robot"]["fused"]
+    after = sharper["levels"]["clean"]["robot"]["fused"]
+    for rule in before:
+        assert after[rule]["accuracy"] == before[rule]["accuracy"]  # the same calls
+        assert after[rule]["ece"] != pytest.approx(before[rule]["ece"])

@@ -85,13 +85,16 @@ ROBOT_FUSION = """``onionsort train robot-fusion``: calibrate the robot's fused 
 
 It trains no network: it fits a temperature on each side of the fused evidence's 0 (monotone,
 so no call changes) on held-out robot onions, and writes ``robot_fusion_calibration.json``
-into ``--out``, which the robot's inspection then applies. Give it data that the calibration
-is not then measured on.
+into ``--out``, which the robot's inspection then applies. With ``--by-level`` each
+difficulty level in the data fits one of its own too, which the robot applies on a line of that
+level (the pooled one elsewhere). Give it data that the calibration is not then measured on.
 
 Examples
 --------
     onionsort train robot-fusion --data runs/heldout-a --data runs/heldout-b \\
         --models runs/perception --out runs/perception
+    onionsort train robot-fusion --data runs/fit-clean --data runs/fit-hard --by-level \\
+        --out runs/perception
     onionsort train robot-fusion --data runs/heldout-a --split val --views 4 --out runs/models
 """
 

@@ -101,6 +101,10 @@ class FusionCalibrationConfig:
     form: str = option("log", choices=CALIBRATION_FORMS,
                        help="log: a slope each side of the evidence 0 on log(1 + |evidence|); "
                             "slopes: on the evidence itself")
+    by_level: bool = option(False, help="also fit each difficulty level's own calibration on "
+                                        "that level's onions (every level needs good and "
+                                        "blemished ones); the robot on a line of that level "
+                                        "applies it, the pooled one elsewhere")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
                             "folder, for the robot to apply it)")
     models: Path | None = common.models()

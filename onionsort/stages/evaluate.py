@@ -146,7 +146,7 @@ def evaluate(config: EvaluateConfig, models=None):
     from robot.station_cameras import ROBOT_INSPECTION_CAMERA
     from robot.world import camera_pose
 
-    classify, inspector = _classifier(config, models)
+    classify, inspector = _classifier(config, models, config.difficulty)
     # the boxes the inspection found, for the Rerun log
     detect = None if inspector is None else inspector.detections
 

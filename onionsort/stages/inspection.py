@@ -408,12 +408,15 @@ def fit_side_slopes(evidence: np.ndarray, y: np.ndarray, form: str = "slopes"
     return slopes[0], slopes[1]
 
 
-def _write_fused_calibration(folder: Path, fitted: dict, provenance: dict) -> dict:
-    """Write :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``folder``; return
-    what was written."""
+def _write_fused_calibration(folder: Path, fitted: dict, provenance: dict,
+                             levels: dict | None = None) -> dict:
+    """Write :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``folder`` (``levels``:
+    each level's own fit, where it was fitted by level); return what was written."""
     from onionsort.stages.models import ROBOT_FUSION_FILE
 
-    doc = {"format": 1, "rules": fitted, **provenance}
+    doc = {"format": 2 if levels else 1, "rules": fitted, **provenance}
+    if levels:
+        doc["levels"] = levels
     write_json(Path(folder) / ROBOT_FUSION_FILE, doc)
     return doc
 
@@ -424,7 +427,16 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
     cropped round the detector's box, as at inference) and write
     :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``config.out``, which
     :meth:`~onionsort.stages.models.PerceptionModels.load` applies to the robot's classifier.
-    Returns what was written."""
+    With ``config.by_level`` each difficulty level's onions fit a calibration of its own too,
+    which :meth:`~onionsort.stages.models.PerceptionModels.at_level` applies on a line of that
+    level. Returns what was written.
+
+    Raises
+    ------
+    ValueError
+        If the data hold no robot view, no onion of one class, or (by level) a level whose
+        onions are all of one class.
+    """
     from onionsort.stages.models import PerceptionModels
     from perception.fusion import FUSION_RULES
 
@@ -448,13 +460,21 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
                          f"in split {config.split!r}; render them with `onionsort dataset "
                          "--robot-onions N`")
     z = clf.logits(views.crops)
-    fitted = fit_fused_calibration(clf, views, {rule: clf.calibrated(z, rule)
-                                                for rule in FUSION_RULES}, config.form)
+    p = {rule: clf.calibrated(z, rule) for rule in FUSION_RULES}
+    fitted = fit_fused_calibration(clf, views, p, config.form)
+    levels = {}
+    for level in sorted(set(views.level.tolist()), key=_level_order) if config.by_level else ():
+        at = views.level == level
+        try:
+            levels[str(level)] = fit_fused_calibration(
+                clf, views.subset(at), {rule: q[at] for rule, q in p.items()}, config.form)
+        except ValueError as exc:
+            raise ValueError(f"level {level!r}: {exc}") from None
     Path(config.out).mkdir(parents=True, exist_ok=True)
     return _write_fused_calibration(config.out, fitted, {
         "fitted_on": "held-out robot onions", "data": [str(d) for d in config.data],
         "split": config.split, "views": shown, "form": config.form,
-        "models": models.describe()})
+        "models": models.describe()}, levels)
 
 
 def _fused_scores(classifier, views: InspectionViews, rule: str, p: np.ndarray) -> dict:
@@ -532,8 +552,12 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                                   == (data.classes[found & (data.view == v)] == 1))
                     for v in sorted(set(data.view[found]))}
             subset = data.subset(mine)
+            reader = readers[source]
+            if source == "robot":  # its fused probability calibrated for the level's line
+                reader = models.at_level(str(level)).inspection_for("robot")
+                row["fused_calibration"] = models.fused_calibration_of(str(level))
             for rule in FUSION_RULES:
-                fused, y, _ = _fused(readers[source], subset, rule, p_view[rule][mine])
+                fused, y, _ = _fused(reader, subset, rule, p_view[rule][mine])
                 if not len(y):
                     continue
                 called = fused >= threshold

@@ -225,14 +225,17 @@ def evaluate_lineup(config: EvaluateConfig, actions: np.ndarray, doc: dict,
     return pooled, summary
 
 
-def _classifier(config: EvaluateConfig, models=None):
+def _classifier(config: EvaluateConfig, models=None, level: str | None = None):
     """``(classify, inspector)``: what reads the views, and the detector's inspection (None
-    for ground truth)."""
+    for ground truth); the robot's P(blemished) calibrated for a line of difficulty ``level``
+    (:meth:`~onionsort.stages.models.PerceptionModels.at_level`; None: the pooled
+    calibration, as on a recorded line-up, whose level is not known)."""
     if config.ground_truth_inspection:
         return "ground-truth", None
     from onionsort.stages.models import PerceptionModels
 
     loaded = PerceptionModels.load(config.models, config.device) if models is None else models
+    loaded = loaded.at_level(level)
     inspector = loaded.inspector(rule=config.fusion, threshold=config.threshold,
                                  camera="robot")
     return inspector, inspector
@@ -245,7 +248,15 @@ def _inspection_summary(config: EvaluateConfig, inspector) -> dict:
             "inspection_views": config.inspection_views, "every_view": config.every_view,
             "defer_below": config.defer_below,
             "threshold": None if inspector is None else inspector.threshold,
-            "fusion": None if inspector is None else inspector.rule}
+            "fusion": None if inspector is None else inspector.rule,
+            "fused_calibration": None if inspector is None else _calibration(inspector)}
+
+
+def _calibration(inspector) -> list | None:
+    """The calibration ``[low, high, form]`` the inspector's fused probability carries (None:
+    uncalibrated)."""
+    applied = inspector.classifier.fused_calibration.get(inspector.rule)
+    return None if applied is None else list(applied)
 
 
 class LineupRecorder:

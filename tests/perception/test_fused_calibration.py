@@ -178,6 +178,48 @@ def test_the_robots_inspection_applies_the_calibration_its_models_folder_holds(t
         assert "\n" not in str(err.value)
 
 
+def test_a_line_of_a_level_applies_that_levels_own_calibration(tmp_path):
+    from onionsort.stages.models import DEFAULT_MODELS, ROBOT_FUSION_FILE, PerceptionModels
+    from robot.difficulty import DIFFICULTY_LEVELS
+
+    folder = tmp_path / "models"
+    shutil.copytree(DEFAULT_MODELS, folder)
+    pooled, hard = (2.0, 0.5, "slopes"), (0.5, 3.0, "log")
+    doc = {"format": 2, "rules": {"noisy-or": {"low": 2.0, "high": 0.5}},
+           "levels": {"hard": {"noisy-or": {"low": 0.5, "high": 3.0, "form": "log"}}}}
+    (folder / ROBOT_FUSION_FILE).write_text(json.dumps(doc))
+    models = PerceptionModels.load(folder, "cpu")
+    assert models.robot_inspection.fused_calibration == {"noisy-or": pooled}
+    at_hard = models.at_level("hard")
+    assert at_hard.robot_inspection.fused_calibration == {"noisy-or": hard}
+    assert models.robot_inspection.fused_calibration == {"noisy-or": pooled}  # left as it was
+    assert at_hard.robot_inspection.net is models.robot_inspection.net  # shared, not copied
+    assert at_hard.inspection is models.inspection and at_hard.detector is models.detector
+    assert models.at_level(DIFFICULTY_LEVELS["hard"]).robot_inspection.fused_calibration \
+        == {"noisy-or": hard}
+    assert models.at_level("clean") is models and models.at_level(None) is models
+    assert (models.fused_calibration_of("hard"), models.fused_calibration_of("clean")) == (
+        "hard", "pooled")
+    views = [0.02, 0.9, 0.05]  # the same call, as sure as the level's map makes it
+    evidence = log_odds(views, "noisy-or", train_prior=models.robot_inspection.rot_prior,
+                        visibility=models.robot_inspection.visibility)
+    got = {name: m.inspector(camera="robot", rule="noisy-or").verdict(views)
+           for name, m in (("pooled", models), ("hard", at_hard))}
+    assert got["pooled"].p_blemished == pytest.approx(1 / (1 + np.exp(-0.5 * evidence)))
+    assert got["hard"].p_blemished == pytest.approx(
+        1 / (1 + np.exp(-3.0 * np.log1p(evidence))))
+    assert got["pooled"].prediction == got["hard"].prediction
+    # a level's entry that is not a calibration: one line naming the file and the level
+    for levels in ({"hard": {"noisy-or": {"low": -1.0, "high": 1.0}}}, [1],
+                   {"hard": {"max": {"low": 1.0, "high": 1.0}}}):
+        (folder / ROBOT_FUSION_FILE).write_text(json.dumps({**doc, "levels": levels}))
+        with pytest.raises(ValueError, match=ROBOT_FUSION_FILE) as err:
+            PerceptionModels.load(folder, "cpu")
+        assert "\n" not in str(err.value)
+        if isinstance(levels, dict):
+            assert "level 'hard'" in str(err.value)
+
+
 def test_the_log_form_lifts_weak_evidence_of_a_blemish_that_one_slope_hedges():
     """Good onions near the evidence of 5 clean views, blemished ones from a weak view to many
     strong ones, every call right (the robot at `hard`): one slope above 0 must temper the
