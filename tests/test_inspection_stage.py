@@ -117,7 +117,7 @@ def test_the_clis_inspection_cameras_are_the_stages():
     assert _args.INSPECTION_CAMERAS == INSPECTION_CAMERAS
 
 
-def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_path):
+def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_path, capsys):
     import shutil
 
     from onionsort.configs.inspection import FusionCalibrationConfig
@@ -129,9 +129,13 @@ def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_
     plain = fit_robot_fusion_stage(FusionCalibrationConfig(data=dataset, out=tmp_path / "one",
                                                            models=folder, device="cpu"))
     assert plain["format"] == 1 and "levels" not in plain
-    doc = fit_robot_fusion_stage(FusionCalibrationConfig(data=dataset, out=folder,
-                                                         models=folder, device="cpu",
-                                                         by_level=True))
+    from onionsort.cli import main
+
+    assert main(["train", "robot-fusion", "--data", str(dataset), "--by-level", "--models",
+                 str(folder), "--out", str(folder), "--device", "cpu"]) == 0
+    said = capsys.readouterr().out.splitlines()
+    assert said[0] == "all levels" and "clean" in said  # the pooled fit, then each level's
+    doc = json.loads((folder / ROBOT_FUSION_FILE).read_text())
     assert doc["format"] == 2 and set(doc["levels"]) == {"clean"}  # the data's one level
     assert doc["levels"]["clean"] == doc["rules"] == plain["rules"]  # the same onions
     models = PerceptionModels.load(folder, "cpu")

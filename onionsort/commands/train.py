@@ -156,11 +156,12 @@ def run_robot_fusion(args: argparse.Namespace) -> int:
     from onionsort.stages.inspection import fit_robot_fusion_stage
 
     doc = fit_robot_fusion_stage(config_from_args(FusionCalibrationConfig, args))
-    for rule, fit in doc["rules"].items():
-        print(f"  fused by {rule}: {fit['form']} {fit['low']:.3f} below 0, {fit['high']:.3f} "
-              f"above, on "
-              f"{fit['onions']} onions "
-              f"({fit['blemished']} blemished); ECE here {fit['ece_before']:.3f} -> "
-              f"{fit['ece_after']:.3f}")
+    for where, rules in (("all levels", doc["rules"]), *doc.get("levels", {}).items()):
+        if "levels" in doc:
+            print(where)
+        for rule, fit in rules.items():
+            print(f"  fused by {rule}: {fit['form']} {fit['low']:.3f} below 0, "
+                  f"{fit['high']:.3f} above, on {fit['onions']} onions ({fit['blemished']} "
+                  f"blemished); ECE here {fit['ece_before']:.3f} -> {fit['ece_after']:.3f}")
     print(f"wrote {args.out / 'robot_fusion_calibration.json'}")
     return 0
