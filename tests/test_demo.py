@@ -112,15 +112,16 @@ def test_quick_demo_runs_end_to_end(quick_demo, capsys):
                 f"{fn} | {precision:.3f}") in said
     assert "| mmap-birl | paper (physical robot) | 23 | 2 | 18 | 7 |" in said
 
-    # the Sawyer sorted with the policy of model.json: sorting again with it, seed and models
-    # as the demo did, gives the same onions the same fates
+    # the Sawyer sorted with the policy of model.json: sorting again with it, seed, models and
+    # the calibration of its level as the demo did, gives the same onions the same fates
     from onionsort.stages.models import PerceptionModels
     from robot.evaluation import evaluate_policy
 
     model = json.loads((out / "mmap-birl" / "model.json").read_text())
     again = evaluate_policy(np.array(model["policy_indices"]), n_onions=size["onions"],
                             n_blemished=size["blemished"], seed=results["seed"],
-                            classify=PerceptionModels.load().inspector(camera="robot"))
+                            classify=PerceptionModels.load().at_level(
+                                results["difficulty"]).inspector(camera="robot"))
     evaluation = json.loads((out / "mmap-birl" / "evaluation.json").read_text())
     assert [o.to_dict() for o in again.onions] == evaluation["onions"]
 
