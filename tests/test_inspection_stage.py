@@ -155,3 +155,28 @@ def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_
     for rule in before:
         assert after[rule]["accuracy"] == before[rule]["accuracy"]  # the same calls
         assert after[rule]["ece"] != pytest.approx(before[rule]["ece"])
+
+
+def test_robot_fusion_by_level_refuses_a_level_whose_onions_are_one_class(dataset, tmp_path,
+                                                                          monkeypatch):
+    import dataclasses
+
+    import numpy as np
+
+    from onionsort.configs.inspection import FusionCalibrationConfig
+    from onionsort.stages import inspection as stage
+
+    read = stage.inspection_views
+
+    def good_ones_at_hard(*args, **kwargs):  # good onions `hard`, blemished `clean`: each one class
+        views = read(*args, **kwargs)
+        return dataclasses.replace(views, level=np.where(views.classes == 0, "hard",
+                                                         views.level))
+
+    monkeypatch.setattr(stage, "inspection_views", good_ones_at_hard)
+    config = FusionCalibrationConfig(data=dataset, out=tmp_path, device="cpu")
+    stage.fit_robot_fusion_stage(config)  # pooled, both classes: fitted
+    with pytest.raises(ValueError, match=r"level '(clean|hard)': .*good and blemished onions"
+                       ) as err:
+        stage.fit_robot_fusion_stage(dataclasses.replace(config, by_level=True))
+    assert "\n" not in str(err.value)
