@@ -34,7 +34,6 @@ __all__ = [
     "PerceptionModels",
     "model_mismatch",
     "read_fused_calibration",
-    "read_level_calibrations",
     "resolve_device",
     "torch_threads",
 ]
@@ -107,7 +106,7 @@ class PerceptionModels:
     device: str = "cpu"
     robot_inspection: object = None
     #: Per difficulty level, the robot's fused calibration fitted on that level's own onions
-    #: (:func:`read_level_calibrations`); :meth:`at_level` applies one.
+    #: (the file's ``levels``); :meth:`at_level` applies one.
     robot_fusion_levels: dict = field(default_factory=dict)
 
     @classmethod
@@ -154,9 +153,9 @@ class PerceptionModels:
                             else None)
         levels = {}
         if robot_inspection is not None and (folder / ROBOT_FUSION_FILE).is_file():
-            for rule, calibration in read_fused_calibration(folder / ROBOT_FUSION_FILE).items():
+            pooled, levels = _read_fusion_file(folder / ROBOT_FUSION_FILE)
+            for rule, calibration in pooled.items():
                 robot_inspection.set_fused_calibration(rule, calibration)
-            levels = read_level_calibrations(folder / ROBOT_FUSION_FILE)
         return cls(classifier=StateClassifier.load(folder / CLASSIFIER_FILE, device=where),
                    detector=Detector.load(folder / DETECTOR_FILE, device=where), folder=folder,
                    hashes=_hashes(folder),
@@ -171,8 +170,7 @@ class PerceptionModels:
         that level's own calibration where :data:`ROBOT_FUSION_FILE` holds one, else these
         models as loaded (the calibration pooled over every level). Only how sure the fused
         probability is changes; the networks are shared, not copied."""
-        name = getattr(level, "name", level)
-        own = self.robot_fusion_levels.get(name)
+        own = self.robot_fusion_levels.get(_level_name(level))
         if own is None or self.robot_inspection is None:
             return self
         robot = copy.copy(self.robot_inspection)
@@ -182,7 +180,7 @@ class PerceptionModels:
     def fused_calibration_of(self, level) -> str:
         """Which calibration :meth:`at_level` applies on ``level``: the level's name, or
         ``"pooled"``."""
-        name = getattr(level, "name", level)
+        name = _level_name(level)
         return name if name in self.robot_fusion_levels else "pooled"
 
     @staticmethod
@@ -308,14 +306,32 @@ def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float, st
     ValueError
         Naming the file, if it is not such a file or a calibration in it is not monotone.
     """
+    return _read_fusion_file(path)[0]
+
+
+def _read_fusion_file(path: Path | str) -> tuple[dict, dict[str, dict]]:
+    """``(pooled, levels)`` of a :data:`ROBOT_FUSION_FILE`, read once: the pooled maps per
+    fusion rule (:func:`read_fused_calibration`) and, per difficulty level, the maps fitted on
+    that level's own onions (``{}`` where it was not fitted by level).
+
+    Raises
+    ------
+    ValueError
+        Naming the file (and the level), if it or an entry of it is not such a calibration.
+    """
     import json
 
     path = Path(path)
     try:
-        rules = json.loads(path.read_text())["rules"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        doc = json.loads(path.read_text())
+        rules, levels = doc["rules"], doc.get("levels", {})
+        if not isinstance(levels, dict):
+            raise TypeError(f"'levels' is a {type(levels).__name__}, not a mapping")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
-    return _rules(path, rules, "")
+    return (_rules(path, rules, ""),
+            {str(level): _rules(path, entry, f"level {level!r}")
+             for level, entry in levels.items()})
 
 
 def _rules(path: Path, rules, where: str) -> dict[str, tuple[float, float, str]]:
@@ -338,27 +354,9 @@ def _rules(path: Path, rules, where: str) -> dict[str, tuple[float, float, str]]
     return out
 
 
-def read_level_calibrations(path: Path | str) -> dict[str, dict[str, tuple[float, float, str]]]:
-    """Per difficulty level, the map ``(low, high, form)`` of each fusion rule fitted on that
-    level's own onions, from a :data:`ROBOT_FUSION_FILE` (``{}`` where it was not fitted by
-    level).
-
-    Raises
-    ------
-    ValueError
-        Naming the file and the level, if an entry is not such a calibration.
-    """
-    import json
-
-    path = Path(path)
-    try:
-        levels = json.loads(path.read_text()).get("levels", {})
-        if not isinstance(levels, dict):
-            raise TypeError(f"'levels' is a {type(levels).__name__}, not a mapping")
-    except (OSError, ValueError, TypeError, AttributeError) as exc:
-        raise ValueError(f"{path} is not a fused-probability calibration ({exc})") from None
-    return {str(level): _rules(path, rules, f"level {level!r}")
-            for level, rules in levels.items()}
+def _level_name(level) -> str | None:
+    """A difficulty level's name, from its name or a :class:`robot.difficulty.Difficulty`."""
+    return getattr(level, "name", level)
 
 
 def model_mismatch(a: dict | None, b: dict | None) -> list[str]:
