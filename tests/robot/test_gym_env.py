@@ -219,7 +219,8 @@ def test_steps_need_a_reset_and_a_valid_action():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_rollout_matches_onionsort_evaluate_with_the_detector(tmp_path, seed):
     """The acceptance check end to end: the shipped models inspect, on a hard station, and
-    ``onionsort evaluate`` records to Rerun (its default, which renders every step)."""
+    ``onionsort evaluate`` records to Rerun (its default, which renders every step). The env
+    takes the level's fused calibration, as ``evaluate --difficulty hard`` does."""
     from onionsort.stages.evaluate import EvaluateConfig, evaluate
     from onionsort.stages.models import PerceptionModels
 
@@ -230,7 +231,7 @@ def test_the_rollout_matches_onionsort_evaluate_with_the_detector(tmp_path, seed
     expected, _ = evaluate(EvaluateConfig(run=tmp_path, onions=4, blemished=2, seed=seed,
                                           difficulty="hard"), models=models)
     env = gymnasium.make("onionsort/Sorting-v0", n_onions=4, n_blemished=2, difficulty="hard",
-                         classify=models.inspector(camera="robot"))
+                         classify=models.at_level("hard").inspector(camera="robot"))
     try:
         _, infos, _, _ = rollout(env, actions, seed)
     finally:
