@@ -157,6 +157,7 @@ def _checkpoint(path: Path) -> None:
 def _check_tree(folder: Path, *, recoverable_sessions: bool = False) -> dict[str, int]:
     """Check every file under ``folder``; count them by what they were."""
     from onionsort.stages.learn import load_policy
+    from recordings.labels.sorting_csv import read_tally
 
     seen: dict[str, int] = {}
     for path in sorted(folder.rglob("*")):
@@ -183,6 +184,12 @@ def _check_tree(folder: Path, *, recoverable_sessions: bool = False) -> dict[str
             elif path.name == "evaluation.json":
                 assert len(doc["onions"]) == doc["n_onions"]
                 assert doc["tp"] + doc["fp"] + doc["tn"] + doc["fn"] == doc["n_onions"]
+        elif path.name == "tally.csv":  # one row an onion; written before evaluation.json
+            kind = "tally"
+            rows = read_tally(path)
+            if (path.parent / "evaluation.json").is_file():
+                evaluation = json.loads((path.parent / "evaluation.json").read_text())
+                assert len(rows) == evaluation["n_onions"]
         else:
             raise AssertionError(f"an unexpected file {path}")
         seen[kind] = seen.get(kind, 0) + 1
