@@ -43,6 +43,15 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
     assert robot["fused"]["noisy-or"]["onions"] == 30
     for fused in robot["fused"].values():  # ECE beside chance's median and 90th percentile
         assert 0 < fused["ece_by_chance"] < fused["ece_by_chance_90"] < 1
+    # the class call's two errors, weighed by the views of each class, are its error
+    views = inspection_views(dataset, "all", detector=models.detector)
+    found = views.found & (views.source == "robot") & (views.view < 2)
+    good, blemished = int((found & (views.classes == 0)).sum()), int(
+        (found & (views.classes == 1)).sum())
+    assert good and blemished
+    errors = (good * robot["good_views_called_blemished"]
+              + blemished * robot["blemished_views_called_good"])
+    assert errors / (good + blemished) == pytest.approx(1 - robot["view_accuracy"])
 
 
 def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(dataset,
@@ -180,3 +189,20 @@ def test_robot_fusion_by_level_refuses_a_level_whose_onions_are_one_class(datase
                        ) as err:
         stage.fit_robot_fusion_stage(dataclasses.replace(config, by_level=True))
     assert "\n" not in str(err.value)
+
+
+def test_a_sorter_classifier_learns_and_validates_on_the_sorters_views_alone(dataset,
+                                                                            tmp_path):
+    import numpy as np
+
+    metrics = train_inspection_stage(InspectionTrainStageConfig(
+        data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="noisy-or",
+        visibility=0.3, device="cpu", camera="sorter"))
+    assert metrics["camera"] == "sorter" and metrics["file"] == "inspection_classifier.pt"
+    assert (tmp_path / "inspection_classifier.pt").is_file()
+    assert not (tmp_path / "robot_inspection_classifier.pt").exists()
+    val = inspection_views(dataset, "val", detector=PerceptionModels.load(device="cpu").detector)
+    sorter_val = int(np.sum(val.found & (val.source == "human")))
+    assert 0 < metrics["n_val"] == sorter_val < int(np.sum(val.found))
+    train = inspection_views(dataset, "train")
+    assert metrics["n_train"] + metrics["n_train_unclear"] == int(np.sum(train.source == "human"))

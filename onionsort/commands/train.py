@@ -70,7 +70,9 @@ chooses how the views of one onion are fused (``--fusion``, by default the rule 
 log-loss on the validation onions). With ``--camera both`` it writes
 ``inspection_classifier.pt``, which both inspections read; with ``--camera robot``
 ``robot_inspection_classifier.pt`` and ``robot_fusion_calibration.json``, which the Sawyer's
-inspection then reads instead. The validation views are found with ``--detector``'s model.
+inspection then reads instead; with ``--camera sorter`` ``inspection_classifier.pt`` learnt,
+validated and calibrated on the sorter's views alone (for a models folder whose robot has its
+own). The validation views are found with ``--detector``'s model.
 
 Examples
 --------

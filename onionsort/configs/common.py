@@ -34,7 +34,7 @@ DIFFICULTY_LEVELS = ("clean", "realistic", "paper", "hard")
 INSPECTION_VIEWS = 5
 FUSION_RULES = ("noisy-or", "log-odds")
 CALIBRATION_FORMS = ("log", "slopes")
-INSPECTION_CAMERAS = ("both", "robot")
+INSPECTION_CAMERAS = ("both", "robot", "sorter")
 LABEL_FORMATS = ("coco", "yolo")
 #: What ``label import`` reads: the export's layouts and Label Studio's JSON export.
 IMPORT_FORMATS = (*LABEL_FORMATS, "labelstudio")

@@ -40,7 +40,8 @@ class InspectionTrainStageConfig(train.TrainOptions):
     hyperparameters.
 
     A training view counts its dataset's ``data_weights`` times its level's weight.
-    ``camera`` ``"both"`` writes :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
+    ``camera`` ``"both"`` and ``"sorter"`` (the sorter's views alone) write
+    :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
     :data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`; a smaller ``lr`` suits
     fine-tuning from ``init``.
     """
@@ -57,9 +58,11 @@ class InspectionTrainStageConfig(train.TrainOptions):
                                        "lower log-loss on the validation onions)")
     camera: str = option("both", choices=INSPECTION_CAMERAS,
                          help="whose views to learn from: both (the sorter's and the robot's; "
-                              "writes inspection_classifier.pt, which both read) or robot (the "
+                              "writes inspection_classifier.pt, which both read), robot (the "
                               "Sawyer's only; writes robot_inspection_classifier.pt, which its "
-                              "inspection then reads instead)")
+                              "inspection then reads instead) or sorter (the sorter's only; "
+                              "writes inspection_classifier.pt, validated and calibrated on the "
+                              "sorter's views)")
     visibility: float | None = option(None, help="the chance that a view of a blemished onion "
                                                  "shows its rot, as noisy-or fusion assumes it "
                                                  "(default: the share measured on the "

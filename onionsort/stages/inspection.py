@@ -225,7 +225,8 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     rule on the validation splits' onions; write ``inspection_classifier.pt`` and
     ``inspection_metrics.json`` into ``config.out`` (with ``camera="robot"``,
     ``robot_inspection_classifier.pt`` and ``robot_inspection_metrics.json``, so that both
-    can be trained into one models folder).
+    can be trained into one models folder; with ``camera="sorter"`` the shared files, learnt
+    from the sorter's views alone).
 
     Returns
     -------
@@ -258,13 +259,16 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
                                                    allow_empty=len(config.data) > 1)
                                   for d in config.data])
     val = val.subset(val.found.astype(bool))  # an empty set's columns are float
-    if config.camera == "robot":
-        counts = counts[train.source == "robot"]
-        train, val = (views.subset(views.source == "robot") for views in (train, val))
+    if config.camera != "both":  # one camera's views alone
+        source = "robot" if config.camera == "robot" else "human"
+        counts = counts[train.source == source]
+        train, val = (views.subset(views.source == source) for views in (train, val))
         if not len(train) or not len(val):
-            raise ValueError(f"{', '.join(map(str, config.data))} hold no robot views in "
-                             f"their {'train' if not len(train) else 'val'} splits; render "
-                             "them with `onionsort dataset --robot-onions N`")
+            how = ("render them with `onionsort dataset --robot-onions N`"
+                   if source == "robot" else "render sessions with `onionsort dataset`")
+            raise ValueError(f"{', '.join(map(str, config.data))} hold no {config.camera} "
+                             f"views in their {'train' if not len(train) else 'val'} splits; "
+                             + how)
     logger.info("inspection views: %d train (%d show rot), %d val", len(train),
                 int((train.labels == 1).sum()), len(val))
     if not len(train) or not len(val):
@@ -491,15 +495,17 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
     """The inspection on a dataset split, per difficulty level and source.
 
     For each level: how often the detector finds the onion; the accuracy of each view alone
-    (its rot call against the rot it shows, and its class call against the onion's class);
-    and, for each fusion rule, the fused call on each onion (the robot's views of it, the first
-    ``views`` of them if given; the sorter's views of it in a session) at ``threshold`` (the
-    task's cost threshold by default): accuracy, precision, recall, expected calibration error
-    (``ece``) beside the median (``ece_by_chance``) and the 90th percentile
-    (``ece_by_chance_90``) of what a perfectly calibrated model shows by chance on the same
-    onions (:func:`perception.fusion.calibration_within_chance`), and the points of the
-    precision-recall curve. ``image_map`` changes each view as it is
-    read (:func:`inspection_views`).
+    (its rot call against the rot it shows, and its class call against the onion's class,
+    with the way it errs: the share of a good onion's views called blemished and of a
+    blemished onion's views called good); and, for each fusion rule, the fused call on each
+    onion (the robot's views of it, the first ``views`` of them if given; the sorter's views
+    of it in a session) at ``threshold`` (the task's cost threshold by default): accuracy,
+    precision, recall, expected calibration error (``ece``) beside the median
+    (``ece_by_chance``) and the 90th percentile (``ece_by_chance_90``) of what a perfectly
+    calibrated model shows by chance on the same onions
+    (:func:`perception.fusion.calibration_within_chance`), and the points of the
+    precision-recall curve. ``image_map`` changes each view as it is read
+    (:func:`inspection_views`).
     """
     from onionsort.configs.common import sorting_threshold
     from perception.fusion import (
@@ -545,6 +551,11 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                                if clear.any() else None),
                    "view_accuracy": _mean((p_class[found] >= 0.5)
                                           == (data.classes[found] == 1)),
+                   # which way the class call per view errs
+                   "good_views_called_blemished": _mean(
+                       p_class[found & (data.classes == 0)] >= 0.5),
+                   "blemished_views_called_good": _mean(
+                       p_class[found & (data.classes == 1)] < 0.5),
                    "fused": {}}
             if source == "robot":
                 row["view_accuracy_by_view"] = {
