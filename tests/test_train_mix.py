@@ -159,3 +159,39 @@ def test_bad_mixes_are_one_line(tmp_path, capsys, rendered, argv, words):  # noq
         err = capsys.readouterr().err.splitlines()
         assert code == 2 and len(err) == 1, err
         assert all(w in err[0] for w in words), err
+
+
+def test_the_detector_trains_through_other_cameras_at_the_frames_resolution(
+        rendered, tmp_path, monkeypatch):  # noqa: F811
+    """``--through-cameras 11,12``: the training split gets its camera frames again through
+    each seed's session cameras (as ``eval-perception --camera-shift`` sees them), the val split
+    through the first seed's; the frames as rendered stay."""
+    import perception.train_detector
+    from onionsort.stages.calibrate import SessionCameras
+    from onionsort.stages.train import detector_images, train_detector
+    from recordings.labels.dataset import read_split
+
+    seen = {}
+
+    def record(train, val, test=(), *args, **kwargs):
+        seen.update(train=train, val=val)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(perception.train_detector, "train_detector", record)
+    with pytest.raises(KeyboardInterrupt):
+        train_detector(DetectorTrainConfig(data=rendered, out=tmp_path / "d",
+                                           through_cameras=(11, 12)))
+    frames = {s: list(read_split(rendered, s)) for s in ("train", "val")}
+    plain = {s: detector_images(rendered, s, inspection_repeat=3 if s == "train" else 1)
+             for s in ("train", "val")}
+    assert len(seen["train"]) == len(plain["train"]) + 2 * len(frames["train"])
+    assert len(seen["val"]) == len(plain["val"]) + len(frames["val"])
+    first = frames["train"][0]
+    for k, seed in enumerate((11, 12)):  # after the frames as rendered, one pass per seed
+        image, boxes, classes = seen["train"][len(plain["train"]) + k * len(frames["train"])]
+        assert np.array_equal(image, SessionCameras(seed)(first.color, first.record))
+        assert not np.array_equal(image, first.color)
+        assert (boxes, classes) == (first.record["boxes"], first.record["classes"])
+    assert np.array_equal(seen["train"][0][0], first.color)
+    with pytest.raises(ValueError, match="through_cameras names seed 3 twice"):
+        DetectorTrainConfig(data=rendered, out=tmp_path / "e", through_cameras=(3, 3))

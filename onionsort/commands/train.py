@@ -52,7 +52,8 @@ It finds good and blemished onions in the main camera's frames and the inspectio
 trained from scratch (or from ``--init``) on ``--images-per-epoch`` images an epoch, and
 keeps the epoch of best validation score. Writes ``detector.pt`` into ``--out`` (with a
 checkpoint each epoch, which ``--resume`` continues from) and prints its COCO mAP on the test
-split.
+split. ``--through-cameras`` also trains on the camera frames seen through other cameras, the
+ones ``eval-perception --camera-shift`` draws, at the frames' own resolution.
 
 Examples
 --------
@@ -60,6 +61,8 @@ Examples
     onionsort train detector --data runs/data --out runs/perception --resume
     onionsort train detector --data runs/lab --data runs/data --data-weights 3,1 \\
         --init runs/perception/detector.pt --epochs 6 --lr 5e-4 --out runs/lab-models
+    onionsort train detector --data runs/data --through-cameras 8801,8802 \\
+        --init runs/perception/detector.pt --epochs 8 --lr 7e-4 --out runs/across
 """
 
 INSPECTION = """``onionsort train inspection``: the classifier of a held onion's views.

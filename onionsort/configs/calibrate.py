@@ -22,21 +22,23 @@ def check_camera_shift(seed) -> None:
         raise ValueError(f"camera_shift must be a seed, an int >= 0; got {seed!r}")
 
 
-def check_camera_seeds(seeds) -> tuple[int, ...]:
+def check_camera_seeds(seeds, name: str = "camera_shift") -> tuple[int, ...]:
     """``seeds`` as a tuple of ints: one seed, or a list of them, each an int >= 0, none twice
-    and at least one; else a ``ValueError`` that names the first bad one."""
+    and at least one; else a ``ValueError`` that names the option (``name``) and the first bad
+    one."""
     if isinstance(seeds, numbers.Integral) and not isinstance(seeds, bool):
         seeds = (seeds,)
     if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
-        raise ValueError(f"camera_shift must be seeds, ints >= 0; got {seeds!r}")
+        raise ValueError(f"{name} must be seeds, ints >= 0; got {seeds!r}")
     seeds = tuple(seeds)
     if not seeds:
-        raise ValueError("camera_shift must name at least one seed; got none")
+        raise ValueError(f"{name} must name at least one seed; got none")
     for seed in seeds:
-        check_camera_shift(seed)
+        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
+            raise ValueError(f"{name} must be a seed, an int >= 0; got {seed!r}")
     repeated = next((s for i, s in enumerate(seeds) if s in seeds[:i]), None)
     if repeated is not None:
-        raise ValueError(f"camera_shift names seed {repeated} twice; got {list(seeds)}")
+        raise ValueError(f"{name} names seed {repeated} twice; got {list(seeds)}")
     return tuple(int(s) for s in seeds)
 
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onionsort.configs import common, documented, option
+from onionsort.configs.calibrate import camera_seeds, check_camera_seeds
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment", "data",
            "data_weights", "init", "weights"]
@@ -137,7 +138,10 @@ class ClassifierTrainConfig(TrainOptions):
 @dataclass(frozen=True, kw_only=True)
 class DetectorTrainConfig(TrainOptions):
     """``onionsort train detector``: dataset folders, run folder, hyperparameters; a smaller
-    ``lr`` suits fine-tuning from ``init``."""
+    ``lr`` suits fine-tuning from ``init``. With ``through_cameras`` each training camera
+    frame is also seen through the camera its session has under ``eval-perception
+    --camera-shift SEED``, once per seed, at the frame's own resolution (and each validation
+    frame through the first seed's)."""
 
     epochs: int = option(24, help=EPOCHS)
     batch_size: int = option(16, help=BATCH_SIZE)
@@ -146,7 +150,16 @@ class DetectorTrainConfig(TrainOptions):
     init: Path | None = init("a detector.pt")
     lr: float = lr(2e-3)
     resume: bool = option(False, help="continue the run in --out from its last checkpoint")
+    through_cameras: tuple[int, ...] = option(
+        (), metavar="SEEDS", type=camera_seeds,
+        help="also train on each camera frame seen through the camera its session has under "
+             "`eval-perception --camera-shift SEED`, once per seed of SEEDS (ints >= 0, "
+             "comma-separated; seeds your evaluation does not use), and validate through the "
+             "first too (default: none)")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_positive(self, "images_per_epoch")
+        if self.through_cameras != ():
+            object.__setattr__(self, "through_cameras",
+                               check_camera_seeds(self.through_cameras, "through_cameras"))

@@ -16,7 +16,7 @@ Examples
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -27,7 +27,7 @@ from onionsort.stages.base import check_output_folder, log_config, resolve_devic
 from onionsort.stages.parallel import torch_threads
 
 __all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "detector_images",
-           "train_detector", "train_state_classifier"]
+           "frames_through_cameras", "train_detector", "train_state_classifier"]
 
 logger = logging.getLogger(__name__)
 
@@ -131,6 +131,21 @@ def detector_images(root: Path | str, split: str, *, inspection_repeat: int = 1,
     return images
 
 
+def frames_through_cameras(data: Sequence[Path], weights: Sequence[int], split: str,
+                           seeds: Sequence[int]) -> list[tuple[np.ndarray, list, list]]:
+    """The camera frames of ``split`` of each dataset of ``data`` (its ``weights`` times for
+    the train split) seen through the camera each session has in the evaluation through other
+    cameras (:class:`onionsort.stages.calibrate.SessionCameras`), once per seed of ``seeds``:
+    ``(image, boxes, classes)``, as :func:`detector_images` gives them."""
+    from onionsort.stages.calibrate import SessionCameras
+    from recordings.labels.dataset import read_split
+
+    return [(f.color, f.record["boxes"], f.record["classes"])
+            for seed in seeds for root, weight in zip(data, weights, strict=True)
+            for f in read_split(root, split, image_map=SessionCameras(seed))
+            for _ in range(weight if split == "train" else 1)]
+
+
 def train_detector(config: DetectorTrainConfig) -> dict:
     """Train the detector on ``config.data`` (or resume the run in ``config.out``).
 
@@ -160,6 +175,8 @@ def train_detector(config: DetectorTrainConfig) -> dict:
                           inspection_repeat=INSPECTION_REPEAT if split == "train" else 1)
                       * (weight if split == "train" else 1)]
               for split in ("train", "val", "test")}
+    for split, seeds in (("train", config.through_cameras), ("val", config.through_cameras[:1])):
+        images[split] += frames_through_cameras(config.data, config.data_weights, split, seeds)
     for split in ("train", "val"):
         if not images[split]:
             raise ValueError(f"split {split!r} of {', '.join(map(str, config.data))} holds no "
