@@ -1,7 +1,7 @@
 """Which part of another camera costs the detector its camera-view mAP.
 
 ``eval-perception --camera-shift S`` sees each session through a camera of its own
-(``onionsort.stages.calibrate.SessionCameras``). This study splits each of those cameras in two
+(``onionsort.stages.cameras.SessionCameras``). This study splits each of those cameras in two
 and measures the detector's camera-view mAP@0.5 through each part alone:
 
 - ``colour``: the camera's white balance, exposure and tone curve, with a sharp lens, no noise
@@ -41,7 +41,8 @@ import torch
 
 from onionsort.perception_models import PerceptionModels
 from onionsort.stages.base import write_json
-from onionsort.stages.calibrate import SessionCameras, detector_map
+from onionsort.stages.calibrate import detector_map
+from onionsort.stages.cameras import SessionCameras
 from onionsort.stages.inspection import inspection_views, measure_inspection
 from perception.camera_shift import REFERENCE_TEMPERATURE_K
 

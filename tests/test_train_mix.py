@@ -167,7 +167,7 @@ def test_the_detector_trains_through_other_cameras_at_the_frames_resolution(
     each seed's session cameras (as ``eval-perception --camera-shift`` sees them), the val split
     through the first seed's; the frames as rendered stay."""
     import perception.train_detector
-    from onionsort.stages.calibrate import SessionCameras
+    from onionsort.stages.cameras import SessionCameras
     from onionsort.stages.train import detector_images, train_detector
     from recordings.labels.dataset import read_split
 

@@ -93,7 +93,7 @@ class CalibrateConfig(ParallelOptions):
 class PerceptionEvalConfig:
     """A dataset split to measure the perception models on: the detector, the state
     classifier and the inspection; ``camera_shift`` draws the other cameras, once per seed
-    (:class:`~onionsort.stages.calibrate.SessionCameras`; one seed, an int, is a list of
+    (:class:`~onionsort.stages.cameras.SessionCameras`; one seed, an int, is a list of
     one)."""
 
     data: Path = option(help="labelled dataset folder")

@@ -19,21 +19,21 @@ Example::
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from onionsort.configs.calibrate import CalibrateConfig, PerceptionEvalConfig, check_camera_shift
+from onionsort.configs.calibrate import CalibrateConfig, PerceptionEvalConfig
 from onionsort.stages.base import (
     check_output_folder,
     log_config,
     output_folder,
     refuse_existing,
 )
+from onionsort.stages.cameras import SessionCameras
 from onionsort.stages.models import CALIBRATION_FILE, PerceptionModels
 from onionsort.stages.parallel import ParallelOptions, run_pieces
 
@@ -299,39 +299,6 @@ def dataset_identity(root: Path | str) -> dict:
               else difficulty["name"] if isinstance(difficulty, dict) else difficulty)
     return {"name": Path(root).resolve().name, "seed": meta.get("seed"),
             "frames": meta.get("frames"), "difficulty": levels}
-
-
-@dataclass(frozen=True)
-class SessionCameras:
-    """A dataset seen through other cameras: each session and each robot line-up through a
-    camera of its own, ``CameraShift.draw((seed, kind, index))`` (kind 0 a session, 1 a
-    line-up; :mod:`perception.camera_shift`), on its colour images and inspection views alike;
-    with ``one_camera``, every image through the one camera ``CameraShift.draw(seed)``, as a
-    lab with one camera would take them. An :data:`recordings.labels.dataset.ImageMap`."""
-
-    seed: int
-    one_camera: bool = False
-
-    def __post_init__(self) -> None:
-        check_camera_shift(self.seed)
-
-    def camera(self, record: dict):
-        """The camera of the session or line-up ``record`` belongs to."""
-        if self.one_camera:
-            return _camera(int(self.seed), None, None)
-        robot = record.get("source", "human") == "robot"
-        return _camera(int(self.seed), int(robot),
-                       int(record["lineup"] if robot else record["session"]))
-
-    def __call__(self, image: np.ndarray, record: dict) -> np.ndarray:
-        return self.camera(record).apply(image)
-
-
-@functools.lru_cache(maxsize=4096)
-def _camera(seed: int, kind: int | None, index: int | None):
-    from perception.camera_shift import CameraShift
-
-    return CameraShift.draw(seed if kind is None else (seed, kind, index))
 
 
 def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | None = None

@@ -135,9 +135,9 @@ def frames_through_cameras(data: Sequence[Path], weights: Sequence[int], split: 
                            seeds: Sequence[int]) -> list[tuple[np.ndarray, list, list]]:
     """The camera frames of ``split`` of each dataset of ``data`` (its ``weights`` times for
     the train split) seen through the camera each session has in the evaluation through other
-    cameras (:class:`onionsort.stages.calibrate.SessionCameras`), once per seed of ``seeds``:
+    cameras (:class:`onionsort.stages.cameras.SessionCameras`), once per seed of ``seeds``:
     ``(image, boxes, classes)``, as :func:`detector_images` gives them."""
-    from onionsort.stages.calibrate import SessionCameras
+    from onionsort.stages.cameras import SessionCameras
     from recordings.labels.dataset import read_split
 
     return [(f.color, f.record["boxes"], f.record["classes"])

@@ -102,7 +102,7 @@ def test_bad_settings_and_images_are_refused():
 
 
 def test_a_dataset_gives_each_session_and_line_up_a_camera_of_its_own():
-    from onionsort.stages.calibrate import SessionCameras
+    from onionsort.stages.cameras import SessionCameras
 
     cameras = SessionCameras(5)
     frame = {"session": 2, "source": "human", "frame": 7}

@@ -238,7 +238,7 @@ def test_eval_perception_through_several_cameras_is_reproducible(random_models, 
     assert [float(x) for x in row[2:9]] == pytest.approx(
         [f["unchanged"], *f["changed"], f["mean"], f["mean_drop"], f["worst_drop"]], abs=6e-4)
     # one camera per seed for every session and line-up
-    from onionsort.stages.calibrate import SessionCameras
+    from onionsort.stages.cameras import SessionCameras
     from perception.camera_shift import CameraShift
 
     cameras = SessionCameras(12, one_camera=True)
