@@ -108,7 +108,7 @@ def test_an_unknown_fusion_rule_or_a_visibility_out_of_range_is_refused(tmp_path
     with pytest.raises(ValueError, match=r"visibility must be in \(0, 1\]; got 0"):
         InspectionTrainStageConfig(data=tmp_path, out=tmp_path, visibility=0.0)
     with pytest.raises(ValueError, match="camera must be one of"):
-        InspectionTrainStageConfig(data=tmp_path, out=tmp_path, camera="sorter")
+        InspectionTrainStageConfig(data=tmp_path, out=tmp_path, camera="wrist")
 
 
 def test_the_clis_fusion_rules_and_calibration_forms_are_the_librarys():

@@ -1,8 +1,7 @@
 """Other cameras for a dataset: each session and line-up seen through a camera of its own.
 
-What ``onionsort eval-perception --camera-shift`` measures through and ``onionsort train
-detector --through-cameras`` trains through (:mod:`perception.camera_shift` draws each
-camera)."""
+What the evaluation through other cameras measures through and what the detector can be
+trained through (:mod:`perception.camera_shift` draws each camera)."""
 
 from __future__ import annotations
 
