@@ -16,10 +16,11 @@ __all__ = ["CalibrateConfig", "PerceptionEvalConfig", "camera_seeds", "check_cam
            "check_camera_shift"]
 
 
-def check_camera_shift(seed) -> None:
-    """Refuse a ``camera_shift`` that is not a seed, an int >= 0 (numpy's ints are ints)."""
+def check_camera_shift(seed, name: str = "camera_shift") -> None:
+    """Refuse a ``camera_shift`` (or the option ``name``) that is not a seed, an int >= 0
+    (numpy's ints are ints)."""
     if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"camera_shift must be a seed, an int >= 0; got {seed!r}")
+        raise ValueError(f"{name} must be a seed, an int >= 0; got {seed!r}")
 
 
 def check_camera_seeds(seeds, name: str = "camera_shift") -> tuple[int, ...]:
@@ -34,8 +35,7 @@ def check_camera_seeds(seeds, name: str = "camera_shift") -> tuple[int, ...]:
     if not seeds:
         raise ValueError(f"{name} must name at least one seed; got none")
     for seed in seeds:
-        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
-            raise ValueError(f"{name} must be a seed, an int >= 0; got {seed!r}")
+        check_camera_shift(seed, name)
     repeated = next((s for i, s in enumerate(seeds) if s in seeds[:i]), None)
     if repeated is not None:
         raise ValueError(f"{name} names seed {repeated} twice; got {list(seeds)}")

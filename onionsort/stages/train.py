@@ -140,10 +140,14 @@ def frames_through_cameras(data: Sequence[Path], weights: Sequence[int], split: 
     from onionsort.stages.cameras import SessionCameras
     from recordings.labels.dataset import read_split
 
-    return [(f.color, f.record["boxes"], f.record["classes"])
-            for seed in seeds for root, weight in zip(data, weights, strict=True)
-            for f in read_split(root, split, image_map=SessionCameras(seed))
-            for _ in range(weight if split == "train" else 1)]
+    if not seeds:
+        return []
+    cameras = [SessionCameras(seed) for seed in seeds]
+    frames = [(f, weight if split == "train" else 1)  # read once, seen through each camera
+              for root, weight in zip(data, weights, strict=True) for f in read_split(root, split)]
+    return [image for camera in cameras for f, count in frames
+            for image in [(camera(f.color, f.record), f.record["boxes"], f.record["classes"])]
+            * count]
 
 
 def train_detector(config: DetectorTrainConfig) -> dict:
