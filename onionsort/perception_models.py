@@ -268,8 +268,7 @@ class PerceptionModels:
         (:meth:`inspection_for`): the detector finds the onion, the inspection classifier
         reads it, views are fused by ``rule`` (the classifier's own by default) and an onion
         called blemished from ``threshold`` (the task's cost threshold by default,
-        :func:`~onionsort.configs.common.sorting_threshold`). The robot's views hold the onion
-        at their middle, where its box is looked for first."""
+        :func:`~onionsort.configs.common.sorting_threshold`)."""
         from irl.domains.onion_sorting import SORTING_TASK
         from perception.inspection import Inspector
 
@@ -279,7 +278,7 @@ class PerceptionModels:
         return Inspector(self.detector, classifier,
                          rule=classifier.rule if rule is None else rule,
                          threshold=sorting_threshold() if threshold is None else threshold,
-                         values=values, held_centred=camera == "robot")
+                         values=values)
 
     def perceive(self, steps, first_step: int = 0):
         """:func:`state_abstraction.perceive.perceive_steps` with these models."""

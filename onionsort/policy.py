@@ -233,10 +233,7 @@ class SortingPolicy:
         """The robot's inspection as one call: ``inspect(views)`` on a held onion's views
         (each (h, w, 3) uint8 RGB) gives a verdict with its ``prediction`` (the task's
         ``good`` or ``bad``; ``unknown`` where no view shows an onion), the fused
-        ``p_blemished`` and each view's (:class:`perception.inspection.Inspector`). In each
-        view the onion's box is the detector's best that holds the view's middle, where the
-        Sawyer holds it (a camera that sees the held onion elsewhere gets the best box anywhere
-        where none holds the middle).
+        ``p_blemished`` and each view's (:class:`perception.inspection.Inspector`).
 
         Parameters
         ----------

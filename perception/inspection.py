@@ -25,7 +25,6 @@ from torch import nn
 
 from perception.checkpoint import load_checkpoint, save_checkpoint
 from perception.fusion import FUSION_RULES, check_calibration, fuse, settled
-from perception.views import INSPECTION_SCORE, best_box, view_centre
 
 __all__ = [
     "CROP_MARGIN",
@@ -37,18 +36,18 @@ __all__ = [
     "InspectionNetConfig",
     "InspectionVerdict",
     "Inspector",
-    "best_box",
     "crop_onion",
     "fit_platt",
     "fit_temperature",
     "rot_label",
-    "view_centre",
 ]
 
 CROP_SIZE = 64
 """Side of the square crop the network reads (pixels)."""
 CROP_MARGIN = 0.15
 """Context around the onion's box, as a share of its longer side on each side."""
+INSPECTION_SCORE = 0.2
+"""Minimum detector score for an onion in an inspection view to count as found."""
 ROT_SHARE = 0.01
 """A view shows rot when at least this share of the onion's visible pixels do."""
 _MEAN, _STD = 0.5, 0.25
@@ -441,15 +440,11 @@ class Inspector:
     values : (int, int, int)
         What a verdict answers for good, bad and unknown (the sorting task's ``prediction``
         values by default).
-    held_centred : bool
-        Whether each view holds the onion at its middle, as the Sawyer's do: the onion's box
-        is then the best that holds the middle (:func:`best_box` at :func:`view_centre`). The
-        sorter's views show the onion wherever the hand is (False).
     """
 
     def __init__(self, detector, classifier: InspectionClassifier, *, rule: str | None = None,
                  threshold: float = 0.5, prior: float = 0.5,
-                 values: tuple[int, int, int] = (0, 1, 2), held_centred: bool = False) -> None:
+                 values: tuple[int, int, int] = (0, 1, 2)) -> None:
         rule = classifier.rule if rule is None else rule
         if rule not in FUSION_RULES:
             raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
@@ -460,24 +455,18 @@ class Inspector:
         self.detector, self.classifier = detector, classifier
         self.rule, self.threshold, self.prior = rule, float(threshold), float(prior)
         self.values = tuple(int(v) for v in values)
-        self.held_centred = bool(held_centred)
         self._recent: dict[str, object] = {}  # view digest -> its detections
 
     def boxes(self, views: Sequence[np.ndarray]) -> list[np.ndarray | None]:
         """The onion's box (4,) in each view: the detector's best box of either class at or
-        above :data:`INSPECTION_SCORE` (:meth:`onion_box`); None where it found none. The
-        detections of the last views are kept (:meth:`last_detections`)."""
+        above :data:`INSPECTION_SCORE`; None where it found none. The detections of the last
+        views are kept (:meth:`last_detections`)."""
         found = self.detector.detect(list(views)) if len(views) else []
         for view, det in zip(views, found, strict=True):
             self._recent[_digest([view])] = det
         while len(self._recent) > _RECENT:
             del self._recent[next(iter(self._recent))]
-        return [self.onion_box(view, det) for view, det in zip(views, found, strict=True)]
-
-    def onion_box(self, view: np.ndarray, detections) -> np.ndarray | None:
-        """The box the inspection reads among ``view``'s ``detections`` (:func:`best_box`, at
-        the view's middle where :attr:`held_centred`)."""
-        return best_box(detections, view_centre(view) if self.held_centred else None)
+        return [best_box(det) for det in found]
 
     def last_detections(self, views: Sequence[np.ndarray]) -> list | None:
         """The detector's detections of ``views`` if it read them among the last views
@@ -540,6 +529,15 @@ class Inspector:
     def __call__(self, views: Sequence[np.ndarray]) -> InspectionVerdict:
         """The verdict on one onion from its views (each (H, W, 3) uint8)."""
         return self.verdict(self.view_probabilities(views))
+
+
+def best_box(detections) -> np.ndarray | None:
+    """The onion's box (4,) among one view's ``detections`` (:class:`perception.Detections`):
+    the best of either class if it scores :data:`INSPECTION_SCORE` or more, else None."""
+    scores = np.asarray(detections.scores)
+    if scores.size == 0 or scores.max() < INSPECTION_SCORE:
+        return None
+    return np.asarray(detections.boxes)[int(scores.argmax())]
 
 
 _RECENT = 4096

@@ -3,7 +3,6 @@ the pipeline loads, ``fusion`` fixes its rule, and the measurement reports every
 
 import json
 
-import numpy as np
 import pytest
 
 from onionsort.stages import DatasetConfig, make_dataset
@@ -57,6 +56,8 @@ def test_training_writes_a_classifier_with_the_fusion_rule_asked_for(dataset, tm
 
 def test_a_robot_classifier_reads_the_robots_views_and_the_sorters_stay_shared(dataset,
                                                                             tmp_path):
+    import numpy as np
+
     metrics = train_inspection_stage(InspectionTrainStageConfig(
         data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="log-odds", device="cpu",
         camera="robot"))
@@ -169,6 +170,8 @@ def test_robot_fusion_by_level_refuses_a_level_whose_onions_are_one_class(datase
                                                                           monkeypatch):
     import dataclasses
 
+    import numpy as np
+
     from onionsort.configs.inspection import FusionCalibrationConfig
     from onionsort.stages import inspection as stage
 
@@ -190,6 +193,8 @@ def test_robot_fusion_by_level_refuses_a_level_whose_onions_are_one_class(datase
 
 def test_a_sorter_classifier_learns_and_validates_on_the_sorters_views_alone(dataset,
                                                                             tmp_path):
+    import numpy as np
+
     metrics = train_inspection_stage(InspectionTrainStageConfig(
         data=dataset, out=tmp_path, epochs=1, batch_size=64, fusion="noisy-or",
         visibility=0.3, device="cpu", camera="sorter"))
@@ -201,34 +206,3 @@ def test_a_sorter_classifier_learns_and_validates_on_the_sorters_views_alone(dat
     assert 0 < metrics["n_val"] == sorter_val < int(np.sum(val.found))
     train = inspection_views(dataset, "train")
     assert metrics["n_train"] + metrics["n_train_unclear"] == int(np.sum(train.source == "human"))
-
-
-def test_the_robots_inspection_looks_for_the_onion_at_the_middle_and_the_sorters_does_not():
-    models = PerceptionModels.load(device="cpu")
-    assert models.inspector(camera="robot").held_centred
-    assert not models.inspector(camera="sorter").held_centred
-
-
-def test_measuring_reads_the_box_each_camera_reads(dataset, monkeypatch):
-    """The evaluation cuts the robot's views round the best box that holds their middle, as
-    the Sawyer's inspection does, and the sorter's round the best box anywhere."""
-    from types import SimpleNamespace
-
-    import perception.inspection
-
-    class Detector:  # a corner box scored best, a box round the middle scored less
-        def detect(self, images):
-            return [SimpleNamespace(
-                boxes=np.array([[0.0, 0.0, 4.0, 4.0],
-                                [im.shape[1] / 4, im.shape[0] / 4, im.shape[1] * 3 / 4,
-                                 im.shape[0] * 3 / 4]]),
-                scores=np.array([0.9, 0.5]), classes=np.array([1, 0])) for im in images]
-
-    # each crop remembers the left edge of the box it was cut round
-    monkeypatch.setattr(perception.inspection, "crop_onion", lambda image, box: np.full(
-        (perception.inspection.CROP_SIZE,) * 2 + (3,), int(box[0]), np.uint8))
-    views = inspection_views(dataset, "all", detector=Detector())
-    robot, sorter = views.source == "robot", views.source == "human"
-    assert robot.any() and sorter.any() and views.found.all()
-    assert set(views.crops[robot][:, 0, 0, 0].tolist()) == {320 // 4}  # the middle's box
-    assert set(views.crops[sorter][:, 0, 0, 0].tolist()) == {0}  # the best anywhere

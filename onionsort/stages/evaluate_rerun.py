@@ -54,7 +54,6 @@ import rerun.blueprint as rrb
 
 from irl.domains.onion_sorting import SORTING_TASK
 from irl.domains.task import TaskDescription
-from perception.views import best_box, view_centre
 from recordings.rerun.common import (
     WORK_CELL_DEPTH_M,
     close_recording,
@@ -380,7 +379,7 @@ class EvaluationLogger:
             if det is not None:
                 p_view = per_view[k] if k < len(per_view) else None
                 rec.log(f"{p}/inspection/view_{k}/detections",
-                        _boxes(det, p_view, self.threshold, view_centre(view)))
+                        _boxes(det, p_view, self.threshold))
         for k in range(len(views), self.views):  # an onion settled early: no stale views
             rec.log(f"{p}/inspection/view_{k}", rr.Clear(recursive=True))
         p_bad = getattr(event, "p_blemished", None)
@@ -431,12 +430,11 @@ class EvaluationLogger:
 
 
 def _boxes(det: Detection, p_blemished: float | None = None,
-           threshold: float = 0.5, held_at: tuple[float, float] | None = None) -> rr.Boxes2D:
+           threshold: float = 0.5) -> rr.Boxes2D:
     """The boxes of one view, with one verdict.
 
     Where the view gave a probability of a blemish, the one box the inspection read (the
-    detector's best, :func:`perception.views.best_box`, among those that hold the point
-    ``held_at`` where the onion is held, if any does) with the view's call as its class
+    detector's best, :func:`perception.inspection.best_box`) with the view's call as its class
     (blemished where ``p_blemished`` reaches ``threshold``) and the probability as its label;
     the detector's other boxes (the same onion under the other class, mostly) are left out.
     Where it gave none (no box scored enough for the inspection to read it), the detector's
@@ -446,9 +444,9 @@ def _boxes(det: Detection, p_blemished: float | None = None,
     """
     boxes = np.asarray(det.boxes, float).reshape(-1, 4)
     scores = np.asarray(det.scores, float).reshape(-1)
-    read = best_box(det, held_at) if p_blemished is not None and len(scores) else None
-    if read is not None:
-        boxes = np.asarray(read, float).reshape(1, 4)
+    if p_blemished is not None and len(scores):
+        best = int(scores.argmax())
+        boxes = boxes[best:best + 1]
         call = _view_call(p_blemished, threshold)
         class_ids, colors = [call], [CLASS_COLORS[call]]
         labels = [f"{CLASS_NAMES[call]}: P(blemished) {p_blemished:.2f}"]

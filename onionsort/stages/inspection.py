@@ -127,14 +127,13 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
 
     Without ``detector``: context crops of the true boxes (for training,
     :func:`perception.train_inspection.context_crop`). With it: the crops inference cuts round
-    the detector's best box (:meth:`perception.inspection.Inspector.boxes`; in the robot's
-    views the best that holds the view's middle, where the Sawyer holds the onion), ``found`` False
+    the detector's best box (:meth:`perception.inspection.Inspector.boxes`), ``found`` False
     (and a blank crop) where it finds none. ``dataset_level`` names the level of records that
     do not name theirs (datasets written before the field). A split with no such view is an
     error, or empty with ``allow_empty``. ``image_map`` changes each view as it is read
     (:data:`recordings.labels.dataset.ImageMap`).
     """
-    from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label, view_centre
+    from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
     from recordings.labels.dataset import read_metadata, read_split, split_names
 
@@ -145,14 +144,13 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     levels = meta.get("session_difficulty")
     default_level = dataset_level or _dataset_level(meta)
     rows = defaultdict(list)
-    pending: list[tuple[np.ndarray, bool]] = []  # (image, held centred), for the detector
+    pending: list[np.ndarray] = []  # images waiting for the detector, in batches
 
     def flush() -> None:
         if not pending:
             return
-        images = [image for image, _ in pending]
-        for (image, centred), det in zip(pending, detector.detect(images), strict=True):
-            box = best_box(det, view_centre(image) if centred else None)
+        for image, det in zip(pending, detector.detect(pending), strict=True):
+            box = best_box(det)
             rows["found"].append(box is not None)
             rows["crops"].append(np.zeros((CROP_SIZE, CROP_SIZE, 3), np.uint8) if box is None
                                  else crop_onion(image, box))
@@ -188,7 +186,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
                 rows["found"].append(True)
             else:
-                pending.append((frame.color, source == "robot"))
+                pending.append(frame.color)
                 if len(pending) == 32:
                     flush()
     if detector is not None:

@@ -21,12 +21,10 @@ from perception.inspection import (
     InspectionNet,
     InspectionNetConfig,
     Inspector,
-    best_box,
     crop_onion,
     fit_platt,
     fit_temperature,
     rot_label,
-    view_centre,
 )
 from perception.train_inspection import (
     CONTEXT_SIZE,
@@ -377,34 +375,3 @@ def test_an_onion_no_view_has_shown_is_never_settled_while_views_remain():
     assert low.verdict([None]).prediction == 2
     # a threshold below the clipping of probabilities is compared as it is
     assert not settled([1e-6, 1e-6], 1, "log-odds", threshold=1e-7, prior=0.3)
-
-
-def _detections(*boxes_scores):
-    return NS(boxes=np.array([b for b, _ in boxes_scores], float).reshape(-1, 4),
-              scores=np.array([s for _, s in boxes_scores], float),
-              classes=np.zeros(len(boxes_scores), int))
-
-
-def test_a_held_onions_box_is_the_best_that_holds_the_middle_of_the_view():
-    arm = ((230.0, 0.0, 246.0, 10.0), 0.36)  # a sliver of the arm at the top edge, scored best
-    onion = ((95.0, 56.0, 241.0, 203.0), 0.35)  # the held onion, round the middle (160, 120)
-    faint = ((100.0, 60.0, 220.0, 200.0), 0.1)  # round the middle too, under the score to count
-    view = np.zeros((240, 320, 3), np.uint8)
-    assert view_centre(view) == (160.0, 120.0)
-    assert best_box(_detections(arm, onion)).tolist() == list(arm[0])  # anywhere: the arm
-    assert best_box(_detections(arm, onion), view_centre(view)).tolist() == list(onion[0])
-    # no box that counts holds the middle: the best anywhere, as without the point
-    assert best_box(_detections(arm, faint), (160.0, 120.0)).tolist() == list(arm[0])
-    assert best_box(_detections(faint), (160.0, 120.0)) is None
-    assert best_box(_detections(), (160.0, 120.0)) is None
-
-    class Detector:
-        def detect(self, images):
-            return [_detections(arm, onion) for _ in images]
-
-    torch.manual_seed(0)
-    clf = InspectionClassifier(InspectionNet(InspectionNetConfig(width=4)))
-    held = Inspector(Detector(), clf, held_centred=True).boxes([view])[0]
-    anywhere = Inspector(Detector(), clf).boxes([view])[0]  # the sorter's: the hand moves
-    assert held.tolist() == list(onion[0]) and anywhere.tolist() == list(arm[0])
-

@@ -461,23 +461,3 @@ def test_each_inspection_view_shows_its_own_call_and_the_fused_call_stands_besid
     verify(out)
     with pytest.raises(ValueError, match="threshold must be in"):
         EvaluationLogger(tmp_path / "bad.rrd", threshold=1.0)
-
-
-def test_the_box_drawn_is_the_one_round_the_held_onion_not_a_better_one_elsewhere(tmp_path):
-    """The Sawyer holds the onion at its views' middle, and its inspection reads the best box
-    that holds the middle: the box drawn with the view's call is that one, even where the
-    detector scored a box elsewhere (a part of the arm) higher."""
-    out = tmp_path / "held.rrd"
-
-    def detect(images):  # a corner sliver scored 0.9; the onion round the middle (8, 6) 0.5
-        return [FakeDetection(np.array([[12.0, 0.0, 16.0, 3.0], [2.0, 2.0, 14.0, 10.0]]),
-                              np.array([1, 0]), np.array([0.9, 0.5])) for _ in images]
-
-    image = np.zeros((12, 16, 3), np.uint8)
-    with EvaluationLogger(out, detector=detect, views=1) as log:
-        log.on_step(FakeStep(step=0, state=11, action=1, next_state=17, onion=4,
-                             blemished=False, perceived=0, views=(image,),
-                             p_blemished=0.2, view_p_blemished=(0.1,)))
-    boxes = logged_boxes(out)
-    assert boxes[0, 0]["centers"] == [[8.0, 6.0]] and boxes[0, 0]["class_ids"] == [0]
-    verify(out)
