@@ -312,6 +312,8 @@ CASES = [
       "8801,x"], ["--through-cameras", "expected comma-separated seeds", "'x' in '8801,x'"]),
     (["train", "detector", "--data", "{d}/data_bad", "--out", "{d}/x", "--through-cameras",
       "8801,-1"], ["through_cameras must be a seed, an int >= 0", "got -1"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--through-cameras",
+      "12,12"], ["through_cameras names seed 12 twice"]),
     (["perceive", "{d}/unperceived.mcap", "--device", "gpu"],
      ["--device", "invalid choice", "'gpu'"]),
     (["eval-perception", "--data", "{d}/data_bad", "--views", "0"], ["views must be >= 1"]),

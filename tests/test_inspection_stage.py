@@ -206,3 +206,43 @@ def test_a_sorter_classifier_learns_and_validates_on_the_sorters_views_alone(dat
     assert 0 < metrics["n_val"] == sorter_val < int(np.sum(val.found))
     train = inspection_views(dataset, "train")
     assert metrics["n_train"] + metrics["n_train_unclear"] == int(np.sum(train.source == "human"))
+
+
+def test_the_inspection_trains_through_other_cameras(dataset, tmp_path, monkeypatch):
+    """``--through-cameras 11,12``: the training views again through each seed's session
+    cameras (as ``eval-perception --camera-shift`` sees them), the validation views through the
+    first seed's, each as an onion of its own; the views as rendered stay first."""
+    import numpy as np
+
+    import perception.train_inspection
+    from onionsort.stages.cameras import SessionCameras
+
+    seen = {}
+
+    def record(train, val, *args, **kwargs):
+        seen.update(train=train, val=val)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(perception.train_inspection, "train_inspection", record)
+    with pytest.raises(KeyboardInterrupt):
+        train_inspection_stage(InspectionTrainStageConfig(
+            data=dataset, out=tmp_path / "s", epochs=1, device="cpu", camera="sorter",
+            through_cameras=(11, 12)))
+    plain = inspection_views(dataset, "train")
+    plain = plain.subset(plain.source == "human")
+    n = len(plain)
+    assert len(seen["train"].crops) == 3 * n
+    assert np.array_equal(seen["train"].crops[:n], plain.crops)
+    for k, seed in enumerate((11, 12)):  # one pass per seed, after the views as rendered
+        through = inspection_views(dataset, "train", image_map=SessionCameras(seed))
+        through = through.subset(through.source == "human")
+        assert np.array_equal(seen["train"].crops[(k + 1) * n:(k + 2) * n], through.crops)
+        assert not np.array_equal(through.crops, plain.crops)
+        assert np.array_equal(seen["train"].labels[(k + 1) * n:(k + 2) * n], plain.labels)
+    detector = PerceptionModels.load(device="cpu").detector
+    val = [inspection_views(dataset, "val", detector=detector, image_map=camera)
+           for camera in (None, SessionCameras(11))]
+    assert len(seen["val"].crops) == sum(int(np.sum(v.found & (v.source == "human")))
+                                         for v in val)
+    with pytest.raises(ValueError, match="through_cameras names seed 3 twice"):
+        InspectionTrainStageConfig(data=dataset, out=tmp_path / "e", through_cameras=(3, 3))

@@ -76,6 +76,8 @@ log-loss on the validation onions). With ``--camera both`` it writes
 inspection then reads instead; with ``--camera sorter`` ``inspection_classifier.pt`` learnt,
 validated and calibrated on the sorter's views alone (for a models folder whose robot has its
 own). The validation views are found with ``--detector``'s model.
+``--through-cameras`` also trains on each view seen through other cameras, the ones
+``eval-perception --camera-shift`` draws.
 
 Examples
 --------
@@ -84,6 +86,8 @@ Examples
         --fusion noisy-or --out runs/perception
     onionsort train inspection --data runs/data-robot --camera robot --fusion noisy-or \\
         --visibility 0.3 --out runs/perception
+    onionsort train inspection --data runs/data --camera sorter --through-cameras 8801,8802 \\
+        --init runs/perception/inspection_classifier.pt --lr 3e-4 --epochs 8 --out runs/across
 """
 
 ROBOT_FUSION = """``onionsort train robot-fusion``: calibrate the robot's fused P(blemished).

@@ -39,7 +39,10 @@ class InspectionTrainStageConfig(train.TrainOptions):
     """``onionsort train inspection``: dataset folders (their splits pooled), run folder,
     hyperparameters.
 
-    A training view counts its dataset's ``data_weights`` times its level's weight.
+    A training view counts its dataset's ``data_weights`` times its level's weight. With
+    ``through_cameras`` each training view is also seen through the camera its session or
+    line-up has under ``eval-perception --camera-shift SEED``, once per seed (and each
+    validation view through the first seed's).
     ``camera`` ``"both"`` and ``"sorter"`` (the sorter's views alone) write
     :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
     :data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`; a smaller ``lr`` suits
@@ -69,12 +72,14 @@ class InspectionTrainStageConfig(train.TrainOptions):
                                                  "training views)")
     init: Path | None = train.init("an inspection_classifier.pt")
     lr: float = train.lr(3e-3)
+    through_cameras: tuple[int, ...] = train.through_cameras("inspection view")
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
 
         super().__post_init__()
         train.check_lr(self.lr)
+        train.check_through_cameras(self)
         if self.fusion is not None and self.fusion not in FUSION_RULES:
             raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
         if self.visibility is not None and not 0.0 < self.visibility <= 1.0:

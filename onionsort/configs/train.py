@@ -11,8 +11,9 @@ from pathlib import Path
 from onionsort.configs import common, documented, option
 from onionsort.configs.calibrate import camera_seeds, check_camera_seeds
 
-__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment", "data",
-           "data_weights", "init", "weights"]
+__all__ = ["ClassifierTrainConfig", "DetectorTrainConfig", "TrainOptions", "augment",
+           "check_through_cameras", "data", "data_weights", "init", "through_cameras",
+           "weights"]
 
 
 #: The help of ``--epochs`` and ``--batch-size``, whose defaults differ by model
@@ -57,6 +58,25 @@ def init(what: str):
     """``--init CHECKPOINT``: ``what`` to fine-tune instead of training from scratch."""
     return option(None, metavar="CHECKPOINT",
                   help=f"{what} to fine-tune instead of training from scratch (default: none)")
+
+
+def through_cameras(what: str):
+    """``--through-cameras SEEDS``: each training ``what`` also seen through the camera its
+    session (or line-up) has under ``eval-perception --camera-shift SEED``."""
+    return option((), metavar="SEEDS", type=camera_seeds,
+                  help=f"also train on each {what} seen through the camera its session has "
+                       "under `eval-perception --camera-shift SEED`, once per seed of SEEDS "
+                       "(ints >= 0, comma-separated; seeds your evaluation does not use), and "
+                       "validate through the first too (default: none)")
+
+
+def check_through_cameras(config) -> None:
+    """Check ``config.through_cameras`` (none, or seeds as
+    :func:`~onionsort.configs.calibrate.check_camera_seeds` takes them) and store it as a
+    tuple."""
+    if config.through_cameras != ():
+        object.__setattr__(config, "through_cameras",
+                           check_camera_seeds(config.through_cameras, "through_cameras"))
 
 
 @documented
@@ -150,16 +170,9 @@ class DetectorTrainConfig(TrainOptions):
     init: Path | None = init("a detector.pt")
     lr: float = lr(2e-3)
     resume: bool = option(False, help="continue the run in --out from its last checkpoint")
-    through_cameras: tuple[int, ...] = option(
-        (), metavar="SEEDS", type=camera_seeds,
-        help="also train on each camera frame seen through the camera its session has under "
-             "`eval-perception --camera-shift SEED`, once per seed of SEEDS (ints >= 0, "
-             "comma-separated; seeds your evaluation does not use), and validate through the "
-             "first too (default: none)")
+    through_cameras: tuple[int, ...] = through_cameras("camera frame")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_positive(self, "images_per_epoch")
-        if self.through_cameras != ():
-            object.__setattr__(self, "through_cameras",
-                               check_camera_seeds(self.through_cameras, "through_cameras"))
+        check_through_cameras(self)

@@ -251,13 +251,17 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     detector = _load_detector(config.detector, device)
     if config.init is not None and not Path(config.init).is_file():
         raise FileNotFoundError(f"{config.init}: no such inspection classifier to start from")
-    parts = [inspection_views(d, "train", allow_empty=len(config.data) > 1)
-             for d in config.data]
-    train = InspectionViews.concat(parts)
-    counts = np.repeat(config.data_weights, [len(p) for p in parts]).astype(float)
+    train_cameras, val_cameras = _cameras(config.through_cameras)
+    parts = [(inspection_views(d, "train", allow_empty=len(config.data) > 1, image_map=camera),
+              weight)
+             for camera in train_cameras for d, weight in zip(config.data, config.data_weights,
+                                                              strict=True)]
+    train = InspectionViews.concat([views for views, _ in parts])
+    counts = np.repeat([w for _, w in parts], [len(v) for v, _ in parts]).astype(float)
     val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
-                                                   allow_empty=len(config.data) > 1)
-                                  for d in config.data])
+                                                   allow_empty=len(config.data) > 1,
+                                                   image_map=camera)
+                                  for camera in val_cameras for d in config.data])
     val = val.subset(val.found.astype(bool))  # an empty set's columns are float
     if config.camera != "both":  # one camera's views alone
         source = "robot" if config.camera == "robot" else "human"
@@ -319,6 +323,16 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
                            "probability is left uncalibrated (`onionsort train robot-fusion`)")
     write_json(config.out / f"{prefix}inspection_metrics.json", metrics)
     return metrics
+
+
+def _cameras(seeds: tuple[int, ...]) -> tuple[list, list]:
+    """The image maps the training views and the validation views are read through: as
+    rendered (``None``), then through each seed's cameras
+    (:class:`onionsort.stages.cameras.SessionCameras`; validation through the first's)."""
+    from onionsort.stages.cameras import SessionCameras
+
+    cameras = [SessionCameras(seed) for seed in seeds]
+    return [None, *cameras], [None, *cameras[:1]]
 
 
 def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray
