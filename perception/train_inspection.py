@@ -39,7 +39,7 @@ from perception.photometric import PhotometricAugment
 from perception.trainer import fit
 
 __all__ = ["CONTEXT_SCALE", "CropSet", "InspectionTrainConfig", "augment", "context_crop",
-           "train_inspection"]
+           "fit_class_map", "train_inspection"]
 
 CONTEXT_SCALE = 1.35
 """A context crop spans this many times the window the network reads."""
@@ -170,6 +170,15 @@ def _class_weights(classes: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return out
 
 
+def fit_class_map(logits: np.ndarray, classes: np.ndarray, weights: np.ndarray
+                  ) -> tuple[float, float]:
+    """Platt's map ``(a, b)`` from a view's logit to P(its onion is blemished)
+    (:func:`perception.inspection.fit_platt`) on views of onions of ``classes`` (N,), each
+    view weighing its ``weights`` (N,), both classes weighing the same in all."""
+    classes = np.asarray(classes, float)
+    return fit_platt(logits, classes, _class_weights(classes, np.asarray(weights, float)))
+
+
 def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig,
                      net_config: InspectionNetConfig | None = None, *,
                      rule: str = "noisy-or", device: str | torch.device = "cpu",
@@ -249,8 +258,7 @@ def train_inspection(train: CropSet, val: CropSet, config: InspectionTrainConfig
     z_all = InspectionClassifier(net, device=device).logits(np.asarray(val.crops))
     z = z_all[val_known]
     temperature = fit_temperature(z, val_y, val_w)
-    classes = np.asarray(val.classes, float)
-    platt = fit_platt(z_all, classes, _class_weights(classes, np.asarray(val.weights, float)))
+    platt = fit_class_map(z_all, val.classes, val.weights)
     metrics = {
         "history": history, "best_epoch": best_epoch, "temperature": temperature,
         "platt": list(platt), "config": {**asdict(config), "scale": list(config.scale)},

@@ -314,6 +314,8 @@ CASES = [
       "8801,-1"], ["through_cameras must be a seed, an int >= 0", "got -1"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--through-cameras",
       "12,12"], ["through_cameras names seed 12 twice"]),
+    (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--log-odds-data",
+      "{d}/data_bad"], ["log_odds_data", "data_bad is also training data"]),
     (["perceive", "{d}/unperceived.mcap", "--device", "gpu"],
      ["--device", "invalid choice", "'gpu'"]),
     (["eval-perception", "--data", "{d}/data_bad", "--views", "0"], ["views must be >= 1"]),

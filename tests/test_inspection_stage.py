@@ -246,3 +246,36 @@ def test_the_inspection_trains_through_other_cameras(dataset, tmp_path, monkeypa
                                          for v in val)
     with pytest.raises(ValueError, match="through_cameras names seed 3 twice"):
         InspectionTrainStageConfig(data=dataset, out=tmp_path / "e", through_cameras=(3, 3))
+
+
+def test_the_log_odds_map_is_fitted_on_held_out_views_where_asked(dataset, tmp_path_factory,
+                                                                 tmp_path):
+    """``--log-odds-data``: the map the log-odds fusion reads is fitted on every view of the
+    held-out data (both cameras', every split, found by the detector), not on the validation
+    views; the temperature, which noisy-or reads, stays the validation views'."""
+    import numpy as np
+
+    from perception.inspection import InspectionClassifier
+    from perception.train_inspection import fit_class_map
+
+    held = tmp_path_factory.mktemp("held-out") / "data"
+    make_dataset(DatasetConfig(out=held, frames=45, steps_per_session=5, robot_onions=12,
+                               robot_views=2, seed=4))
+    config = dict(data=dataset, epochs=1, batch_size=64, fusion="noisy-or", visibility=0.3,
+                  device="cpu", camera="sorter")
+    plain = train_inspection_stage(InspectionTrainStageConfig(out=tmp_path / "a", **config))
+    mapped = train_inspection_stage(InspectionTrainStageConfig(
+        out=tmp_path / "b", log_odds_data=(held,), **config))
+    clf = InspectionClassifier.load(tmp_path / "b" / "inspection_classifier.pt")
+    assert clf.temperature == pytest.approx(plain["temperature"])
+    assert mapped["log_odds_map"]["platt_on_val"] == pytest.approx(plain["platt"])
+    views = inspection_views(held, "all", detector=PerceptionModels.load(device="cpu").detector)
+    views = views.subset(views.found.astype(bool))
+    assert set(views.source.tolist()) == {"human", "robot"}
+    assert mapped["log_odds_map"]["views"] == len(views)
+    expected = fit_class_map(clf.logits(views.crops), views.classes, views.weights())
+    assert clf.platt == pytest.approx(expected) and mapped["platt"] == pytest.approx(expected)
+    assert not np.allclose(clf.platt, plain["platt"])
+    assert clf.metadata["log_odds_map"]["data"] == [str(held)]
+    with pytest.raises(ValueError, match="is also training data"):
+        InspectionTrainStageConfig(out=tmp_path / "c", log_odds_data=(dataset,), **config)

@@ -42,7 +42,9 @@ class InspectionTrainStageConfig(train.TrainOptions):
     A training view counts its dataset's ``data_weights`` times its level's weight. With
     ``through_cameras`` each training view is also seen through the camera its session or
     line-up has under ``eval-perception --camera-shift SEED``, once per seed (and each
-    validation view through the first seed's).
+    validation view through the first seed's). With ``log_odds_data`` the map the ``log-odds``
+    fusion reads (Platt's, from a view's logit to P(its onion is blemished)) is fitted on every
+    view of those held-out datasets, both cameras', instead of on the validation views.
     ``camera`` ``"both"`` and ``"sorter"`` (the sorter's views alone) write
     :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
     :data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`; a smaller ``lr`` suits
@@ -73,11 +75,23 @@ class InspectionTrainStageConfig(train.TrainOptions):
     init: Path | None = train.init("an inspection_classifier.pt")
     lr: float = train.lr(3e-3)
     through_cameras: tuple[int, ...] = train.through_cameras("inspection view")
+    log_odds_data: tuple[Path, ...] | None = option(
+        None, type=Path, action="append", metavar="DATA",
+        help="held-out dataset folder (repeat it to pool several) whose views, the sorter's and "
+             "the robot's, every split, fit the map the log-odds fusion reads (from a view's "
+             "logit to P(its onion is blemished)) instead of the validation views; never data "
+             "you then measure on (default: the validation views)")
 
     def __post_init__(self) -> None:
         from perception.fusion import FUSION_RULES
 
         super().__post_init__()
+        object.__setattr__(self, "log_odds_data",
+                           tuple(Path(d) for d in self.log_odds_data or ()))
+        for folder in self.log_odds_data:
+            if folder in self.data:
+                raise ValueError(f"log_odds_data {folder} is also training data; the map is "
+                                 "fitted on held-out views")
         train.check_lr(self.lr)
         train.check_through_cameras(self)
         if self.fusion is not None and self.fusion not in FUSION_RULES:

@@ -293,6 +293,9 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     if config.visibility is not None:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
+    if config.log_odds_data:
+        metrics["log_odds_map"] = _fit_log_odds_map(classifier, config, detector)
+        metrics["platt"] = metrics["log_odds_map"]["platt"]
     z = classifier.logits(val.crops)  # once, read under each rule
     rules = {rule: _fused_scores(classifier, val, rule, classifier.calibrated(z, rule))
              for rule in FUSION_RULES}
@@ -323,6 +326,28 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
                            "probability is left uncalibrated (`onionsort train robot-fusion`)")
     write_json(config.out / f"{prefix}inspection_metrics.json", metrics)
     return metrics
+
+
+def _fit_log_odds_map(classifier, config: InspectionTrainStageConfig, detector) -> dict:
+    """Fit ``classifier``'s map from a view's logit to P(its onion is blemished), which the
+    ``log-odds`` fusion reads, on every view of ``config.log_odds_data`` the detector finds
+    (both cameras', every split; weighted as validation views are); return what was fitted
+    and on what."""
+    from perception.train_inspection import fit_class_map
+
+    views = InspectionViews.concat([inspection_views(d, "all", detector=detector)
+                                    for d in config.log_odds_data])
+    views = views.subset(views.found.astype(bool))
+    if len(set(views.classes.tolist())) < 2:
+        raise ValueError(f"{', '.join(map(str, config.log_odds_data))} show onions of one "
+                         "class only; the log-odds map needs good and blemished ones")
+    fitted = fit_class_map(classifier.logits(views.crops), views.classes,
+                           views.weights(config.level_weights))
+    out = {"platt": list(fitted), "platt_on_val": list(classifier.platt),
+           "data": [str(d) for d in config.log_odds_data], "views": len(views)}
+    classifier.platt = fitted
+    classifier.metadata["log_odds_map"] = out
+    return out
 
 
 def _cameras(seeds: tuple[int, ...]) -> tuple[list, list]:
