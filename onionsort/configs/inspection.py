@@ -88,8 +88,9 @@ class InspectionTrainStageConfig(train.TrainOptions):
         super().__post_init__()
         object.__setattr__(self, "log_odds_data",
                            tuple(Path(d) for d in self.log_odds_data or ()))
+        training = {d.resolve() for d in self.data}
         for folder in self.log_odds_data:
-            if folder in self.data:
+            if folder.resolve() in training:
                 raise ValueError(f"log_odds_data {folder} is also training data; the map is "
                                  "fitted on held-out views")
         train.check_lr(self.lr)
