@@ -193,6 +193,10 @@ CASES = [
     (["dataset", "--difficulty", "nope", "--out", "{d}/x"], ["unknown level", "'nope'"]),
     (["dataset", "--robot-onions", "-1", "--out", "{d}/x"], ["robot_onions must be >= 0", "-1"]),
     (["dataset", "--robot-views", "0", "--out", "{d}/x"], ["robot_views must be >= 1", "got 0"]),
+    (["dataset", "--inspection-size", "320", "--out", "{d}/x"],
+     ["--inspection-size", "WIDTHxHEIGHT", "'320'"]),
+    (["dataset", "--inspection-size", "16x12", "--out", "{d}/x"],
+     ["--inspection-size", "32 to 1920", "'16x12'"]),
     # train
     (["train"], ["required", "MODEL"]),
     (["train", "state-classifier", "--data", "{d}/data_none", "--out", "{d}/x"],

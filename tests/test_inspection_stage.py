@@ -279,3 +279,32 @@ def test_the_log_odds_map_is_fitted_on_held_out_views_where_asked(dataset, tmp_p
     assert clf.metadata["log_odds_map"]["data"] == [str(held)]
     with pytest.raises(ValueError, match="is also training data"):
         InspectionTrainStageConfig(out=tmp_path / "c", log_odds_data=(dataset,), **config)
+
+
+def test_the_sorters_inspection_view_renders_at_another_size_with_the_same_onions(tmp_path):
+    import cv2
+
+    from recordings.labels.dataset import read_metadata
+
+    def render(name, size):
+        root = tmp_path / name
+        make_dataset(DatasetConfig(out=root, frames=45, steps_per_session=5, robot_onions=0,
+                                   seed=4, inspection_size=size, workers=1))
+        records = [r for s in ("train", "val", "test") if (root / s / "inspection.json").exists()
+                   for r in json.loads((root / s / "inspection.json").read_text())]
+        return root, records
+
+    _, a = render("default", "160x120")
+    sharp, b = render("sharp", "96x72")
+    assert read_metadata(sharp)["config"]["inspection"]["width"] == 96
+    keys = ("session", "frame", "state", "onions", "classes")
+    assert [[r[k] for k in keys] for r in a] == [[r[k] for k in keys] for r in b]
+    held = [r for r in b if r["boxes"]]
+    assert held  # the sorter held an onion up in some frame
+    for r in held[:3]:
+        split = next(s for s in ("train", "val", "test")
+                     if (sharp / s / r["color"]).exists())
+        assert cv2.imread(str(sharp / split / r["color"])).shape == (72, 96, 3)
+    import numpy as np  # the same onion, seen 0.6 times as large
+    pairs = [(ra["boxes"][0], rb["boxes"][0]) for ra, rb in zip(a, b, strict=True) if rb["boxes"]]
+    assert np.allclose([x for _, x in pairs], [0.6 * np.asarray(x) for x, _ in pairs], atol=2.5)

@@ -9,11 +9,17 @@ Examples
     onionsort dataset --frames 300 --occlusion 0.4 --seed 1 --out runs/data-small
     onionsort dataset --frames 8000 --difficulty clean,realistic,paper,hard --out runs/data-mix
     onionsort dataset --frames 8000 --randomize-look --out runs/data-looks
+    onionsort dataset --frames 1500 --difficulty hard --inspection-size 320x240 --out runs/sharp
 
 ``--randomize-look`` gives each session and robot line-up a look of its own, drawn from its
 seed (``robot.look``: the light's colour, intensity and direction; the colours of the floor,
 belt, stand and bin; the cameras' exposure and white balance), for models that must survive
 another camera. The difficulty levels are unchanged by it.
+
+``--inspection-size`` renders the sorter's inspection view at another resolution: the same
+camera, spot and field of view, so a session's onions and views are those of the default
+size (the detector reads any size; the inspection classifier reads a fixed crop round the
+onion). It asks what a sharper or coarser camera at the inspection spot would change.
 """
 
 from __future__ import annotations

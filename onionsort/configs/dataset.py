@@ -10,7 +10,7 @@ from typing import ClassVar
 from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import ParallelOptions
 
-__all__ = ["DatasetConfig", "levels"]
+__all__ = ["DatasetConfig", "image_size", "levels"]
 
 
 def levels(text: str) -> str:
@@ -21,6 +21,19 @@ def levels(text: str) -> str:
             f"unknown level {unknown[0].strip()!r}; the levels are "
             f"{', '.join(common.DIFFICULTY_LEVELS)}")
     return ",".join(x.strip() for x in text.split(","))
+
+
+def image_size(text: str) -> str:
+    """An image size ``WIDTHxHEIGHT`` in pixels (each 32 to 1920), for argparse ``type=``."""
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(x.strip().isdigit() for x in parts):
+        raise argparse.ArgumentTypeError(f"an image size is WIDTHxHEIGHT, e.g. 320x240; "
+                                         f"got {text!r}")
+    w, h = (int(x) for x in parts)
+    if not (32 <= w <= 1920 and 32 <= h <= 1920):
+        raise argparse.ArgumentTypeError(f"an image's width and height are 32 to 1920 pixels; "
+                                         f"got {text!r}")
+    return f"{w}x{h}"
 
 
 @documented
@@ -55,6 +68,10 @@ class DatasetConfig(ParallelOptions):
                                               "surface colours and camera exposure and white "
                                               "balance from its seed (training data across "
                                               "cameras; without it, one look for all)")
+    inspection_size: str = option("160x120", type=image_size,
+                                  help="the sorter's inspection view, WIDTHxHEIGHT in pixels "
+                                       "(the same view at another resolution; the Sawyer's "
+                                       "camera is its own)")
     #: Measure the rot each inspection view shows (the inspection classifier's labels; one more
     #: render of each view). Calibration needs none.
     rot_labels: bool = True
@@ -71,6 +88,16 @@ class DatasetConfig(ParallelOptions):
             raise ValueError(f"robot_onions must be >= 0; got {self.robot_onions}")
         if self.robot_views < 1:
             raise ValueError(f"robot_views must be >= 1; got {self.robot_views}")
+        try:
+            object.__setattr__(self, "inspection_size", image_size(self.inspection_size))
+        except argparse.ArgumentTypeError as err:
+            raise ValueError(f"inspection_size: {err}") from None
+
+    @property
+    def inspection_pixels(self) -> tuple[int, int]:
+        """The sorter's inspection view's (width, height) in pixels."""
+        w, h = self.inspection_size.split("x")
+        return int(w), int(h)
 
     @property
     def levels(self) -> list[str]:

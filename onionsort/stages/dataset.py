@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from onionsort.configs.dataset import DatasetConfig
 from onionsort.stages.base import check_output_folder, log_config
@@ -62,14 +62,17 @@ def make_dataset(config: DatasetConfig) -> DatasetSummary:
     if (config.out / "dataset.json").exists():
         raise FileExistsError(f"{config.out} already holds a dataset; choose a new --out")
     check_output_folder(config.out)
-    from robot.simulation import SessionConfig
+    from robot.simulation import INSPECTION_CAMERA, SessionConfig
 
     levels = config.levels
+    width, height = config.inspection_pixels
+    inspection = replace(INSPECTION_CAMERA, width=width, height=height)
     session_configs = [SessionConfig(n_steps=config.steps_per_session,
                                      occlusion=config.occlusion,
                                      frames_per_step=config.frames_per_step, difficulty=level,
                                      label_blemishes=config.rot_labels,
-                                     randomize_look=config.randomize_look)
+                                     randomize_look=config.randomize_look,
+                                     inspection=inspection)
                        for level in levels]
     per_session = config.steps_per_session * config.frames_per_step
     n_sessions = math.ceil(config.frames / per_session)
