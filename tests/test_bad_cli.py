@@ -197,6 +197,8 @@ CASES = [
      ["--inspection-size", "WIDTHxHEIGHT", "'320'"]),
     (["dataset", "--inspection-size", "16x12", "--out", "{d}/x"],
      ["--inspection-size", "32 to 1920", "'16x12'"]),
+    (["dataset", "--inspection-size", "320x120", "--out", "{d}/x"],
+     ["--inspection-size", "4:3", "'320x120'"]),
     # train
     (["train"], ["required", "MODEL"]),
     (["train", "state-classifier", "--data", "{d}/data_none", "--out", "{d}/x"],

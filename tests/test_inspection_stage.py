@@ -281,30 +281,39 @@ def test_the_log_odds_map_is_fitted_on_held_out_views_where_asked(dataset, tmp_p
         InspectionTrainStageConfig(out=tmp_path / "c", log_odds_data=(dataset,), **config)
 
 
-def test_the_sorters_inspection_view_renders_at_another_size_with_the_same_onions(tmp_path):
+@pytest.mark.parametrize("level", ["clean", "realistic"])
+def test_the_sorters_inspection_view_renders_at_another_size_with_the_same_onions(tmp_path,
+                                                                                   level):
     import cv2
+    import numpy as np
 
     from recordings.labels.dataset import read_metadata
+    from robot.simulation import INSPECTION_CAMERA
 
     def render(name, size):
         root = tmp_path / name
         make_dataset(DatasetConfig(out=root, frames=45, steps_per_session=5, robot_onions=0,
-                                   seed=4, inspection_size=size, workers=1))
-        records = [r for s in ("train", "val", "test") if (root / s / "inspection.json").exists()
-                   for r in json.loads((root / s / "inspection.json").read_text())]
-        return root, records
+                                   seed=4, inspection_size=size, difficulty=level, workers=1))
+        return root, [r for s in ("train", "val", "test")
+                      for r in json.loads((root / s / "inspection.json").read_text())]
 
+    default = DatasetConfig(out=tmp_path / "unused").inspection_pixels
+    assert default == (INSPECTION_CAMERA.width, INSPECTION_CAMERA.height)
     _, a = render("default", "160x120")
-    sharp, b = render("sharp", "96x72")
-    assert read_metadata(sharp)["config"]["inspection"]["width"] == 96
-    keys = ("session", "frame", "state", "onions", "classes")
+    sharp, b = render("sharp", "320x240")
+    assert read_metadata(sharp)["config"]["inspection"]["width"] == 320
+    # the same sessions: states, actions and the onion the sorter holds, frame by frame
+    keys = ("session", "frame", "state", "action", "onion")
     assert [[r[k] for k in keys] for r in a] == [[r[k] for k in keys] for r in b]
     held = [r for r in b if r["boxes"]]
     assert held  # the sorter held an onion up in some frame
     for r in held[:3]:
-        split = next(s for s in ("train", "val", "test")
-                     if (sharp / s / r["color"]).exists())
-        assert cv2.imread(str(sharp / split / r["color"])).shape == (72, 96, 3)
-    import numpy as np  # the same onion, seen 0.6 times as large
-    pairs = [(ra["boxes"][0], rb["boxes"][0]) for ra, rb in zip(a, b, strict=True) if rb["boxes"]]
-    assert np.allclose([x for _, x in pairs], [0.6 * np.asarray(x) for x, _ in pairs], atol=2.5)
+        split = next(s for s in ("train", "val", "test") if (sharp / s / r["color"]).exists())
+        assert cv2.imread(str(sharp / split / r["color"])).shape == (240, 320, 3)
+    # the same onion where both label it, seen twice as large
+    pairs = [(dict(zip(ra["onions"], ra["boxes"], strict=True)),
+              dict(zip(rb["onions"], rb["boxes"], strict=True)))
+             for ra, rb in zip(a, b, strict=True)]
+    both = [(pa[k], pb[k]) for pa, pb in pairs for k in pa.keys() & pb.keys()]
+    assert len(both) >= len(held) // 2
+    assert np.allclose([y for _, y in both], [2 * np.asarray(x) for x, _ in both], atol=3)

@@ -17,9 +17,13 @@ belt, stand and bin; the cameras' exposure and white balance), for models that m
 another camera. The difficulty levels are unchanged by it.
 
 ``--inspection-size`` renders the sorter's inspection view at another resolution: the same
-camera, spot and field of view, so a session's onions and views are those of the default
-size (the detector reads any size; the inspection classifier reads a fixed crop round the
-onion). It asks what a sharper or coarser camera at the inspection spot would change.
+camera, spot and field of view. A session's states, actions, onions and the sorter's poses
+are those of the default size; at a level with image effects the hand's patches and the
+cameras' noise are drawn anew (their draws depend on the images' size), and an onion is
+labelled in a view from 25 visible pixels at any size, so the views pair by onion and pose,
+not pixel for pixel. The detector reads any size; the inspection classifier reads a fixed
+crop round the onion. Use it to ask what a sharper or coarser camera at the inspection spot
+would change.
 """
 
 from __future__ import annotations

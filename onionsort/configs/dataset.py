@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -24,15 +25,22 @@ def levels(text: str) -> str:
 
 
 def image_size(text: str) -> str:
-    """An image size ``WIDTHxHEIGHT`` in pixels (each 32 to 1920), for argparse ``type=``."""
-    parts = text.lower().split("x")
-    if len(parts) != 2 or not all(x.strip().isdigit() for x in parts):
+    """The inspection view's size ``WIDTHxHEIGHT`` in pixels, each 32 to 1920, in the 4:3
+    shape of the view (its field of view is vertical: another shape would widen or narrow
+    it), for argparse ``type=``."""
+    if not isinstance(text, str):
+        raise TypeError(f"an image size is a 'WIDTHxHEIGHT' string; got {text!r}")
+    match = re.fullmatch(r"\s*([0-9]+)\s*[xX]\s*([0-9]+)\s*", text)
+    if match is None:
         raise argparse.ArgumentTypeError(f"an image size is WIDTHxHEIGHT, e.g. 320x240; "
                                          f"got {text!r}")
-    w, h = (int(x) for x in parts)
+    w, h = int(match[1]), int(match[2])
     if not (32 <= w <= 1920 and 32 <= h <= 1920):
         raise argparse.ArgumentTypeError(f"an image's width and height are 32 to 1920 pixels; "
                                          f"got {text!r}")
+    if 3 * w != 4 * h:
+        raise argparse.ArgumentTypeError(f"the inspection view keeps its 4:3 shape (e.g. "
+                                         f"320x240); got {text!r}")
     return f"{w}x{h}"
 
 
@@ -68,10 +76,12 @@ class DatasetConfig(ParallelOptions):
                                               "surface colours and camera exposure and white "
                                               "balance from its seed (training data across "
                                               "cameras; without it, one look for all)")
-    inspection_size: str = option("160x120", type=image_size,
-                                  help="the sorter's inspection view, WIDTHxHEIGHT in pixels "
-                                       "(the same view at another resolution; the Sawyer's "
-                                       "camera is its own)")
+    #: The default is the size of ``robot.simulation.INSPECTION_CAMERA`` (a test holds them
+    #: together).
+    inspection_size: str = option("160x120", type=image_size, metavar="WIDTHxHEIGHT",
+                                  help="size of the sorter's inspection view in pixels, each "
+                                       "32 to 1920, 4:3 (the same view at another "
+                                       "resolution; the Sawyer's camera is its own)")
     #: Measure the rot each inspection view shows (the inspection classifier's labels; one more
     #: render of each view). Calibration needs none.
     rot_labels: bool = True
