@@ -5,16 +5,20 @@ models and for the candidate, on the same datasets) and prints, for every figure
 ``onionsort.stages.calibrate.perception_figures`` names, the baseline's and the candidate's
 value (each the mean over the datasets given), the difference (positive: the candidate is
 better; for an ECE, lower is better) and the tolerance: two binomial standard errors at the
-figure's size, at least 0.02. A figure is ``worse`` when the candidate loses more than the
-tolerance. What a calibrated model's ECE would be by chance is a reference, not a figure of
-the models, and is left out. Through other cameras (``--camera-shift`` results) it prints the
-mean drops too.
+figure's size, at least 0.02. The standard error is Agresti and Coull's, at the rate with two
+hits and two misses added (``(x + 2) / (n + 4)``): at a rate of 1.000 the plain estimate is 0,
+and a tolerance under one count of the figure is finer than its set resolves. A figure is
+``worse`` when the candidate loses more than the tolerance. What a calibrated model's ECE
+would be by chance is a reference, not a figure of the models, and is left out. Through other
+cameras (``--camera-shift`` results) it prints the mean drops too.
 
 The size of a figure (summed over the datasets):
 
 - the detector's mAP and the state classifier's figures: the steps evaluated (``n_steps``);
 - an inspection figure per view (onion found, rot call, class call): the views;
-- a fused call (accuracy, precision, recall, ECE): the onions.
+- a fused call: the onions for its accuracy and ECE, the onions it called blemished for its
+  precision and the blemished onions for its recall (the onions, in results written before
+  ``eval-perception`` recorded those counts).
 
 Usage::
 
@@ -36,17 +40,39 @@ from onionsort.stages.base import write_json
 from onionsort.stages.calibrate import perception_figures, shift_summary
 
 
+def fused_counts(f: dict) -> dict[str, int]:
+    """A fused call's sizes: its onions, and for its precision and recall the onions it
+    called blemished and the blemished ones (results written before ``eval-perception``
+    recorded those two counts: its onions)."""
+    n = f["onions"]
+    return {"accuracy": n, "ECE": n, "precision": f.get("called_blemished", n),
+            "recall": f.get("blemished", n)}
+
+
 def figure_sizes(r: dict) -> dict[str, int]:
     """Each figure's size (see the module's text) in one result."""
     sizes = dict.fromkeys(perception_figures(r), r["n_steps"])
     for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
         for source, m in sources.items():
             who = f"inspection {level} {source}:"
-            onions = next(iter(m["fused"].values()))["onions"]
             for name in sizes:
                 if name.startswith(who):
-                    sizes[name] = onions if ": fused by" in name else m["views"]
+                    sizes[name] = m["views"]
+            for rule, f in m["fused"].items():
+                for figure, n in fused_counts(f).items():
+                    name = f"{who} fused by {rule}, {figure}"
+                    if name in sizes:
+                        sizes[name] = n
     return sizes
+
+
+def tolerance(p: float, n: int) -> float:
+    """Two binomial standard errors of a rate ``p`` of ``n``, at Agresti and Coull's rate
+    (two hits and two misses added), at least 0.02."""
+    if not n:
+        return 0.02
+    q = (min(max(p, 0.0), 1.0) * n + 2) / (n + 4)
+    return max(0.02, 2 * math.sqrt(q * (1 - q) / n))
 
 
 def load_result(path: Path) -> dict:
@@ -79,8 +105,7 @@ def compare(base: list[dict], candidate: list[dict]) -> list[dict]:
         ma, mb = float(np.mean(a)), float(np.mean(b))
         n = sum(s[name] for s in sizes)
         higher_worse = "ECE" in name
-        p = min(max(ma, 0.0), 1.0)
-        tol = max(0.02, 2 * math.sqrt(p * (1 - p) / n)) if n else 0.02
+        tol = tolerance(ma, n)
         gain = (ma - mb) if higher_worse else (mb - ma)
         rows.append({"figure": name, "base": ma, "candidate": mb, "gain": gain, "n": n,
                      "tolerance": tol, "verdict": ("worse" if gain < -tol else

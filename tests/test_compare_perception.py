@@ -3,6 +3,7 @@ the sets resolve (two binomial standard errors at each figure's size, at least 0
 
 import importlib.util
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -33,8 +34,10 @@ def result(onion=0.9, ece=0.05, accuracy=0.9, camera=0.8):
 def test_a_loss_beyond_two_standard_errors_is_worse_and_one_within_is_not(compare):
     rows = {r["figure"]: r for r in compare.compare(
         [result()], [result(onion=0.85, ece=0.06, accuracy=0.88, camera=0.83)])}
-    onion = rows["state: onion"]  # 2 sqrt(0.09 / 400) = 0.03 < 0.05 lost
-    assert onion["tolerance"] == pytest.approx(0.03) and onion["verdict"] == "worse"
+    onion = rows["state: onion"]  # 2 SE of 0.9 of 400 = 0.03 < 0.05 lost
+    q = (0.9 * 400 + 2) / 404
+    assert onion["tolerance"] == pytest.approx(2 * math.sqrt(q * (1 - q) / 400))
+    assert onion["tolerance"] == pytest.approx(0.03, abs=0.001) and onion["verdict"] == "worse"
     fused = rows["inspection hard robot: fused by noisy-or, accuracy"]  # 40 onions
     assert fused["n"] == 40 and fused["verdict"] == "within"
     ece = rows["inspection hard robot: fused by noisy-or, ECE"]  # lower is better
@@ -63,3 +66,38 @@ def test_the_command_writes_its_rows_and_refuses_unpaired_results(compare, tmp_p
     assert compare.main(["--base", str(base), "--base", str(base),
                          "--candidate", str(cand)]) == 2
     assert "as many --candidate" in capsys.readouterr().err
+
+
+def fused_result(precision, recall=1.0, blemished=20, called=None, counts=True):
+    r = result()
+    f = r["inspection_classifier"]["levels"]["hard"]["robot"]["fused"]["noisy-or"]
+    f.update(precision=precision, recall=recall)
+    if counts:
+        f.update(blemished=blemished, called_blemished=called)
+    return r
+
+
+def test_precision_and_recall_are_sized_by_what_they_count(compare):
+    """Precision counts the onions called blemished, recall the blemished ones; a result
+    written before those counts is sized by its onions."""
+    name = "inspection hard robot: fused by noisy-or, "
+    rows = {r["figure"]: r for r in compare.compare(
+        [fused_result(20 / 21, called=21)], [fused_result(1.0, called=20)])}
+    assert rows[name + "precision"]["n"] == 21
+    assert rows[name + "recall"]["n"] == 20 and rows[name + "accuracy"]["n"] == 40
+    old = {r["figure"]: r for r in compare.compare(
+        [fused_result(1.0, counts=False)], [fused_result(1.0, counts=False)])}
+    assert old[name + "precision"]["n"] == old[name + "recall"]["n"] == 40
+
+
+def test_one_onion_off_a_perfect_figure_is_within_and_three_are_worse(compare):
+    """At a rate of 1.000 the plain standard error is 0, and the 0.02 floor is finer than one
+    onion of 41: the tolerance is at Agresti and Coull's rate, which one count never exceeds."""
+    name = "inspection hard robot: fused by noisy-or, precision"
+    one = {r["figure"]: r for r in compare.compare(
+        [fused_result(1.0, called=41)], [fused_result(40 / 41, called=41)])}[name]
+    assert one["tolerance"] > 1 / 41 and one["verdict"] == "within"
+    three = {r["figure"]: r for r in compare.compare(
+        [fused_result(1.0, called=41)], [fused_result(38 / 41, called=41)])}[name]
+    assert three["verdict"] == "worse"
+    assert compare.tolerance(0.5, 10_000) == 0.02  # the floor holds for large sets

@@ -616,7 +616,8 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
                 fn = int(np.sum(~called & (y == 1)))
                 precision, recall, cut = precision_recall_curve(fused, y)
                 row["fused"][rule] = {
-                    "onions": len(y), "accuracy": float(np.mean(called == (y == 1))),
+                    "onions": len(y), "blemished": tp + fn, "called_blemished": tp + fp,
+                    "accuracy": float(np.mean(called == (y == 1))),
                     "precision": tp / (tp + fp) if tp + fp else 0.0,
                     "recall": tp / (tp + fn) if tp + fn else 0.0,
                     "ece": expected_calibration_error(fused, y),
