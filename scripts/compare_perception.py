@@ -17,8 +17,9 @@ The size of a figure (summed over the datasets):
 - the detector's mAP and the state classifier's figures: the steps evaluated (``n_steps``);
 - an inspection figure per view (onion found, rot call, class call): the views;
 - a fused call: the onions for its accuracy and ECE, the onions it called blemished for its
-  precision and the blemished onions for its recall (the onions, in results written before
-  ``eval-perception`` recorded those counts).
+  precision and the blemished onions for its recall (in a baseline written before
+  ``eval-perception`` recorded those counts, the candidate's; where neither has them, the
+  onions).
 
 Usage::
 
@@ -49,9 +50,12 @@ def fused_counts(f: dict) -> dict[str, int]:
             "recall": f.get("blemished", n)}
 
 
-def figure_sizes(r: dict) -> dict[str, int]:
-    """Each figure's size (see the module's text) in one result."""
+def figure_sizes(r: dict, other: dict | None = None) -> dict[str, int]:
+    """Each figure's size (see the module's text) in one result; a fused call's counts that
+    ``r`` lacks (written before they were recorded) are ``other``'s, the same call on the same
+    onions by the other models, where it has them."""
     sizes = dict.fromkeys(perception_figures(r), r["n_steps"])
+    levels = (other or {}).get("inspection_classifier", {}).get("levels", {})
     for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
         for source, m in sources.items():
             who = f"inspection {level} {source}:"
@@ -59,6 +63,9 @@ def figure_sizes(r: dict) -> dict[str, int]:
                 if name.startswith(who):
                     sizes[name] = m["views"]
             for rule, f in m["fused"].items():
+                g = levels.get(level, {}).get(source, {}).get("fused", {}).get(rule, {})
+                if "blemished" not in f and g.get("onions") == f["onions"]:
+                    f = {**f, **{k: g[k] for k in ("blemished", "called_blemished") if k in g}}
                 for figure, n in fused_counts(f).items():
                     name = f"{who} fused by {rule}, {figure}"
                     if name in sizes:
@@ -96,7 +103,7 @@ def compare(base: list[dict], candidate: list[dict]) -> list[dict]:
     rows = []
     fb = [perception_figures(r) for r in base]
     fc = [perception_figures(r) for r in candidate]
-    sizes = [figure_sizes(r) for r in base]
+    sizes = [figure_sizes(r, c) for r, c in zip(base, candidate, strict=True)]
     for name in fb[0]:
         a = [f.get(name) for f in fb]
         b = [f.get(name) for f in fc]

@@ -88,6 +88,9 @@ def test_precision_and_recall_are_sized_by_what_they_count(compare):
     old = {r["figure"]: r for r in compare.compare(
         [fused_result(1.0, counts=False)], [fused_result(1.0, counts=False)])}
     assert old[name + "precision"]["n"] == old[name + "recall"]["n"] == 40
+    mixed = {r["figure"]: r for r in compare.compare(  # an old baseline, a new candidate
+        [fused_result(1.0, counts=False)], [fused_result(20 / 21, called=21)])}
+    assert mixed[name + "precision"]["n"] == 21
 
 
 def test_one_onion_off_a_perfect_figure_is_within_and_three_are_worse(compare):
