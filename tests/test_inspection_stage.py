@@ -248,6 +248,49 @@ def test_the_inspection_trains_through_other_cameras(dataset, tmp_path, monkeypa
         InspectionTrainStageConfig(data=dataset, out=tmp_path / "e", through_cameras=(3, 3))
 
 
+def test_the_inspection_trains_on_the_crops_its_detector_cuts(dataset, tmp_path, monkeypatch):
+    """``--crops detected``: each training crop is cut round the box the detector finds (at
+    the context crop's size, so augmentation still moves it), views it finds nothing in left
+    out; by default round the labelled box."""
+    import numpy as np
+
+    import perception.train_inspection
+    from perception.inspection import best_box
+    from perception.train_inspection import CONTEXT_SIZE, context_crop
+    from recordings.labels.dataset import read_split, split_names
+
+    seen = []
+
+    def record(train, val, *args, **kwargs):
+        seen.append(train)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(perception.train_inspection, "train_inspection", record)
+    for crops in ("labelled", "detected"):
+        with pytest.raises(KeyboardInterrupt):
+            train_inspection_stage(InspectionTrainStageConfig(
+                data=dataset, out=tmp_path / crops, epochs=1, device="cpu", camera="robot",
+                crops=crops))
+    labelled, detected = seen
+    plain = inspection_views(dataset, "train")
+    assert np.array_equal(labelled.crops, plain.crops[plain.source == "robot"])
+    detector = PerceptionModels.load(device="cpu").detector
+    found = inspection_views(dataset, "train", detector=detector, context=True)
+    found = found.subset(found.found & (found.source == "robot"))
+    assert len(detected.crops) == len(found) > 0
+    assert detected.crops.shape[1:] == (CONTEXT_SIZE, CONTEXT_SIZE, 3)
+    assert np.array_equal(detected.crops, found.crops)
+    assert not np.array_equal(detected.crops, labelled.crops[:len(detected.crops)])
+    # the first robot view's crop is the context crop round the detector's best box
+    first = next(f for name in split_names("train")
+                 for f in read_split(dataset, name, view="inspection")
+                 if f.record.get("source") == "robot")
+    box = best_box(detector.detect([first.color])[0])
+    assert np.array_equal(detected.crops[0], context_crop(first.color, box))
+    with pytest.raises(ValueError, match="crops must be one of"):
+        InspectionTrainStageConfig(data=dataset, out=tmp_path / "e", crops="true")
+
+
 def test_the_log_odds_map_is_fitted_on_held_out_views_where_asked(dataset, tmp_path_factory,
                                                                  tmp_path):
     """``--log-odds-data``: the map the log-odds fusion reads is fitted on every view of the

@@ -10,8 +10,11 @@ from pathlib import Path
 from onionsort.configs import common, documented, option, train
 from onionsort.configs.common import CALIBRATION_FORMS, INSPECTION_CAMERAS
 
-__all__ = ["CALIBRATION_FORMS", "INSPECTION_CAMERAS", "FusionCalibrationConfig",
-           "InspectionTrainStageConfig", "level_weights"]
+__all__ = ["CALIBRATION_FORMS", "INSPECTION_CAMERAS", "TRAINING_CROPS",
+           "FusionCalibrationConfig", "InspectionTrainStageConfig", "level_weights"]
+
+
+TRAINING_CROPS = ("labelled", "detected")  # where train inspection cuts its training crops
 
 
 def level_weights(text: str) -> dict[str, float]:
@@ -45,7 +48,8 @@ class InspectionTrainStageConfig(train.TrainOptions):
     validation view through the first seed's). With ``log_odds_data`` the map the ``log-odds``
     fusion reads (Platt's, from a view's logit to P(its onion is blemished)) is fitted on every
     view of those held-out datasets, both cameras', instead of on the validation views.
-    ``camera`` ``"both"`` and ``"sorter"`` (the sorter's views alone) write
+    With ``crops`` ``"detected"`` the training crops are cut round the box ``detector`` finds,
+    not the labelled one. ``camera`` ``"both"`` and ``"sorter"`` (the sorter's views alone) write
     :data:`~onionsort.stages.models.INSPECTION_FILE`, ``"robot"``
     :data:`~onionsort.stages.models.ROBOT_INSPECTION_FILE`; a smaller ``lr`` suits
     fine-tuning from ``init``.
@@ -56,6 +60,10 @@ class InspectionTrainStageConfig(train.TrainOptions):
     detector: Path | None = option(None, help="folder of the detector.pt that finds the onion "
                                               "in the validation views (default: the shipped "
                                               "one)")
+    crops: str = option("labelled", choices=TRAINING_CROPS,
+                        help="where each training crop is cut: round the view's labelled box, "
+                             "or round the box --detector finds there, the framing inspection "
+                             "then reads (views it finds no onion in are left out)")
     level_weights: dict = option(default_factory=dict, type=level_weights,
                                  help="weights of difficulty levels, e.g. clean=2,hard=1 "
                                       "(default: 1 each)")
@@ -99,6 +107,8 @@ class InspectionTrainStageConfig(train.TrainOptions):
             raise ValueError(f"fusion must be one of {FUSION_RULES}; got {self.fusion!r}")
         if self.visibility is not None and not 0.0 < self.visibility <= 1.0:
             raise ValueError(f"visibility must be in (0, 1]; got {self.visibility}")
+        if self.crops not in TRAINING_CROPS:
+            raise ValueError(f"crops must be one of {TRAINING_CROPS}; got {self.crops!r}")
         if self.camera not in INSPECTION_CAMERAS:
             raise ValueError(f"camera must be one of {INSPECTION_CAMERAS}; got "
                              f"{self.camera!r}")

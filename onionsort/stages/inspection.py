@@ -66,7 +66,8 @@ class InspectionViews:
     :func:`perception.inspection.rot_label`); ``classes`` (N,) the onion's class; ``level``,
     ``source`` (N,) str; ``onion`` (N,) a key naming the onion (the views of one onion in one
     session or line-up share it); ``view`` (N,) the robot's view index (-1 for the sorter's);
-    ``found`` (N,) bool, whether the detector found the onion (always True for context crops).
+    ``found`` (N,) bool, whether the detector found the onion (always True for crops of the
+    labelled box).
     """
 
     crops: np.ndarray
@@ -122,16 +123,17 @@ def _held_onion(record: dict) -> int | None:
 
 def inspection_views(root: Path | str, split: str, *, detector=None,
                      dataset_level: str | None = None, allow_empty: bool = False,
-                     image_map=None) -> InspectionViews:
+                     image_map=None, context: bool = False) -> InspectionViews:
     """The inspection views of ``split`` (or ``"all"``) of dataset ``root`` that show an onion.
 
     Without ``detector``: context crops of the true boxes (for training,
     :func:`perception.train_inspection.context_crop`). With it: the crops inference cuts round
     the detector's best box (:meth:`perception.inspection.Inspector.boxes`), ``found`` False
-    (and a blank crop) where it finds none. ``dataset_level`` names the level of records that
-    do not name theirs (datasets written before the field). A split with no such view is an
-    error, or empty with ``allow_empty``. ``image_map`` changes each view as it is read
-    (:data:`recordings.labels.dataset.ImageMap`).
+    (and a blank crop) where it finds none; with ``context`` too, context crops round that
+    box (for training on the framing the detector gives). ``dataset_level`` names the level
+    of records that do not name theirs (datasets written before the field). A split with no
+    such view is an error, or empty with ``allow_empty``. ``image_map`` changes each view as it
+    is read (:data:`recordings.labels.dataset.ImageMap`).
     """
     from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
@@ -143,6 +145,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                          "(`onionsort dataset`)")
     levels = meta.get("session_difficulty")
     default_level = dataset_level or _dataset_level(meta)
+    size = CONTEXT_SIZE if detector is None or context else CROP_SIZE
     rows = defaultdict(list)
     pending: list[np.ndarray] = []  # images waiting for the detector, in batches
 
@@ -152,7 +155,8 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
         for image, det in zip(pending, detector.detect(pending), strict=True):
             box = best_box(det)
             rows["found"].append(box is not None)
-            rows["crops"].append(np.zeros((CROP_SIZE, CROP_SIZE, 3), np.uint8) if box is None
+            rows["crops"].append(np.zeros((size, size, 3), np.uint8) if box is None
+                                 else context_crop(image, box) if context
                                  else crop_onion(image, box))
         pending.clear()
 
@@ -194,7 +198,6 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     if not rows["labels"] and not allow_empty:
         raise ValueError(f"split {split!r} of {root} holds no inspection view that shows an "
                          f"onion of {MIN_CROP_PIXELS} pixels or more")
-    size = CONTEXT_SIZE if detector is None else CROP_SIZE
     return InspectionViews(
         crops=np.asarray(rows["crops"], np.uint8).reshape(-1, size, size, 3),
         **{k: np.asarray(rows[k]) for k in ("labels", "classes", "level", "source", "onion",
@@ -252,12 +255,18 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     if config.init is not None and not Path(config.init).is_file():
         raise FileNotFoundError(f"{config.init}: no such inspection classifier to start from")
     train_cameras, val_cameras = _cameras(config.through_cameras)
-    parts = [(inspection_views(d, "train", allow_empty=len(config.data) > 1, image_map=camera),
-              weight)
+    framing = detector if config.crops == "detected" else None
+    parts = [(inspection_views(d, "train", detector=framing, context=True,
+                               allow_empty=len(config.data) > 1, image_map=camera), weight)
              for camera in train_cameras for d, weight in zip(config.data, config.data_weights,
                                                               strict=True)]
     train = InspectionViews.concat([views for views, _ in parts])
     counts = np.repeat([w for _, w in parts], [len(v) for v, _ in parts]).astype(float)
+    if framing is not None:  # the views its detector finds no onion in teach nothing
+        found = train.found.astype(bool)
+        logger.info("the detector finds the onion in %d of %d training views",
+                    int(found.sum()), len(found))
+        train, counts = train.subset(found), counts[found]
     val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
                                                    allow_empty=len(config.data) > 1,
                                                    image_map=camera)
