@@ -296,10 +296,11 @@ def _hashes(folder: Path) -> dict[str, str]:
     return out
 
 
-def read_fused_calibration(path: Path | str) -> dict[str, tuple[float, float, str]]:
+def read_fused_calibration(path: Path | str) -> dict[str, tuple]:
     """The map ``(low, high, form)`` of each fusion rule in a :data:`ROBOT_FUSION_FILE`
-    (:func:`perception.fusion.check_calibration`; ``"slopes"`` where the file names no form):
-    the calibration pooled over every level it was fitted on.
+    (:func:`perception.fusion.check_calibration`; ``"slopes"`` where the file names no form;
+    under ``"powers"`` the entry's ``low_power`` and ``high_power`` after the form): the
+    calibration pooled over every level it was fitted on.
 
     Raises
     ------
@@ -334,15 +335,16 @@ def _read_fusion_file(path: Path | str) -> tuple[dict, dict[str, dict]]:
              for level, entry in levels.items()})
 
 
-def _rules(path: Path, rules, where: str) -> dict[str, tuple[float, float, str]]:
+def _rules(path: Path, rules, where: str) -> dict[str, tuple]:
     """The checked calibrations of one ``rules`` entry of the file ``path`` (``where``: which
     entry, for the error)."""
     from perception.fusion import FUSION_RULES, check_calibration
 
     at = f" ({where})" if where else ""
     try:
-        out = {rule: check_calibration((value["low"], value["high"],
-                                        value.get("form", "slopes")))
+        out = {rule: check_calibration((value["low"], value["high"], value.get("form", "slopes"),
+                                        *((value["low_power"], value["high_power"])
+                                          if value.get("form") == "powers" else ())))
                for rule, value in rules.items()}
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path} is not a fused-probability calibration{at} ({exc})"

@@ -38,15 +38,18 @@ stands: the views are not independent given the class, and ``noisy-or`` with a s
 after 5 clean views), while a view of rot puts a blemished one near 1. A ``calibration``
 ``(low, high)`` or ``(low, high, form)``, both slopes ``> 0``, maps the fused evidence ``E``
 (the sum of the views' terms) with one slope on each side of 0. Under ``form`` ``"slopes"``
-(the default) the log-odds become ``logit(prior) + low E`` where ``E < 0`` and
-``logit(prior) + high E`` where ``E >= 0``: a temperature a side. Under ``"log"`` they become
-``logit(prior) - low log(1 + |E|)`` and ``logit(prior) + high log(1 + E)``: strong evidence is
-compressed and weak evidence kept, so that one slope above 0 need not hedge a blemish seen
-weakly in one view in order to temper one seen strongly in many (:data:`CALIBRATION_FORMS`).
-Either is monotone (more blemished evidence never lowers the probability) and leaves the sign
-of ``E`` alone: at a threshold equal to the prior, every call is the call uncalibrated; only
-how sure it is changes. :func:`settled` applies it to its bounds, so that a call settled
-under it stays settled.
+(the default) the log-odds become ``logit(prior) + low E`` where ``E < 0`` and ``logit(prior) +
+high E`` where ``E >= 0``: a temperature a side. Under ``"log"`` they become ``logit(prior) -
+low log(1 + |E|)`` and ``logit(prior) + high log(1 + E)``: strong evidence is compressed and
+weak evidence kept, so that one slope above 0 need not hedge a blemish seen weakly in one view
+in order to temper one seen strongly in many (:data:`CALIBRATION_FORMS`). Under ``"powers"``,
+``(low, high, "powers", low_power, high_power)``, each side has a power of its own too:
+``logit(prior) - low |E|^low_power`` and ``logit(prior) + high E^high_power``, which can fall
+more steeply than ``"log"`` where a good onion's evidence gathers and still compress the strong
+evidence of a blemish. Each is monotone (more blemished evidence never lowers the probability)
+and leaves the sign of ``E`` alone: at a threshold equal to the prior, every call is the call
+uncalibrated; only how sure it is changes. :func:`settled` applies it to its bounds, so that a
+call settled under it stays settled.
 """
 
 from __future__ import annotations
@@ -71,8 +74,9 @@ __all__ = [
 
 FUSION_RULES = ("noisy-or", "log-odds")
 #: The forms of a fused ``calibration`` (:func:`fuse`): ``"slopes"``, a temperature each side of
-#: the evidence 0; ``"log"``, the slopes on ``log(1 + |E|)``.
-CALIBRATION_FORMS = ("log", "slopes")
+#: the evidence 0; ``"log"``, the slopes on ``log(1 + |E|)``; ``"powers"``, the slopes on
+#: ``|E|`` to a power of each side's own.
+CALIBRATION_FORMS = ("log", "slopes", "powers")
 _EPS = 1e-6
 
 
@@ -93,16 +97,17 @@ def _check_probability(value, name: str, *, open_interval: bool = True) -> float
     return v
 
 
-def check_calibration(calibration) -> tuple[float, float, str] | None:
-    """``calibration`` as ``(low, high, form)``: two floats and one of
-    :data:`CALIBRATION_FORMS`, ``"slopes"`` where only ``(low, high)`` is given (None stays
-    None).
+def check_calibration(calibration) -> tuple | None:
+    """``calibration`` as ``(low, high, form)``, or ``(low, high, "powers", low_power,
+    high_power)``: floats and one of :data:`CALIBRATION_FORMS`, ``"slopes"`` where only ``(low,
+    high)`` is given (None stays None).
 
     Raises
     ------
     ValueError
-        Unless it is None, two finite numbers > 0 or those and a form (a map that could lower
-        the probability as the evidence of a blemish grows is refused).
+        Unless it is None, two finite numbers > 0 or those and a form, and under ``"powers"``
+        two finite powers > 0 after it (a map that could lower the probability as the evidence
+        of a blemish grows is refused).
     """
     if calibration is None:
         return None
@@ -110,19 +115,23 @@ def check_calibration(calibration) -> tuple[float, float, str] | None:
         parts = [calibration] if isinstance(calibration, str) else list(calibration)
     except TypeError:
         parts = []
-    form = parts.pop() if len(parts) == 3 else "slopes"
+    form = parts[2] if len(parts) in (3, 5) else "slopes"
+    numbers = parts[:2] + parts[3:] if len(parts) in (3, 5) else parts
     try:
-        low, high = (float(x) for x in parts)
+        values = [float(x) for x in numbers]
     except (TypeError, ValueError):
+        values = []
+    if len(values) != (4 if len(parts) == 5 else 2):
         raise ValueError(f"calibration must be two slopes and an optional form (low, high"
-                         f"[, form]); got {calibration!r}") from None
-    if not (np.isfinite(low) and np.isfinite(high) and low > 0 and high > 0):
-        raise ValueError(f"calibration must be two finite slopes > 0 (monotone); got "
+                         f"[, form]), or under 'powers' two powers after the form; got "
                          f"{calibration!r}")
-    if form not in CALIBRATION_FORMS:
-        raise ValueError(f"calibration must be of a form in {CALIBRATION_FORMS}; got "
-                         f"{form!r}")
-    return low, high, form
+    if not all(np.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f"calibration must be finite slopes and powers > 0 (monotone); got "
+                         f"{calibration!r}")
+    if form not in CALIBRATION_FORMS or (form == "powers") != (len(values) == 4):
+        raise ValueError(f"calibration must be of a form in {CALIBRATION_FORMS}, with two "
+                         f"powers after it exactly under 'powers'; got {calibration!r}")
+    return (*values[:2], form, *values[2:])
 
 
 def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: float = 0.5,
@@ -146,8 +155,8 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
     calibration : (float, float) or (float, float, str) or None
         ``(low, high[, form])``, both slopes ``> 0``: the fused evidence ``E`` scaled by
         ``low`` where it is negative and by ``high`` where it is not, under ``form``
-        ``"log"`` its size ``log(1 + |E|)`` first (see the module docstring); None: as
-        fused.
+        ``"log"`` its size ``log(1 + |E|)`` first, under ``"powers"`` (two powers after the
+        form) its size to its side's power (see the module docstring); None: as fused.
 
     Raises
     ------
@@ -158,7 +167,7 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
         raise ValueError("view_p must hold at least one view's probability; got none")
     odds = log_odds(view_p, rule, prior=prior, train_prior=train_prior, visibility=visibility,
                     calibration=calibration)
-    return float(1.0 / (1.0 + np.exp(-odds)))
+    return float(1.0 / (1.0 + np.exp(min(-odds, 700.0))))  # 0 without overflow
 
 
 def _view_terms(p: np.ndarray, rule: str, train_prior: float, visibility: float) -> np.ndarray:
@@ -196,13 +205,18 @@ def log_odds(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior:
                        check_calibration(calibration))
 
 
-def _calibrated(base: float, evidence, calibration: tuple[float, float, str] | None):
+def _calibrated(base: float, evidence, calibration: tuple | None):
     """``base + evidence`` as fused, or with ``evidence`` mapped by ``calibration``: its
-    side's slope times its size (under ``"log"``, ``log(1 + size)``), its sign kept."""
+    side's slope times its size (under ``"log"``, ``log(1 + size)``; under ``"powers"``,
+    ``size`` to its side's power), its sign kept."""
     if calibration is None:
         return base + evidence
-    low, high, form = calibration
-    size = abs(evidence) if form == "slopes" else np.log1p(abs(evidence))
+    low, high, form, *powers = calibration
+    size = abs(evidence)
+    if form == "log":
+        size = np.log1p(size)
+    elif form == "powers":
+        size = size ** powers[0 if evidence < 0 else 1]
     return base - low * size if evidence < 0 else base + high * size
 
 

@@ -326,13 +326,14 @@ class InspectionClassifier:
         self.visibility = float(visibility)
         self.rule = rule
         self.metadata = dict(metadata or {})
-        self.fused_calibration: dict[str, tuple[float, float, str]] = {}
+        self.fused_calibration: dict[str, tuple] = {}
         for key, value in (fused_calibration or {}).items():
             self.set_fused_calibration(key, value)
 
     def set_fused_calibration(self, rule: str, calibration) -> None:
         """Calibrate the fused probability of ``rule`` by ``calibration`` ``(low, high[,
-        form])`` (:func:`perception.fusion.check_calibration`; None: fuse as it stands)."""
+        form[, low_power, high_power]])`` (:func:`perception.fusion.check_calibration`; None:
+        fuse as it stands)."""
         if rule not in FUSION_RULES:
             raise ValueError(f"rule must be one of {FUSION_RULES}; got {rule!r}")
         checked = check_calibration(calibration)

@@ -1,20 +1,22 @@
 """Forms of the robot's fused calibration: fitted on held-out robot onions, measured on others.
 
 Each robot onion's fused evidence ``E`` (the robot's inspection classifier on the detector's
-crops of its first ``--views`` views, fused at prior 1/2 and uncalibrated, as
-``onionsort train robot-fusion`` reads it) is read once per dataset. Each candidate form maps
-``E`` to the calibrated log-odds, keeps its sign (every call at the prior threshold stays) and
-is monotone; each is fitted on the ``--fit`` datasets together by log-loss against Platt's
-targets of each side of ``E = 0`` (as :func:`onionsort.stages.inspection.fit_side_slopes`
-fits the shipped forms), then measured on each ``--measure`` dataset: ECE (15 bins) beside the
-median and 90th percentile of what a perfectly calibrated model shows by chance on the same
-onions (:func:`perception.fusion.calibration_within_chance`), and the share of right calls.
+crops of its first ``--views`` views, fused at prior 1/2 and uncalibrated, as ``onionsort train
+robot-fusion`` reads it) is read once per dataset. Each candidate form maps ``E`` to the
+calibrated log-odds, keeps its sign (every call at the prior threshold stays) and is monotone;
+each is fitted on the ``--fit`` datasets together by log-loss against Platt's targets of each
+side of ``E = 0`` (the product's forms by :func:`onionsort.stages.inspection.fit_side_map`, as
+``train robot-fusion`` fits them), then measured on each ``--measure`` dataset: ECE (15 bins)
+beside the median and 90th percentile of what a perfectly calibrated model shows by chance on
+the same onions (:func:`perception.fusion.calibration_within_chance`), and the share of right
+calls.
 
 Forms (parameters): ``slopes`` (2, :data:`perception.fusion.CALIBRATION_FORMS`), ``log`` (2,
-likewise), ``power`` (3: ``-low |E|^k`` below 0, ``high E^k`` above), ``jump`` (3: ``low E``
-below 0, ``c + high E`` above), ``power2`` (4: ``power`` with a ``k`` each side).
-``--calibration LOW,HIGH[,FORM]`` measures a given calibration too (a shipped one); ``--forms
-''`` with it measures given calibrations alone; ``--pool`` measures the sets pooled too.
+likewise), ``powers`` (4, likewise: ``-low |E|^a`` below 0, ``high E^b`` above), ``power`` (3:
+``powers`` with ``a = b``), ``jump`` (3: ``low E`` below 0, ``c + high E`` above).
+``--calibration LOW,HIGH[,FORM[,A,B]]`` measures a given calibration too (a shipped one);
+``--forms ''`` with it measures given calibrations alone; ``--pool`` measures the sets pooled
+too.
 
 Example
 -------
@@ -33,10 +35,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from onionsort.stages.inspection import fit_side_slopes
-from perception.fusion import calibration_within_chance
+from onionsort.stages.inspection import fit_side_map
+from perception.fusion import CALIBRATION_FORMS, calibration_within_chance, check_calibration
 
-FORMS = {"slopes": 2, "log": 2, "power": 3, "jump": 3, "power2": 4}
+FORMS = {"slopes": 2, "log": 2, "powers": 4, "power": 3, "jump": 3}
 
 
 def read_evidence(data: Path, models: Path | None, views: int, cache: Path | None) -> dict:
@@ -85,7 +87,7 @@ def mapped(form: str, E: np.ndarray, q) -> np.ndarray:
         return np.where(E < 0, -q[0], q[1]) * size ** q[2]
     if form == "jump":
         return np.where(E < 0, -q[0] * size, q[2] + q[1] * size)
-    return np.where(E < 0, -q[0] * size ** q[1], q[2] * size ** q[3])  # power2
+    return np.where(E < 0, -q[0] * size ** q[2], q[1] * size ** q[3])  # powers
 
 
 def _targets(E: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -98,8 +100,9 @@ def _targets(E: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def fit(form: str, E: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The parameters of ``form`` fitted on evidence ``E`` and classes ``y``."""
-    if form in ("slopes", "log"):
-        return np.array(fit_side_slopes(E, y, form))
+    if form in CALIBRATION_FORMS:
+        fitted = fit_side_map(E, y, form)
+        return np.array([*fitted[:2], *fitted[3:]])
     t = _targets(E, y)
 
     def loss(q) -> float:
@@ -109,13 +112,13 @@ def fit(form: str, E: np.ndarray, y: np.ndarray) -> np.ndarray:
     if form == "power":  # slopes fitted per side for each k; k by a bounded search
         def at(k: float) -> np.ndarray:
             s = np.sign(E) * np.abs(E) ** k
-            return np.array([*fit_side_slopes(s, y), k])
+            return np.array([*fit_side_map(s, y)[:2], k])
 
         k = float(np.exp(minimize_scalar(lambda a: loss(at(float(np.exp(a)))),
                                          bounds=(np.log(0.02), np.log(2.0)),
                                          method="bounded", options={"xatol": 1e-4}).x))
         return at(k)
-    rng = np.random.default_rng(0)  # jump, power2: Nelder-Mead on the logs, from 20 starts
+    rng = np.random.default_rng(0)  # jump: Nelder-Mead on the logs, from 20 starts
     best = min((minimize(lambda a: loss(np.exp(a)), rng.normal(0, 1, FORMS[form]),
                          method="Nelder-Mead",
                          options={"maxiter": 20000, "xatol": 1e-8, "fatol": 1e-12})
@@ -131,7 +134,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--forms", default=",".join(FORMS))
     ap.add_argument("--calibration", action="append", default=[],
-                    help="LOW,HIGH[,FORM]: a given calibration measured too (repeatable)")
+                    help="LOW,HIGH[,FORM[,A,B]]: a given calibration measured too "
+                         "(repeatable)")
     ap.add_argument("--pool", action="store_true",
                     help="measure the --measure datasets pooled too")
     ap.add_argument("--cache", type=Path, default=None,
@@ -148,9 +152,11 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"fitted on {len(y)} onions ({int(y.sum())} blemished)")
     params = {form: (form, fit(form, E, y)) for form in forms}
     for i, text in enumerate(a.calibration):
-        parts = text.split(",")
-        params[f"given {i + 1}"] = (parts[2] if len(parts) == 3 else "slopes",
-                                    np.array([float(x) for x in parts[:2]]))
+        try:
+            given = check_calibration(text.split(","))
+        except ValueError as exc:
+            raise SystemExit(f"--calibration {text}: {exc}") from None
+        params[f"given {i + 1}"] = (given[2], np.array([*given[:2], *given[3:]]))
     measured = {str(d): read_evidence(d, a.models, a.views, a.cache) for d in a.measure}
     if a.pool:
         measured["pooled"] = {key: np.concatenate([m[key] for m in measured.values()])

@@ -170,8 +170,11 @@ def run_robot_fusion(args: argparse.Namespace) -> int:
         if "levels" in doc:
             print(where)
         for rule, fit in rules.items():
-            print(f"  fused by {rule}: {fit['form']} {fit['low']:.3f} below 0, "
-                  f"{fit['high']:.3f} above, on {fit['onions']} onions ({fit['blemished']} "
-                  f"blemished); ECE here {fit['ece_before']:.3f} -> {fit['ece_after']:.3f}")
+            powers = ((f" |E|^{fit['low_power']:.3f}", f" E^{fit['high_power']:.3f}")
+                      if "low_power" in fit else ("", ""))
+            print(f"  fused by {rule}: {fit['form']} {fit['low']:.3f}{powers[0]} below 0, "
+                  f"{fit['high']:.3f}{powers[1]} above, on {fit['onions']} onions "
+                  f"({fit['blemished']} blemished); ECE here {fit['ece_before']:.3f} -> "
+                  f"{fit['ece_after']:.3f}")
     print(f"wrote {args.out / 'robot_fusion_calibration.json'}")
     return 0

@@ -33,7 +33,7 @@ IRL_METHODS = METHODS[:4]
 DIFFICULTY_LEVELS = ("clean", "realistic", "paper", "hard")
 INSPECTION_VIEWS = 5
 FUSION_RULES = ("noisy-or", "log-odds")
-CALIBRATION_FORMS = ("log", "slopes")
+CALIBRATION_FORMS = ("log", "slopes", "powers")
 INSPECTION_CAMERAS = ("both", "robot", "sorter")
 LABEL_FORMATS = ("coco", "yolo")
 #: What ``label import`` reads: the export's layouts and Label Studio's JSON export.

@@ -134,7 +134,8 @@ class FusionCalibrationConfig:
                                           "many as the robot takes)")
     form: str = option("log", choices=CALIBRATION_FORMS,
                        help="log: a slope each side of the evidence 0 on log(1 + |evidence|); "
-                            "slopes: on the evidence itself")
+                            "slopes: on the evidence itself; powers: on |evidence| to a power "
+                            "each side fits too")
     by_level: bool = option(False, help="also fit each difficulty level's own calibration on "
                                         "that level's onions (every level needs good and "
                                         "blemished ones); the robot on a line of that level "

@@ -44,7 +44,7 @@ __all__ = [
     "InspectionViews",
     "fit_fused_calibration",
     "fit_robot_fusion_stage",
-    "fit_side_slopes",
+    "fit_side_map",
     "inspection_views",
     "measure_inspection",
     "train_inspection_stage",
@@ -388,11 +388,12 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
     """Per fusion rule, the calibration ``(low, high, form)`` of the fused probability of
     ``classifier`` on the onions of ``views`` (found views only): each onion's fused evidence
     ``E`` (its log-odds fused at prior 1/2, uncalibrated), or under ``form`` ``"log"`` its
-    size ``log(1 + |E|)`` with its sign, is scaled by one temperature where ``E < 0`` and by
-    another where ``E >= 0`` (:func:`perception.fusion.fuse`), each fitted on the onions of its
-    side against their class with Platt's targets (``(n+ + 1) / (n+ + 2)`` and
-    ``1 / (n- + 2)``, the counts of the side's classes, so that a side of one class gives a
-    finite slope; :func:`perception.inspection.fit_temperature`). The sign of ``E`` is kept, so
+    size ``log(1 + |E|)`` with its sign (under ``"powers"``, its size to a power each side fits
+    too), is scaled by one temperature where ``E < 0`` and by another where ``E >= 0``
+    (:func:`perception.fusion.fuse`), each fitted on the onions of its side against their class
+    with Platt's targets (``(n+ + 1) / (n+ + 2)`` and ``1 / (n- + 2)``, the counts of the side's
+    classes, so that a side of one class gives a finite slope; :func:`fit_side_map`). The sign
+    of ``E`` is kept, so
     on a line of prior 1/2 every call at the cost threshold 1/2 stays as it was; only how sure
     it is changes. A side with no onion keeps slope 1. ``p``: per rule, each row's per-view
     probability (:meth:`~perception.inspection.InspectionClassifier.calibrated`).
@@ -400,7 +401,8 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
     Returns
     -------
     dict
-        Per rule: ``low``, ``high``, ``form``, ``onions``, ``blemished`` and the expected
+        Per rule: ``low``, ``high``, ``form`` (under ``"powers"``, ``low_power`` and
+        ``high_power``), ``onions``, ``blemished`` and the expected
         calibration error on these onions before and after (``ece_before``, ``ece_after``;
         in-sample).
 
@@ -426,38 +428,71 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
         args = {"prior": 0.5, "train_prior": classifier._train_prior(rule),
                 "visibility": classifier.visibility}
         evidence = np.array([log_odds(probabilities[groups[k]], rule, **args) for k in keys])
-        low, high = fit_side_slopes(evidence, y, form)
+        calibration = fit_side_map(evidence, y, form)
         before = np.array([fuse(probabilities[groups[k]], rule, **args) for k in keys])
-        after = np.array([fuse(probabilities[groups[k]], rule, calibration=(low, high, form),
+        after = np.array([fuse(probabilities[groups[k]], rule, calibration=calibration,
                                **args) for k in keys])
-        out[rule] = {"low": low, "high": high, "form": form, "onions": len(y),
+        out[rule] = {"low": calibration[0], "high": calibration[1], "form": form,
+                     **dict(zip(("low_power", "high_power"), calibration[3:], strict=False)),
+                     "onions": len(y),
                      "blemished": int(y.sum()),
                      "ece_before": expected_calibration_error(before, y),
                      "ece_after": expected_calibration_error(after, y)}
     return out
 
 
-def fit_side_slopes(evidence: np.ndarray, y: np.ndarray, form: str = "slopes"
-                    ) -> tuple[float, float]:
-    """The slopes ``(low, high)`` of :func:`fit_fused_calibration` from each onion's fused
-    ``evidence`` (N,) (log-odds at prior 1/2) and class ``y`` (N,), under ``form`` (one of
-    :data:`CALIBRATION_FORMS`; ``"log"`` fits them on ``log(1 + |E|)``, its sign kept)."""
-    from perception.inspection import fit_temperature
+def fit_side_map(evidence: np.ndarray, y: np.ndarray, form: str = "slopes") -> tuple:
+    """The map :func:`fit_fused_calibration` fits from each onion's fused ``evidence`` (N,)
+    (log-odds at prior 1/2) and class ``y`` (N,), as
+    :func:`perception.fusion.check_calibration` gives it: ``(low, high, form)``, and under
+    ``"powers"`` ``(low, high, form, low_power, high_power)``.
 
+    Each side of ``E = 0`` is fitted alone, by log-loss against Platt's targets of its
+    classes: a slope (:func:`perception.inspection.fit_temperature`) on ``E`` (``"slopes"``),
+    on ``log(1 + |E|)`` (``"log"``), or on ``|E| ** k`` (``"powers"``, the power ``k`` in
+    [0.05, 5] that makes the loss least, by a bounded search on its log), the sign of ``E``
+    kept. A side with no onion keeps slope and power 1.
+
+    Raises
+    ------
+    ValueError
+        If ``form`` is not one of :data:`CALIBRATION_FORMS`.
+    """
     if form not in CALIBRATION_FORMS:
         raise ValueError(f"form must be one of {CALIBRATION_FORMS}; got {form!r}")
     evidence, y = np.asarray(evidence, float), np.asarray(y, float)
-    mapped = evidence if form == "slopes" else np.sign(evidence) * np.log1p(np.abs(evidence))
-    slopes = []
-    for side in (evidence < 0, evidence >= 0):
-        e, c = mapped[side], y[side]
-        if not len(e) or not np.any(e):
-            slopes.append(1.0)
-            continue
-        n_pos, n_neg = c.sum(), len(c) - c.sum()
-        targets = np.where(c == 1, (n_pos + 1) / (n_pos + 2), 1 / (n_neg + 2))
-        slopes.append(float(1.0 / fit_temperature(e, targets)))
-    return slopes[0], slopes[1]
+    (low, low_power), (high, high_power) = (_fit_side(evidence[side], y[side], form)
+                                            for side in (evidence < 0, evidence >= 0))
+    return (low, high, form, low_power, high_power) if form == "powers" else (low, high, form)
+
+
+def _fit_side(e: np.ndarray, c: np.ndarray, form: str) -> tuple[float, float]:
+    """The slope and power of one side's map (:func:`fit_side_map`) from its evidence ``e`` and
+    classes ``c``."""
+    from scipy.optimize import minimize_scalar
+
+    from perception.inspection import fit_temperature
+
+    if not len(e) or not np.any(e):
+        return 1.0, 1.0
+    n_pos, n_neg = c.sum(), len(c) - c.sum()
+    targets = np.where(c == 1, (n_pos + 1) / (n_pos + 2), 1 / (n_neg + 2))
+    if form != "powers":
+        mapped = e if form == "slopes" else np.sign(e) * np.log1p(np.abs(e))
+        return float(1.0 / fit_temperature(mapped, targets)), 1.0
+
+    def at(power: float) -> tuple[float, np.ndarray]:
+        mapped = np.sign(e) * np.abs(e) ** power
+        slope = float(1.0 / fit_temperature(mapped, targets))
+        return slope, slope * mapped
+
+    def loss(log_power: float) -> float:
+        z = at(float(np.exp(log_power)))[1]
+        return float(np.mean(np.logaddexp(0.0, z) - targets * z))
+
+    power = float(np.exp(minimize_scalar(loss, bounds=(np.log(0.05), np.log(5.0)),
+                                         method="bounded", options={"xatol": 1e-5}).x))
+    return at(power)[0], power
 
 
 def _write_fused_calibration(folder: Path, fitted: dict, provenance: dict,

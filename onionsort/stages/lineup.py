@@ -253,8 +253,8 @@ def _inspection_summary(config: EvaluateConfig, inspector) -> dict:
 
 
 def _calibration(inspector) -> list | None:
-    """The calibration ``[low, high, form]`` the inspector's fused probability carries (None:
-    uncalibrated)."""
+    """The calibration ``[low, high, form]`` (under ``"powers"``, the two powers after it) the
+    inspector's fused probability carries (None: uncalibrated)."""
     applied = inspector.classifier.fused_calibration.get(inspector.rule)
     return None if applied is None else list(applied)
 
