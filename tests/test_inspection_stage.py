@@ -166,6 +166,27 @@ def test_robot_fusion_fits_each_levels_own_calibration_where_asked(dataset, tmp_
         assert after[rule]["ece"] != pytest.approx(before[rule]["ece"])
 
 
+def test_robot_fusion_fits_a_levels_own_map_in_the_form_named_for_it(dataset, tmp_path,
+                                                                      capsys):
+    from onionsort.cli import main
+
+    out = tmp_path / "fit"
+    assert main(["train", "robot-fusion", "--data", str(dataset), "--by-level", "--level-forms",
+                 "clean=powers", "--out", str(out), "--device", "cpu"]) == 0
+    assert "E^" in capsys.readouterr().out  # the powers printed beside the slopes
+    doc = json.loads((out / "robot_fusion_calibration.json").read_text())
+    assert doc["level_forms"] == {"clean": "powers"}
+    for rule, fit in doc["levels"]["clean"].items():
+        assert fit["form"] == "powers" and fit["low_power"] > 0 and fit["high_power"] > 0
+        assert doc["rules"][rule]["form"] == "log"  # the pooled map keeps --form
+    # a level that the data do not hold: one line, nothing written
+    assert main(["train", "robot-fusion", "--data", str(dataset), "--by-level", "--level-forms",
+                 "hard=powers", "--out", str(tmp_path / "none"), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "level_forms names ['hard']" in err and "\n" not in err
+    assert not (tmp_path / "none").exists()
+
+
 def test_robot_fusion_by_level_refuses_a_level_whose_onions_are_one_class(dataset, tmp_path,
                                                                           monkeypatch):
     import dataclasses

@@ -11,7 +11,8 @@ from onionsort.configs import common, documented, option, train
 from onionsort.configs.common import CALIBRATION_FORMS, INSPECTION_CAMERAS
 
 __all__ = ["CALIBRATION_FORMS", "INSPECTION_CAMERAS", "TRAINING_CROPS",
-           "FusionCalibrationConfig", "InspectionTrainStageConfig", "level_weights"]
+           "FusionCalibrationConfig", "InspectionTrainStageConfig", "level_forms",
+           "level_weights"]
 
 
 TRAINING_CROPS = ("labelled", "detected")  # where train inspection cuts its training crops
@@ -20,19 +21,43 @@ TRAINING_CROPS = ("labelled", "detected")  # where train inspection cuts its tra
 def level_weights(text: str) -> dict[str, float]:
     """``level=weight`` pairs joined by commas, for argparse ``type=``."""
     out = {}
-    for part in filter(None, (x.strip() for x in text.split(","))):
-        level, _, weight = part.partition("=")
-        if level not in common.DIFFICULTY_LEVELS:
-            raise argparse.ArgumentTypeError(
-                f"unknown level {level!r} in {text!r}; the levels are "
-                f"{', '.join(common.DIFFICULTY_LEVELS)}")
+    for level, weight in _level_pairs(text, "level=weight", "clean=2").items():
         try:
             out[level] = float(weight)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"expected level=weight pairs, e.g. clean=2; got {part!r}") from None
+                f"expected level=weight pairs, e.g. clean=2; got {level}={weight!r}") from None
         if not out[level] > 0:
-            raise argparse.ArgumentTypeError(f"a level's weight must be > 0; got {part!r}")
+            raise argparse.ArgumentTypeError(f"a level's weight must be > 0; got "
+                                             f"{level}={weight}")
+    return out
+
+
+def level_forms(text: str) -> dict[str, str]:
+    """``level=form`` pairs joined by commas (forms of :data:`CALIBRATION_FORMS`), for
+    argparse ``type=``."""
+    out = _level_pairs(text, "level=form", "hard=powers")
+    for level, form in out.items():
+        if form not in CALIBRATION_FORMS:
+            raise argparse.ArgumentTypeError(
+                f"unknown form {form!r} for {level!r}; the forms are "
+                f"{', '.join(CALIBRATION_FORMS)}")
+    return out
+
+
+def _level_pairs(text: str, shape: str, example: str) -> dict[str, str]:
+    """The ``level=value`` pairs of ``text`` (commas between them), each level a known one."""
+    out = {}
+    for part in filter(None, (x.strip() for x in text.split(","))):
+        level, sign, value = part.partition("=")
+        if level not in common.DIFFICULTY_LEVELS:
+            raise argparse.ArgumentTypeError(
+                f"unknown level {level!r} in {text!r}; the levels are "
+                f"{', '.join(common.DIFFICULTY_LEVELS)}")
+        if not sign:
+            raise argparse.ArgumentTypeError(f"expected {shape} pairs, e.g. {example}; got "
+                                             f"{part!r}")
+        out[level] = value
     return out
 
 
@@ -140,6 +165,10 @@ class FusionCalibrationConfig:
                                         "that level's onions (every level needs good and "
                                         "blemished ones); the robot on a line of that level "
                                         "applies it, the pooled one elsewhere")
+    level_forms: dict = option(default_factory=dict, type=level_forms,
+                               help="the form of some levels' own calibrations, e.g. "
+                                    "hard=powers (with --by-level; the pooled one and the other "
+                                    "levels' take --form)")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
                             "folder, for the robot to apply it)")
     models: Path | None = common.models()
@@ -157,3 +186,10 @@ class FusionCalibrationConfig:
         if self.views is not None and (isinstance(self.views, bool)
                                        or not isinstance(self.views, int) or self.views < 1):
             raise ValueError(f"views must be an int >= 1; got {self.views!r}")
+        if self.level_forms and not self.by_level:
+            raise ValueError("level_forms needs by_level: only a level's own calibration can "
+                             "take a form of its own")
+        for level, form in self.level_forms.items():
+            if level not in common.DIFFICULTY_LEVELS or form not in CALIBRATION_FORMS:
+                raise ValueError(f"level_forms must map levels of {common.DIFFICULTY_LEVELS} "
+                                 f"to forms of {CALIBRATION_FORMS}; got {level!r}: {form!r}")

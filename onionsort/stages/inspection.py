@@ -514,15 +514,16 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
     cropped round the detector's box, as at inference) and write
     :data:`~onionsort.stages.models.ROBOT_FUSION_FILE` into ``config.out``, which
     :meth:`~onionsort.stages.models.PerceptionModels.load` applies to the robot's classifier.
-    With ``config.by_level`` each difficulty level's onions fit a calibration of its own too,
-    which :meth:`~onionsort.stages.models.PerceptionModels.at_level` applies on a line of that
+    With ``config.by_level`` each difficulty level's onions fit a calibration of its own too
+    (of the form ``config.level_forms`` gives the level, else ``config.form``), which
+    :meth:`~onionsort.stages.models.PerceptionModels.at_level` applies on a line of that
     level. Returns what was written.
 
     Raises
     ------
     ValueError
         If the data hold no robot view, no onion of one class, or (by level) a level whose
-        onions are all of one class.
+        onions are all of one class, or none of a level ``config.level_forms`` names.
     """
     from onionsort.stages.models import PerceptionModels
     from perception.fusion import FUSION_RULES
@@ -546,6 +547,8 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
         raise ValueError(f"{', '.join(map(str, config.data))} hold no robot view of an onion "
                          f"in split {config.split!r}; render them with `onionsort dataset "
                          "--robot-onions N`")
+    if missing := sorted(set(config.level_forms) - set(views.level.tolist())):
+        raise ValueError(f"level_forms names {missing}; the data hold no robot onion there")
     z = clf.logits(views.crops)
     p = {rule: clf.calibrated(z, rule) for rule in FUSION_RULES}
     fitted = fit_fused_calibration(clf, views, p, config.form)
@@ -554,13 +557,15 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
         at = views.level == level
         try:
             levels[str(level)] = fit_fused_calibration(
-                clf, views.subset(at), {rule: q[at] for rule, q in p.items()}, config.form)
+                clf, views.subset(at), {rule: q[at] for rule, q in p.items()},
+                config.level_forms.get(str(level), config.form))
         except ValueError as exc:
             raise ValueError(f"level {level!r}: {exc}") from None
     Path(config.out).mkdir(parents=True, exist_ok=True)
     return _write_fused_calibration(config.out, fitted, {
         "fitted_on": "held-out robot onions", "data": [str(d) for d in config.data],
         "split": config.split, "views": shown, "form": config.form,
+        **({"level_forms": dict(config.level_forms)} if config.level_forms else {}),
         "models": models.describe()}, levels)
 
 
