@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 BEFORE = ROOT / "tests" / "data" / "cli_flags_before_issue_39.tsv"
 #: A command-line text for each option parser that is not a plain type, by its name.
 TEXTS = {"floats": "0.5,0.25", "parse": "bc", "levels": "paper,hard", "weights": "3,1",
-         "level_weights": "clean=2", "classes": "good=sound",
+         "level_weights": "clean=2", "level_forms": "hard=powers", "classes": "good=sound",
          "camera_seeds": "11,12,13", "image_size": "320x240"}
 
 

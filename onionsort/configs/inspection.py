@@ -166,9 +166,9 @@ class FusionCalibrationConfig:
                                         "blemished ones); the robot on a line of that level "
                                         "applies it, the pooled one elsewhere")
     level_forms: dict = option(default_factory=dict, type=level_forms,
-                               help="the form of some levels' own calibrations, e.g. "
-                                    "hard=powers (with --by-level; the pooled one and the other "
-                                    "levels' take --form)")
+                               help="the form of some levels' own calibrations, with "
+                                    "--by-level, e.g. hard=powers (default: --form for every "
+                                    "level and the pooled one)")
     out: Path = option(help="folder to write robot_fusion_calibration.json into (the models "
                             "folder, for the robot to apply it)")
     models: Path | None = common.models()
