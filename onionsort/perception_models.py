@@ -344,7 +344,8 @@ def _rules(path: Path, rules, where: str) -> dict[str, tuple]:
     try:
         out = {rule: check_calibration((value["low"], value["high"], value.get("form", "slopes"),
                                         *((value["low_power"], value["high_power"])
-                                          if value.get("form") == "powers" else ())))
+                                          if value.get("form") == "powers" or "low_power" in value
+                                          else ())))
                for rule, value in rules.items()}
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path} is not a fused-probability calibration{at} ({exc})"

@@ -36,7 +36,8 @@ a call settles only once the views so far outweigh all those to come.
 stands: the views are not independent given the class, and ``noisy-or`` with a small
 ``visibility`` leaves a good onion near the prior odds times ``(1 - visibility)^K`` (about 0.2
 after 5 clean views), while a view of rot puts a blemished one near 1. A ``calibration``
-``(low, high)`` or ``(low, high, form)``, both slopes ``> 0``, maps the fused evidence ``E``
+``(low, high)`` or ``(low, high, form)`` (under ``"powers"``, two powers after it), both
+slopes ``> 0``, maps the fused evidence ``E``
 (the sum of the views' terms) with one slope on each side of 0. Under ``form`` ``"slopes"``
 (the default) the log-odds become ``logit(prior) + low E`` where ``E < 0`` and ``logit(prior) +
 high E`` where ``E >= 0``: a temperature a side. Under ``"log"`` they become ``logit(prior) -
@@ -152,7 +153,7 @@ def fuse(view_p, rule: str = "noisy-or", *, prior: float = 0.5, train_prior: flo
         to.
     visibility : float in (0, 1]
         The chance that a view of a blemished onion shows its rot (``"noisy-or"`` only).
-    calibration : (float, float) or (float, float, str) or None
+    calibration : (float, float) or (float, float, str) or (float, float, str, float, float) or None
         ``(low, high[, form])``, both slopes ``> 0``: the fused evidence ``E`` scaled by
         ``low`` where it is negative and by ``high`` where it is not, under ``form``
         ``"log"`` its size ``log(1 + |E|)`` first, under ``"powers"`` (two powers after the

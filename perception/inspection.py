@@ -295,7 +295,8 @@ class InspectionClassifier:
     rule : {"noisy-or", "log-odds"}
         The fusion rule chosen for this model (on validation onions).
     fused_calibration : dict
-        Per fusion rule, the map ``(low, high, form)`` that calibrates the fused probability
+        Per fusion rule, the map ``(low, high, form[, low_power, high_power])`` that
+        calibrates the fused probability
         (:func:`perception.fusion.fuse`'s ``calibration``; fitted on held-out onions by
         :func:`onionsort.stages.inspection.fit_fused_calibration`); a rule not in it is fused
         as it stands.

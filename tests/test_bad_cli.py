@@ -94,6 +94,7 @@ def fx(tmp_path_factory) -> Path:
 
 CAL = str(SHIPPED_CALIBRATION)
 #: (argv, words the one-line message must contain). ``{d}`` is the fixture folder.
+FUSION = ["train", "robot-fusion", "--data", "{d}/data_bad", "--out", "{d}/x"]
 CASES = [
     # experiment
     (["experiment", "forestworld", "--methods", "svm", "--out", "{d}/x"],
@@ -308,12 +309,9 @@ CASES = [
      ["data_bad/dataset.json", "not JSON"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--level-weights",
       "muddy=2"], ["--level-weights", "unknown level 'muddy'"]),
-    (["train", "robot-fusion", "--data", "{d}/data_bad", "--out", "{d}/x", "--by-level",
-      "--level-forms", "hard=isotonic"], ["--level-forms", "unknown form 'isotonic'"]),
-    (["train", "robot-fusion", "--data", "{d}/data_bad", "--out", "{d}/x", "--by-level",
-      "--level-forms", "hard"], ["--level-forms", "expected level=form pairs", "'hard'"]),
-    (["train", "robot-fusion", "--data", "{d}/data_bad", "--out", "{d}/x", "--level-forms",
-      "hard=powers"], ["level_forms needs by_level"]),
+    ([*FUSION, "--by-level", "--level-forms", "hard=isotonic"], ["unknown form 'isotonic'"]),
+    ([*FUSION, "--by-level", "--level-forms", "hard"], ["expected level=form pairs", "'hard'"]),
+    ([*FUSION, "--level-forms", "hard=powers"], ["level_forms needs by_level"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--fusion", "mean"],
      ["--fusion", "invalid choice", "'mean'"]),
     (["train", "inspection", "--data", "{d}/data_bad", "--out", "{d}/x", "--visibility", "1.5"],

@@ -26,7 +26,8 @@ def level_weights(text: str) -> dict[str, float]:
             out[level] = float(weight)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"expected level=weight pairs, e.g. clean=2; got {level}={weight!r}") from None
+                f"expected level=weight pairs, e.g. clean=2; got {f'{level}={weight}'!r}"
+            ) from None
         if not out[level] > 0:
             raise argparse.ArgumentTypeError(f"a level's weight must be > 0; got "
                                              f"{level}={weight}")

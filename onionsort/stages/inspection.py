@@ -385,7 +385,7 @@ def _fused(classifier, views: InspectionViews, rule: str, p: np.ndarray
 
 def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.ndarray],
                           form: str = "log") -> dict[str, dict]:
-    """Per fusion rule, the calibration ``(low, high, form)`` of the fused probability of
+    """Per fusion rule, the calibration ``(low, high, form[, powers])`` of the fused probability of
     ``classifier`` on the onions of ``views`` (found views only): each onion's fused evidence
     ``E`` (its log-odds fused at prior 1/2, uncalibrated), or under ``form`` ``"log"`` its
     size ``log(1 + |E|)`` with its sign (under ``"powers"``, its size to a power each side fits
@@ -393,10 +393,9 @@ def fit_fused_calibration(classifier, views: InspectionViews, p: dict[str, np.nd
     (:func:`perception.fusion.fuse`), each fitted on the onions of its side against their class
     with Platt's targets (``(n+ + 1) / (n+ + 2)`` and ``1 / (n- + 2)``, the counts of the side's
     classes, so that a side of one class gives a finite slope; :func:`fit_side_map`). The sign
-    of ``E`` is kept, so
-    on a line of prior 1/2 every call at the cost threshold 1/2 stays as it was; only how sure
-    it is changes. A side with no onion keeps slope 1. ``p``: per rule, each row's per-view
-    probability (:meth:`~perception.inspection.InspectionClassifier.calibrated`).
+    of ``E`` is kept, so on a line of prior 1/2 every call at the cost threshold 1/2 stays as it
+    was; only how sure it is changes. A side with no onion keeps slope 1. ``p``: per rule, each
+    row's per-view probability (:meth:`~perception.inspection.InspectionClassifier.calibrated`).
 
     Returns
     -------
@@ -451,7 +450,8 @@ def fit_side_map(evidence: np.ndarray, y: np.ndarray, form: str = "slopes") -> t
     classes: a slope (:func:`perception.inspection.fit_temperature`) on ``E`` (``"slopes"``),
     on ``log(1 + |E|)`` (``"log"``), or on ``|E| ** k`` (``"powers"``, the power ``k`` in
     [0.05, 5] that makes the loss least, by a bounded search on its log), the sign of ``E``
-    kept. A side with no onion keeps slope and power 1.
+    kept. A side with no onion keeps slope and power 1; a side whose onions are (nearly) all of
+    one class takes its power to a bound, and a warning says so.
 
     Raises
     ------
@@ -461,14 +461,15 @@ def fit_side_map(evidence: np.ndarray, y: np.ndarray, form: str = "slopes") -> t
     if form not in CALIBRATION_FORMS:
         raise ValueError(f"form must be one of {CALIBRATION_FORMS}; got {form!r}")
     evidence, y = np.asarray(evidence, float), np.asarray(y, float)
-    (low, low_power), (high, high_power) = (_fit_side(evidence[side], y[side], form)
-                                            for side in (evidence < 0, evidence >= 0))
+    (low, low_power), (high, high_power) = (_fit_side(evidence[at], y[at], form, side)
+                                            for at, side in ((evidence < 0, "below 0"),
+                                                             (evidence >= 0, "above 0")))
     return (low, high, form, low_power, high_power) if form == "powers" else (low, high, form)
 
 
-def _fit_side(e: np.ndarray, c: np.ndarray, form: str) -> tuple[float, float]:
-    """The slope and power of one side's map (:func:`fit_side_map`) from its evidence ``e`` and
-    classes ``c``."""
+def _fit_side(e: np.ndarray, c: np.ndarray, form: str, side: str) -> tuple[float, float]:
+    """The slope and power of one ``side``'s map (:func:`fit_side_map`) from its evidence ``e``
+    and classes ``c``."""
     from scipy.optimize import minimize_scalar
 
     from perception.inspection import fit_temperature
@@ -492,6 +493,9 @@ def _fit_side(e: np.ndarray, c: np.ndarray, form: str) -> tuple[float, float]:
 
     power = float(np.exp(minimize_scalar(loss, bounds=(np.log(0.05), np.log(5.0)),
                                          method="bounded", options={"xatol": 1e-5}).x))
+    if min(abs(np.log(power / bound)) for bound in (0.05, 5.0)) < 1e-3:
+        logger.warning("the map's power %s runs to its bound (%.3g): the onions there are "
+                       "(nearly) of one class, and each gets about one P", side, power)
     return at(power)[0], power
 
 

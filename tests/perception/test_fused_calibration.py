@@ -180,6 +180,8 @@ def test_the_robots_inspection_applies_the_calibration_its_models_folder_holds(t
     # a file that is not one, or holds a map that is not monotone: one line naming it
     for text in ("not json", json.dumps({"rules": {"noisy-or": {"low": -1.0, "high": 1.0}}}),
                  json.dumps({"rules": {"noisy-or": {"low": 1.0, "high": 1.0, "form": "max"}}}),
+                 json.dumps({"rules": {"noisy-or": {"low": 1.0, "high": 1.0, "form": "log",
+                                                    "low_power": 2.0, "high_power": 1.0}}}),
                  json.dumps({"rules": {"max": {"low": 1.0, "high": 1.0}}})):
         (folder / ROBOT_FUSION_FILE).write_text(text)
         with pytest.raises(ValueError, match=ROBOT_FUSION_FILE) as err:
@@ -229,7 +231,7 @@ def test_a_line_of_a_level_applies_that_levels_own_calibration(tmp_path):
             assert "level 'hard'" in str(err.value)
 
 
-def test_the_log_form_lifts_weak_evidence_of_a_blemish_that_one_slope_hedges():
+def test_the_log_form_lifts_weak_evidence_of_a_blemish_that_one_slope_hedges(caplog):
     """Good onions near the evidence of 5 clean views, blemished ones from a weak view to many
     strong ones, every call right (the robot at `hard`): one slope above 0 must temper the
     strong evidence and so hedges the weak; on log(1 + |E|) the slopes are better calibrated,
@@ -253,6 +255,9 @@ def test_the_log_form_lifts_weak_evidence_of_a_blemish_that_one_slope_hedges():
     np.testing.assert_array_equal(calibrated("log") >= 0.5, evidence >= 0)
     with pytest.raises(ValueError, match="form must be one of"):
         fit_side_map(evidence, y, "isotonic")
+    with caplog.at_level("WARNING"):  # every call right: each side's power runs to a bound
+        assert fit_side_map(evidence, y, "powers")[3:] == pytest.approx((0.05, 0.05), rel=1e-3)
+    assert "power below 0 runs to its bound" in caplog.text
 
 
 def test_the_powers_form_recovers_a_steeper_fall_where_good_onions_gather():
@@ -268,7 +273,8 @@ def test_the_powers_form_recovers_a_steeper_fall_where_good_onions_gather():
     p_true = np.array([fuse([1 / (1 + np.exp(-e))], "log-odds", calibration=truth)
                        for e in evidence])
     y = (rng.uniform(size=evidence.size) < p_true).astype(float)
-    assert fit_side_map(evidence, y, "powers")[2] == "powers"
+    low_power, high_power = fit_side_map(evidence, y, "powers")[3:]
+    assert abs(low_power - 1.5) < 0.3 and abs(high_power - 0.8) < 0.3  # the truth's powers
 
     def calibrated(form):  # one view under log-odds at prior 1/2: its logit is E
         c = fit_side_map(evidence, y, form)
