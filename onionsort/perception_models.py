@@ -343,9 +343,8 @@ def _rules(path: Path, rules, where: str) -> dict[str, tuple]:
     at = f" ({where})" if where else ""
     try:
         out = {rule: check_calibration((value["low"], value["high"], value.get("form", "slopes"),
-                                        *((value["low_power"], value["high_power"])
-                                          if value.get("form") == "powers" or "low_power" in value
-                                          else ())))
+                                        *(value[k] for k in ("low_power", "high_power")
+                                          if k in value)))
                for rule, value in rules.items()}
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path} is not a fused-probability calibration{at} ({exc})"
