@@ -1,6 +1,6 @@
 """The perception models a stage runs: the detector, the state classifier and the inspection
-classifier (and, where the folder has one, the Sawyer's own inspection classifier, which reads
-the robot's views instead of the shared one), from one folder.
+classifier (and, where the folder has them, the Sawyer's own detector and inspection classifier,
+which read the robot's views instead of the shared ones), from one folder.
 
 Loading them imports torch and the models, never the stages, the simulator or the writers: a
 robot's own process loads them so (:mod:`onionsort.policy`). The stages import them from
@@ -29,6 +29,7 @@ __all__ = [
     "CALIBRATION_FILE",
     "DEFAULT_MODELS",
     "INSPECTION_FILE",
+    "ROBOT_DETECTOR_FILE",
     "ROBOT_FUSION_FILE",
     "ROBOT_INSPECTION_FILE",
     "PerceptionModels",
@@ -43,6 +44,7 @@ CLASSIFIER_FILE = "state_classifier.pt"
 DETECTOR_FILE = "detector.pt"
 INSPECTION_FILE = "inspection_classifier.pt"
 ROBOT_INSPECTION_FILE = "robot_" + INSPECTION_FILE  # the Sawyer's own, where there is one
+ROBOT_DETECTOR_FILE = "robot_" + DETECTOR_FILE  # likewise
 CALIBRATION_FILE = "calibration.json"
 ROBOT_FUSION_FILE = "robot_fusion_calibration.json"
 """Beside the robot's inspection classifier: the calibration of its fused P(blemished), per
@@ -54,6 +56,10 @@ model (``calibration.json``) does not read it."""
 HASH_KEYS = ("state_classifier_sha256", "detector_sha256", "inspection_sha256")
 _FILES = {"state_classifier_sha256": CLASSIFIER_FILE, "detector_sha256": DETECTOR_FILE,
           "inspection_sha256": INSPECTION_FILE}
+#: The Sawyer's own models, hashed where a folder has them (never checked against a session:
+#: the sorter's observation model does not read them).
+_ROBOT_FILES = {"robot_inspection_sha256": ROBOT_INSPECTION_FILE,
+                "robot_detector_sha256": ROBOT_DETECTOR_FILE}
 
 
 #: Models loaded by :meth:`PerceptionModels.load_cached` in this process.
@@ -105,6 +111,9 @@ class PerceptionModels:
     inspection: object = None
     device: str = "cpu"
     robot_inspection: object = None
+    #: The detector that finds the onion in the Sawyer's views, where the folder has one
+    #: (:data:`ROBOT_DETECTOR_FILE`); else :attr:`detector` finds it there too.
+    robot_detector: object = None
     #: Per difficulty level, the robot's fused calibration fitted on that level's own onions
     #: (the file's ``levels``); :meth:`at_level` applies one.
     robot_fusion_levels: dict = field(default_factory=dict)
@@ -116,7 +125,7 @@ class PerceptionModels:
         stage loads the models once for all the pieces it runs."""
         where = DEFAULT_MODELS if folder is None else Path(folder)
         files = tuple((name, (where / name).stat().st_mtime_ns)
-                      for name in (*_FILES.values(), ROBOT_INSPECTION_FILE, ROBOT_FUSION_FILE)
+                      for name in (*_FILES.values(), *_ROBOT_FILES.values(), ROBOT_FUSION_FILE)
                       if (where / name).is_file())  # a model trained again is loaded again
         key = (where.resolve(), device, files)
         if key not in _LOADED:
@@ -127,10 +136,10 @@ class PerceptionModels:
     def load(cls, folder: Path | str | None = None, device: str = "auto") -> PerceptionModels:
         """Load ``state_classifier.pt``, ``detector.pt`` and ``inspection_classifier.pt``
         from ``folder`` (default: shipped) onto ``device`` (``auto``, ``cpu`` or ``cuda``;
-        :func:`resolve_device`), and ``robot_inspection_classifier.pt``
-        where the folder has one (the Sawyer's inspection reads it instead of the shared one),
-        with the calibration of its fused probability from :data:`ROBOT_FUSION_FILE` where the
-        folder has that too.
+        :func:`resolve_device`), and ``robot_inspection_classifier.pt`` and
+        ``robot_detector.pt`` where the folder has them (the Sawyer's inspection reads them
+        instead of the shared ones), with the calibration of its fused probability from
+        :data:`ROBOT_FUSION_FILE` where the folder has that too.
 
         Raises
         ------
@@ -151,6 +160,8 @@ class PerceptionModels:
         robot = folder / ROBOT_INSPECTION_FILE
         robot_inspection = (InspectionClassifier.load(robot, device=where) if robot.is_file()
                             else None)
+        robot = folder / ROBOT_DETECTOR_FILE
+        robot_detector = Detector.load(robot, device=where) if robot.is_file() else None
         levels = {}
         if robot_inspection is not None and (folder / ROBOT_FUSION_FILE).is_file():
             pooled, levels = _read_fusion_file(folder / ROBOT_FUSION_FILE)
@@ -162,7 +173,8 @@ class PerceptionModels:
                    inspection=InspectionClassifier.load(folder / INSPECTION_FILE,
                                                         device=where),
                    device=str(where),
-                   robot_inspection=robot_inspection, robot_fusion_levels=levels)
+                   robot_inspection=robot_inspection, robot_fusion_levels=levels,
+                   robot_detector=robot_detector)
 
     def at_level(self, level) -> PerceptionModels:
         """These models on a line of difficulty ``level`` (a level's name or a
@@ -212,7 +224,7 @@ class PerceptionModels:
         folder = cls.check_folder(folder)
         try:  # every model's, so that a file that is no checkpoint is found here too
             configs = {name: checkpoint_config(folder / name)
-                       for name in (*_FILES.values(), ROBOT_INSPECTION_FILE)
+                       for name in (*_FILES.values(), *_ROBOT_FILES.values())
                        if (folder / name).is_file()}
             frames = configs[CLASSIFIER_FILE]["frames"]
         except Exception:  # any unreadable file: loading it names the fault
@@ -262,20 +274,29 @@ class PerceptionModels:
             return self.robot_inspection
         return self.inspection
 
+    def detector_for(self, camera: str):
+        """The detector that finds the onion in ``camera``'s views: ``"sorter"`` the shared
+        one; ``"robot"`` the Sawyer's own where one was loaded, else the shared one."""
+        if camera not in ("sorter", "robot"):
+            raise ValueError(f"camera must be 'sorter' or 'robot'; got {camera!r}")
+        if camera == "robot" and self.robot_detector is not None:
+            return self.robot_detector
+        return self.detector
+
     def inspector(self, *, rule: str | None = None, threshold: float | None = None,
                   camera: str = "sorter"):
         """The inspection (:class:`perception.inspection.Inspector`) of ``camera``'s views
-        (:meth:`inspection_for`): the detector finds the onion, the inspection classifier
-        reads it, views are fused by ``rule`` (the classifier's own by default) and an onion
-        called blemished from ``threshold`` (the task's cost threshold by default,
-        :func:`~onionsort.configs.common.sorting_threshold`)."""
+        (:meth:`inspection_for`): the detector finds the onion (:meth:`detector_for`), the
+        inspection classifier reads it, views are fused by ``rule`` (the classifier's own by
+        default) and an onion called blemished from ``threshold`` (the task's cost threshold by
+        default, :func:`~onionsort.configs.common.sorting_threshold`)."""
         from irl.domains.onion_sorting import SORTING_TASK
         from perception.inspection import Inspector
 
         classifier = self.inspection_for(camera)
         values = tuple(SORTING_TASK.value_index("prediction", v)
                        for v in ("good", "bad", "unknown"))
-        return Inspector(self.detector, classifier,
+        return Inspector(self.detector_for(camera), classifier,
                          rule=classifier.rule if rule is None else rule,
                          threshold=sorting_threshold() if threshold is None else threshold,
                          values=values)
@@ -288,11 +309,12 @@ class PerceptionModels:
 
 
 def _hashes(folder: Path) -> dict[str, str]:
-    """A hash of each model file in ``folder`` (the Sawyer's inspection classifier only where
-    the folder has one)."""
+    """A hash of each model file in ``folder`` (the Sawyer's own models only where the folder
+    has them)."""
     out = {key: _digest(folder / name) for key, name in _FILES.items()}
-    if (folder / ROBOT_INSPECTION_FILE).is_file():
-        out["robot_inspection_sha256"] = _digest(folder / ROBOT_INSPECTION_FILE)
+    for key, name in _ROBOT_FILES.items():
+        if (folder / name).is_file():
+            out[key] = _digest(folder / name)
     return out
 
 

@@ -56,7 +56,8 @@ def read_evidence(data: Path, models: Path | None, views: int, cache: Path | Non
     torch.set_num_threads(2)
     loaded = PerceptionModels.load(models, "cpu")
     clf = loaded.robot_inspection or loaded.inspection
-    got = inspection_views(data, "all", detector=loaded.detector, allow_empty=True)
+    got = inspection_views(data, "all", detector=loaded.detector_for("robot"),
+                           allow_empty=True)
     got = got.subset((got.source == "robot") & got.found.astype(bool) & (got.view < views))
     p = clf.calibrated(clf.logits(got.crops), "noisy-or")
     groups = defaultdict(list)

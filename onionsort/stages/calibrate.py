@@ -224,8 +224,9 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
                  batch_size: int = 32, *, image_map=None,
                  views: Sequence[str] | None = None) -> dict[str, dict[str, float]]:
     """mAP of the detector on a dataset split: ``{"all" | "camera" | "inspection": {...}}``
-    (each colour image changed by ``image_map`` first, if given; ``views``: only these of the
-    dataset's views, ``"all"`` then being theirs). Besides COCO's figures,
+    (the Sawyer's views by its own detector where the models have one; each colour image
+    changed by ``image_map`` first, if given; ``views``: only these of the dataset's views,
+    ``"all"`` then being theirs). Besides COCO's figures,
     ``map50_any_class`` is mAP@0.5 with every box one class: whether the detector finds the
     onions, apart from the good/blemished call it puts on them, which nothing downstream reads
     (the inspection classifier makes the class call)."""
@@ -243,11 +244,17 @@ def detector_map(models: PerceptionModels, root: Path | str, split: str = "test"
                         for f in read_split(root, name, view=view, image_map=image_map)]
         gts[view] = [(np.asarray(f.record["boxes"], float).reshape(-1, 4),
                       np.asarray(f.record["classes"], int)) for f in frames[view]]
-        dts[view] = []
-        for i in range(0, len(frames[view]), batch_size):
-            dts[view].extend(models.detector.detect(
-                [f.color for f in frames[view][i:i + batch_size]],
-                score_threshold=EVAL_SCORE_THRESHOLD))
+        dts[view] = [None] * len(frames[view])
+        for camera in ("sorter", "robot"):  # the Sawyer's views by its own detector, if any
+            mine = [i for i, f in enumerate(frames[view])
+                    if (f.record.get("source") == "robot") == (camera == "robot")]
+            for start in range(0, len(mine), batch_size):
+                rows = mine[start:start + batch_size]
+                found = models.detector_for(camera).detect(
+                    [frames[view][i].color for i in rows], score_threshold=EVAL_SCORE_THRESHOLD)
+                for i, det in zip(rows, found, strict=True):
+                    dts[view][i] = det
+
     def figures(g: list, d: list) -> dict[str, float]:
         found = [(x.boxes, x.scores, x.classes) for x in d]
         return {**mean_average_precision(g, found),

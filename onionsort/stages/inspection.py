@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
-from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ from onionsort.configs.inspection import (
     InspectionTrainStageConfig,
 )
 from onionsort.stages.base import check_output_folder, log_config, write_json
+from onionsort.stages.inspection_views import MIN_CROP_PIXELS, InspectionViews, inspection_views
 
 __all__ = [
     "CALIBRATION_FORMS",
@@ -51,166 +51,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-MIN_CROP_PIXELS = 300
-"""A view is read only if the onion shows at least this many pixels (a rim at the edge of the
-sorter's view is no inspection)."""
-
-
-@dataclass
-class InspectionViews:
-    """The inspection views of a dataset split that show an onion, one row each.
-
-    ``crops`` (N, S, S, 3) uint8 (context crops of the true box, or the crops inference cuts
-    round the detector's box); ``labels`` (N,) rot in view (1, 0, -1 unclear;
-    :func:`perception.inspection.rot_label`); ``classes`` (N,) the onion's class; ``level``,
-    ``source`` (N,) str; ``onion`` (N,) a key naming the onion (the views of one onion in one
-    session or line-up share it); ``view`` (N,) the robot's view index (-1 for the sorter's);
-    ``found`` (N,) bool, whether the detector found the onion (always True for crops of the
-    labelled box).
-    """
-
-    crops: np.ndarray
-    labels: np.ndarray
-    classes: np.ndarray
-    level: np.ndarray
-    source: np.ndarray
-    onion: np.ndarray
-    view: np.ndarray
-    found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-
-    def __len__(self) -> int:
-        return len(self.labels)
-
-    def subset(self, mask: np.ndarray) -> InspectionViews:
-        return InspectionViews(**{f.name: getattr(self, f.name)[mask] for f in fields(self)})
-
-    @classmethod
-    def concat(cls, parts: list[InspectionViews]) -> InspectionViews:
-        """The rows of several sets, in order (onion keys prefixed by the set's index, so
-        that onions of two datasets never share one)."""
-        out = {f.name: np.concatenate([getattr(p, f.name) for p in parts])
-               for f in fields(cls)}
-        out["onion"] = np.concatenate([np.char.add(f"{i}:", p.onion.astype(str))
-                                       for i, p in enumerate(parts)])
-        return cls(**out)
-
-    def weights(self, level_weights: dict[str, float] | None = None) -> np.ndarray:
-        """Each (level, source, label) cell weighs the same in all, times its level's weight
-        (:data:`level_weights`, 1 where not given)."""
-        level_weights = level_weights or {}
-        out = np.zeros(len(self))
-        cells = defaultdict(list)
-        for i, key in enumerate(zip(self.level, self.source, self.labels, strict=True)):
-            cells[key].append(i)
-        for (level, _, _), rows in cells.items():
-            out[rows] = float(level_weights.get(str(level), 1.0)) / len(rows)
-        return out * len(self) / out.sum()
-
-
-def _held_onion(record: dict) -> int | None:
-    """Index of the onion an inspection record is about: the one showing most pixels, if it
-    shows at least :data:`MIN_CROP_PIXELS`."""
-    pixels = record.get("visible_pixels")
-    boxes = record["boxes"]
-    if not boxes:
-        return None
-    if pixels is None:  # a dataset written before the field: the largest box
-        pixels = [(b[2] - b[0]) * (b[3] - b[1]) for b in boxes]
-    k = int(np.argmax(pixels))
-    return k if pixels[k] >= MIN_CROP_PIXELS else None
-
-
-def inspection_views(root: Path | str, split: str, *, detector=None,
-                     dataset_level: str | None = None, allow_empty: bool = False,
-                     image_map=None, context: bool = False) -> InspectionViews:
-    """The inspection views of ``split`` (or ``"all"``) of dataset ``root`` that show an onion.
-
-    Without ``detector``: context crops of the true boxes (for training,
-    :func:`perception.train_inspection.context_crop`). With it: the crops inference cuts round
-    the detector's best box (:meth:`perception.inspection.Inspector.boxes`), ``found`` False
-    (and a blank crop) where it finds none; with ``context`` too, context crops round that
-    box (for training on the framing the detector gives). ``dataset_level`` names the level
-    of records that do not name theirs (datasets written before the field). A split with no
-    such view is an error, or empty with ``allow_empty``. ``image_map`` changes each view as it
-    is read (:data:`recordings.labels.dataset.ImageMap`).
-    """
-    from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
-    from perception.train_inspection import CONTEXT_SIZE, context_crop
-    from recordings.labels.dataset import read_metadata, read_split, split_names
-
-    meta = read_metadata(root)
-    if "inspection" not in meta.get("views", ["camera"]):
-        raise ValueError(f"{root} holds no inspection views; render a dataset with them "
-                         "(`onionsort dataset`)")
-    levels = meta.get("session_difficulty")
-    default_level = dataset_level or _dataset_level(meta)
-    size = CONTEXT_SIZE if detector is None or context else CROP_SIZE
-    rows = defaultdict(list)
-    pending: list[np.ndarray] = []  # images waiting for the detector, in batches
-
-    def flush() -> None:
-        if not pending:
-            return
-        for image, det in zip(pending, detector.detect(pending), strict=True):
-            box = best_box(det)
-            rows["found"].append(box is not None)
-            rows["crops"].append(np.zeros((size, size, 3), np.uint8) if box is None
-                                 else context_crop(image, box) if context
-                                 else crop_onion(image, box))
-        pending.clear()
-
-    for name in split_names(split):
-        for frame in read_split(root, name, view="inspection", image_map=image_map):
-            rec = frame.record
-            k = _held_onion(rec)
-            if k is None:
-                continue
-            source = rec.get("source", "human")
-            level = rec.get("difficulty") or (
-                levels[rec["session"]] if levels and source == "human" and "session" in rec
-                else default_level)
-            rot = rec.get("rot_pixels")
-            visible = (rec.get("visible_pixels") or [0] * len(rec["boxes"]))[k]
-            blemished = bool(rec["classes"][k])
-            rows["labels"].append(rot_label(None if rot is None else rot[k], visible, blemished))
-            rows["classes"].append(int(blemished))
-            rows["level"].append(level)
-            rows["source"].append(source)
-            if source == "robot":
-                rows["onion"].append(f"{name}/lineup{rec['lineup']}/{rec['index']}")
-                rows["view"].append(int(rec.get("view", 0)))
-            elif rec.get("onions"):
-                rows["onion"].append(f"{name}/session{rec['session']}/{rec['onions'][k]}")
-                rows["view"].append(-1)
-            else:  # an imported view names no onion: an onion of its own
-                rows["onion"].append(f"{name}/{rec.get('image', rec['color'])}")
-                rows["view"].append(-1)
-            if detector is None:
-                rows["crops"].append(context_crop(frame.color, rec["boxes"][k]))
-                rows["found"].append(True)
-            else:
-                pending.append(frame.color)
-                if len(pending) == 32:
-                    flush()
-    if detector is not None:
-        flush()
-    if not rows["labels"] and not allow_empty:
-        raise ValueError(f"split {split!r} of {root} holds no inspection view that shows an "
-                         f"onion of {MIN_CROP_PIXELS} pixels or more")
-    return InspectionViews(
-        crops=np.asarray(rows["crops"], np.uint8).reshape(-1, size, size, 3),
-        **{k: np.asarray(rows[k]) for k in ("labels", "classes", "level", "source", "onion",
-                                             "view", "found")})
-
-
-def _dataset_level(meta: dict) -> str:
-    config = meta.get("config", {})
-    difficulty = config.get("difficulty", "clean")
-    if isinstance(difficulty, dict):
-        return difficulty.get("name", "custom")
-    return "mix" if isinstance(difficulty, list) else str(difficulty)
-
 
 def _load_detector(folder: Path | None, device):
     from onionsort.stages.models import DEFAULT_MODELS, DETECTOR_FILE
@@ -539,8 +379,8 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
     clf = models.robot_inspection
     for rule in FUSION_RULES:  # fitted on the evidence as fused, never on top of a calibration
         clf.set_fused_calibration(rule, None)
-    parts = [inspection_views(d, config.split, detector=models.detector, allow_empty=True)
-             for d in config.data]
+    parts = [inspection_views(d, config.split, detector=models.detector_for("robot"),
+                              allow_empty=True) for d in config.data]
     views = InspectionViews.concat(parts)
     from robot.inspection_poses import INSPECTION_VIEWS
 
@@ -610,7 +450,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
 
     threshold = sorting_threshold() if threshold is None else threshold
     data = inspection_views(root, split, detector=models.detector, allow_empty=True,
-                            image_map=image_map)
+                            image_map=image_map, robot_detector=models.robot_detector)
     if views is not None:
         keep = (data.source != "robot") | (data.view < views)
         data = data.subset(keep)
