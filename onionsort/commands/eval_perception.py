@@ -1,7 +1,8 @@
 """``onionsort eval-perception``: measure the perception models on a dataset.
 
-Prints mAP of the detector (per view; "any class" counts every box as one class: how well it
-finds the onions, whatever it calls them); the accuracy of each factor of the state classifier on
+Prints mAP of the detector (per view, the Sawyer's views by its ``robot_detector.pt`` where the
+folder has one; "any class" counts every box as one class: how well it finds the onions,
+whatever it calls them); the accuracy of each factor of the state classifier on
 unoccluded steps, and the recall and precision of occluded steps (``--no-depth``: on colour
 alone); and, per difficulty level, the inspection: how often the detector finds the onion, the
 accuracy of each view alone, and the fused call on each onion (the Sawyer's views of it, the

@@ -75,8 +75,9 @@ log-loss on the validation onions). With ``--camera both`` it writes
 ``robot_inspection_classifier.pt`` and ``robot_fusion_calibration.json``, which the Sawyer's
 inspection then reads instead; with ``--camera sorter`` ``inspection_classifier.pt`` learnt,
 validated and calibrated on the sorter's views alone (for a models folder whose robot has its
-own). The validation views are found with ``--detector``'s model, and with ``--crops
-detected`` the training crops are cut round the boxes it finds.
+own). The validation views are found with ``--detector``'s model (the Sawyer's by its
+``robot_detector.pt`` where the folder has one), and with ``--crops detected`` the training
+crops are cut round the boxes it finds.
 ``--through-cameras`` also trains on each view seen through other cameras, the ones
 ``eval-perception --camera-shift`` draws.
 

@@ -73,7 +73,8 @@ def models():
     """``--models``: the perception models folder."""
     return option(None, help="folder with detector.pt, state_classifier.pt and "
                              "inspection_classifier.pt, and optionally "
-                             "robot_inspection_classifier.pt for the Sawyer's inspection "
+                             "robot_inspection_classifier.pt and robot_detector.pt for the "
+                             "Sawyer's inspection "
                              "(default: the models shipped with onionsort)")
 
 

@@ -85,8 +85,9 @@ class InspectionTrainStageConfig(train.TrainOptions):
     batch_size: int = option(128, help=train.BATCH_SIZE)
     detector: Path | None = option(None, help="folder of the detector.pt that finds the onion "
                                               "in the validation views, and with --crops "
-                                              "detected in the training views (default: the "
-                                              "shipped one)")
+                                              "detected in the training views, its "
+                                              "robot_detector.pt in the Sawyer's where it has "
+                                              "one (default: the shipped one)")
     crops: str = option("labelled", choices=TRAINING_CROPS,
                         help="where each training crop is cut: round the view's labelled box, "
                              "or round the box --detector finds there, the framing inspection "

@@ -52,15 +52,20 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-def _load_detector(folder: Path | None, device):
-    from onionsort.stages.models import DEFAULT_MODELS, DETECTOR_FILE
+
+def _load_detectors(folder: Path | None, device) -> dict:
+    """The detectors of ``folder`` (default: shipped) as :func:`inspection_views` takes them:
+    ``detector`` and, where the folder has one, the Sawyer's own ``robot_detector``."""
+    from onionsort.stages.models import DEFAULT_MODELS, DETECTOR_FILE, ROBOT_DETECTOR_FILE
     from perception import Detector
 
-    path = (DEFAULT_MODELS if folder is None else Path(folder)) / DETECTOR_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{path.parent} has no {DETECTOR_FILE}; train it with "
-                                f"`onionsort train detector --data DATASET --out {path.parent}`")
-    return Detector.load(path, device=device)
+    folder = DEFAULT_MODELS if folder is None else Path(folder)
+    if not (folder / DETECTOR_FILE).is_file():
+        raise FileNotFoundError(f"{folder} has no {DETECTOR_FILE}; train it with "
+                                f"`onionsort train detector --data DATASET --out {folder}`")
+    robot = folder / ROBOT_DETECTOR_FILE
+    return {"detector": Detector.load(folder / DETECTOR_FILE, device=device),
+            "robot_detector": Detector.load(robot, device=device) if robot.is_file() else None}
 
 
 def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
@@ -91,23 +96,23 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     device = resolve_device(config.device)
     check_output_folder(config.out)
     torch.set_num_threads(torch_threads())
-    detector = _load_detector(config.detector, device)
+    detectors = _load_detectors(config.detector, device)
     if config.init is not None and not Path(config.init).is_file():
         raise FileNotFoundError(f"{config.init}: no such inspection classifier to start from")
     train_cameras, val_cameras = _cameras(config.through_cameras)
-    framing = detector if config.crops == "detected" else None
-    parts = [(inspection_views(d, "train", detector=framing, context=True,
+    framing = detectors if config.crops == "detected" else {}
+    parts = [(inspection_views(d, "train", **framing, context=True,
                                allow_empty=len(config.data) > 1, image_map=camera), weight)
              for camera in train_cameras for d, weight in zip(config.data, config.data_weights,
                                                               strict=True)]
     train = InspectionViews.concat([views for views, _ in parts])
     counts = np.repeat([w for _, w in parts], [len(v) for v, _ in parts]).astype(float)
-    if framing is not None:  # the views its detector finds no onion in teach nothing
+    if framing:  # the views its detector finds no onion in teach nothing
         found = train.found.astype(bool)
         logger.info("the detector finds the onion in %d of %d training views",
                     int(found.sum()), len(found))
         train, counts = train.subset(found), counts[found]
-    val = InspectionViews.concat([inspection_views(d, "val", detector=detector,
+    val = InspectionViews.concat([inspection_views(d, "val", **detectors,
                                                    allow_empty=len(config.data) > 1,
                                                    image_map=camera)
                                   for camera in val_cameras for d in config.data])
@@ -143,7 +148,7 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
         classifier.visibility = float(config.visibility)
         metrics.update(visibility_measured=metrics["visibility"], visibility=config.visibility)
     if config.log_odds_data:
-        metrics["log_odds_map"] = _fit_log_odds_map(classifier, config, detector)
+        metrics["log_odds_map"] = _fit_log_odds_map(classifier, config, detectors)
         metrics["platt"] = metrics["log_odds_map"]["platt"]
     z = classifier.logits(val.crops)  # once, read under each rule
     rules = {rule: _fused_scores(classifier, val, rule, classifier.calibrated(z, rule))
@@ -177,14 +182,15 @@ def train_inspection_stage(config: InspectionTrainStageConfig) -> dict:
     return metrics
 
 
-def _fit_log_odds_map(classifier, config: InspectionTrainStageConfig, detector) -> dict:
+def _fit_log_odds_map(classifier, config: InspectionTrainStageConfig, detectors: dict
+                      ) -> dict:
     """Fit ``classifier``'s map from a view's logit to P(its onion is blemished), which the
     ``log-odds`` fusion reads, on every view of ``config.log_odds_data`` the detector finds
-    (both cameras', every split; weighted as validation views are); return what was fitted
-    and on what."""
+    (both cameras', every split, each by its camera's detector of ``detectors``; weighted as
+    validation views are); return what was fitted and on what."""
     from perception.train_inspection import fit_class_map
 
-    views = InspectionViews.concat([inspection_views(d, "all", detector=detector)
+    views = InspectionViews.concat([inspection_views(d, "all", **detectors)
                                     for d in config.log_odds_data])
     views = views.subset(views.found.astype(bool))
     if len(set(views.classes.tolist())) < 2:
@@ -379,8 +385,9 @@ def fit_robot_fusion_stage(config: FusionCalibrationConfig) -> dict:
     clf = models.robot_inspection
     for rule in FUSION_RULES:  # fitted on the evidence as fused, never on top of a calibration
         clf.set_fused_calibration(rule, None)
-    parts = [inspection_views(d, config.split, detector=models.detector_for("robot"),
-                              allow_empty=True) for d in config.data]
+    parts = [inspection_views(d, config.split, detector=models.detector,
+                              robot_detector=models.robot_detector, allow_empty=True)
+             for d in config.data]
     views = InspectionViews.concat(parts)
     from robot.inspection_poses import INSPECTION_VIEWS
 
@@ -450,7 +457,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
 
     threshold = sorting_threshold() if threshold is None else threshold
     data = inspection_views(root, split, detector=models.detector, allow_empty=True,
-                            image_map=image_map, robot_detector=models.robot_detector)
+                            image_map=image_map, robot_detector=models.detector_for("robot"))
     if views is not None:
         keep = (data.source != "robot") | (data.view < views)
         data = data.subset(keep)

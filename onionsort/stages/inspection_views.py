@@ -93,8 +93,8 @@ def _held_onion(record: dict) -> int | None:
 
 def inspection_views(root: Path | str, split: str, *, detector=None,
                      dataset_level: str | None = None, allow_empty: bool = False,
-                     image_map=None, context: bool = False,
-                     robot_detector=None) -> InspectionViews:
+                     image_map=None, context: bool = False, robot_detector=None,
+                     batch_size: int = 32) -> InspectionViews:
     """The inspection views of ``split`` (or ``"all"``) of dataset ``root`` that show an onion.
 
     Without ``detector``: context crops of the true boxes (for training,
@@ -105,12 +105,21 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     of records that do not name theirs (datasets written before the field). A split with no
     such view is an error, or empty with ``allow_empty``. ``image_map`` changes each view as it
     is read (:data:`recordings.labels.dataset.ImageMap`). ``robot_detector``, where given with
-    ``detector``, finds the onion in the Sawyer's views instead (the rows keep their order).
+    ``detector``, finds the onion in the Sawyer's views instead (the rows keep their order);
+    each detector reads ``batch_size`` views at a time.
+
+    Raises
+    ------
+    ValueError
+        If ``robot_detector`` is given without ``detector``, or (unless ``allow_empty``) the
+        split shows no onion.
     """
     from perception.inspection import CROP_SIZE, best_box, crop_onion, rot_label
     from perception.train_inspection import CONTEXT_SIZE, context_crop
     from recordings.labels.dataset import read_metadata, read_split, split_names
 
+    if detector is None and robot_detector is not None:
+        raise ValueError("a robot_detector needs a detector for the sorter's views too")
     meta = read_metadata(root)
     if "inspection" not in meta.get("views", ["camera"]):
         raise ValueError(f"{root} holds no inspection views; render a dataset with them "
@@ -119,7 +128,8 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
     default_level = dataset_level or _dataset_level(meta)
     size = CONTEXT_SIZE if detector is None or context else CROP_SIZE
     rows = defaultdict(list)
-    finders = {"robot": robot_detector or detector, "human": detector}
+    finders = {"robot": detector if robot_detector is None else robot_detector,
+               "human": detector}
     pending = {source: [] for source in finders}  # (row, image) waiting for a detector
 
     def flush(source: str) -> None:
@@ -169,7 +179,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 pending[finder].append((len(rows["crops"]), frame.color))
                 rows["crops"].append(None)
                 rows["found"].append(False)
-                if len(pending[finder]) == 32:
+                if len(pending[finder]) == batch_size:
                     flush(finder)
     for finder in pending if detector is not None else ():
         flush(finder)
