@@ -268,20 +268,12 @@ class PerceptionModels:
     def inspection_for(self, camera: str):
         """The inspection classifier that reads ``camera``'s views: ``"sorter"`` the shared
         one; ``"robot"`` the Sawyer's own where one was loaded, else the shared one."""
-        if camera not in ("sorter", "robot"):
-            raise ValueError(f"camera must be 'sorter' or 'robot'; got {camera!r}")
-        if camera == "robot" and self.robot_inspection is not None:
-            return self.robot_inspection
-        return self.inspection
+        return _of_camera(camera, self.robot_inspection, self.inspection)
 
     def detector_for(self, camera: str):
         """The detector that finds the onion in ``camera``'s views: ``"sorter"`` the shared
         one; ``"robot"`` the Sawyer's own where one was loaded, else the shared one."""
-        if camera not in ("sorter", "robot"):
-            raise ValueError(f"camera must be 'sorter' or 'robot'; got {camera!r}")
-        if camera == "robot" and self.robot_detector is not None:
-            return self.robot_detector
-        return self.detector
+        return _of_camera(camera, self.robot_detector, self.detector)
 
     def inspector(self, *, rule: str | None = None, threshold: float | None = None,
                   camera: str = "sorter"):
@@ -306,6 +298,14 @@ class PerceptionModels:
         from state_abstraction.perceive import perceive_steps
 
         return perceive_steps(self.classifier, steps, self.inspector(), first_step=first_step)
+
+
+def _of_camera(camera: str, robot, shared):
+    """The model that reads ``camera``'s views: ``robot`` for the Sawyer's (``"robot"``) where
+    there is one, else ``shared``."""
+    if camera not in ("sorter", "robot"):
+        raise ValueError(f"camera must be 'sorter' or 'robot'; got {camera!r}")
+    return robot if camera == "robot" and robot is not None else shared
 
 
 def _hashes(folder: Path) -> dict[str, str]:
