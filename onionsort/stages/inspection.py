@@ -457,7 +457,7 @@ def measure_inspection(models, root: Path | str, split: str = "test", *,
 
     threshold = sorting_threshold() if threshold is None else threshold
     data = inspection_views(root, split, detector=models.detector, allow_empty=True,
-                            image_map=image_map, robot_detector=models.detector_for("robot"))
+                            image_map=image_map, robot_detector=models.robot_detector)
     if views is not None:
         keep = (data.source != "robot") | (data.view < views)
         data = data.subset(keep)

@@ -181,7 +181,7 @@ def inspection_views(root: Path | str, split: str, *, detector=None,
                 rows["found"].append(False)
                 if len(pending[finder]) == batch_size:
                     flush(finder)
-    for finder in pending if detector is not None else ():
+    for finder in pending:  # what is left of each batch (none without a detector)
         flush(finder)
     if not rows["labels"] and not allow_empty:
         raise ValueError(f"split {split!r} of {root} holds no inspection view that shows an "
