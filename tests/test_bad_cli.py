@@ -238,6 +238,18 @@ CASES = [
     (["eval-perception", "--data", "{d}/data_bad"], ["data_bad/dataset.json", "not JSON"]),
     (["eval-perception", "--data", "{d}/data_none", "--split", "nope"],
      ["split must be one of", "'nope'"]),
+    # compare-perception
+    (["compare-perception", "--base", "{d}/bad.json", "--candidate", "{d}/bad.json"],
+     ["bad.json is not JSON", "eval-perception --json"]),
+    (["compare-perception", "--base", "{d}/no.json", "--candidate", "{d}/no.json"],
+     ["no.json", "No such file"]),
+    (["compare-perception", "--base", "{d}/run_shape/model.json", "--candidate",
+      "{d}/run_shape/model.json"], ["model.json is not an `eval-perception --json` result",
+                                    "'map_by_view'"]),
+    (["compare-perception", "--base", "{d}/bad.json", "--base", "{d}/bad.json",
+      "--candidate", "{d}/bad.json"], ["one --candidate result per --base one",
+                                       "2 --base and 1 --candidate"]),
+    (["compare-perception", "--base", "{d}/bad.json"], ["required", "--candidate"]),
     # learn
     (["learn", "{d}/nofile.mcap", "--observation-model", CAL, "--out", "{d}/x"],
      ["no such session file", "nofile.mcap"]),
@@ -536,6 +548,7 @@ _FOREIGN = {("robot/assets.py", "--no-deps"), ("recordings/sources/video.py", "-
 #: Which commands print the messages of a module of ``onionsort/commands`` or
 #: ``onionsort/stages`` (by the module's name).
 _MODULE_COMMANDS = {"import_video": ["import"], "eval_perception": ["eval-perception"],
+                    "compare_perception": ["compare-perception"],
                     "eval_posterior": ["eval-posterior"],
                     "calibrate": ["calibrate", "eval-perception"],
                     "label_select": ["label"], "lineup": ["evaluate", "score"]}

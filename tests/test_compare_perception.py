@@ -1,5 +1,6 @@
-"""scripts/compare_perception.py: two sets of models' figures side by side, with a tolerance
-the sets resolve (two binomial standard errors at each figure's size, at least 0.02)."""
+"""``onionsort compare-perception``: two sets of models' figures side by side, with a tolerance
+the sets resolve (two binomial standard errors at each figure's size, at least 0.02); and
+scripts/compare_perception.py, the name the notes ran it by."""
 
 import importlib.util
 import json
@@ -8,15 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from onionsort.cli import main as cli
+from onionsort.stages.compare_perception import compare_figures, tolerance
+
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "compare_perception.py"
-
-
-@pytest.fixture(scope="module")
-def compare():
-    spec = importlib.util.spec_from_file_location("compare_perception", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def result(onion=0.9, ece=0.05, accuracy=0.9, camera=0.8):
@@ -31,8 +27,8 @@ def result(onion=0.9, ece=0.05, accuracy=0.9, camera=0.8):
             "inspection_classifier": {"levels": {"hard": {"robot": level}}}}
 
 
-def test_a_loss_beyond_two_standard_errors_is_worse_and_one_within_is_not(compare):
-    rows = {r["figure"]: r for r in compare.compare(
+def test_a_loss_beyond_two_standard_errors_is_worse_and_one_within_is_not():
+    rows = {r["figure"]: r for r in compare_figures(
         [result()], [result(onion=0.85, ece=0.06, accuracy=0.88, camera=0.83)])}
     onion = rows["state: onion"]  # 2 SE of 0.9 of 400 = 0.03 < 0.05 lost
     q = (0.9 * 400 + 2) / 404
@@ -46,26 +42,86 @@ def test_a_loss_beyond_two_standard_errors_is_worse_and_one_within_is_not(compar
     assert not any("by chance" in name for name in rows)  # a reference, not a figure
 
 
-def test_figures_are_averaged_over_the_datasets_and_sized_by_their_sum(compare):
-    rows = {r["figure"]: r for r in compare.compare(
+def test_figures_are_averaged_over_the_datasets_and_sized_by_their_sum():
+    rows = {r["figure"]: r for r in compare_figures(
         [result(onion=0.9), result(onion=0.8)], [result(onion=0.9), result(onion=0.9)])}
     onion = rows["state: onion"]
     assert onion["base"] == pytest.approx(0.85) and onion["candidate"] == pytest.approx(0.9)
     assert onion["n"] == 800 and onion["verdict"] == "better"
 
 
-def test_the_command_writes_its_rows_and_refuses_unpaired_results(compare, tmp_path, capsys):
-    base, cand = tmp_path / "a.json", tmp_path / "b.json"
-    base.write_text(json.dumps(result()))
-    cand.write_text(json.dumps(result(onion=0.8)))
-    assert compare.main(["--base", str(base), "--candidate", str(cand),
-                         "--json", str(tmp_path / "rows.json")]) == 0
-    assert "worse beyond tolerance: 1 of" in capsys.readouterr().out
+def _write(tmp_path, name, r) -> str:
+    path = tmp_path / name
+    path.write_text(json.dumps(r))
+    return str(path)
+
+
+def test_the_command_prints_the_rows_and_the_figures_worse(tmp_path, capsys):
+    base, cand = _write(tmp_path, "a.json", result()), _write(tmp_path, "b.json",
+                                                              result(onion=0.8))
+    assert cli(["compare-perception", "--base", base, "--candidate", cand]) == 0
+    out = capsys.readouterr().out
+    assert "worse beyond the tolerance: 1 of" in out and "state: onion" in out
+    assert cli(["compare-perception", "--base", base, "--candidate", cand, "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["worse"] == ["state: onion"] and r["datasets"] == 1
+    assert [x["figure"] for x in r["unchanged"] if x["verdict"] == "worse"] == ["state: onion"]
+
+
+def test_results_of_two_datasets_are_refused_with_one_line(tmp_path, capsys):
+    """A paired comparison needs both models' readings of one dataset."""
+    other = result()
+    other["n_steps"] = 500
+    base, cand = _write(tmp_path, "a.json", result()), _write(tmp_path, "b.json", other)
+    assert cli(["compare-perception", "--base", base, "--candidate", cand]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "not readings of one dataset" in err and "steps differ (500 against 400)" in err
+    fewer = result()
+    fewer["inspection_classifier"]["levels"]["hard"]["robot"]["views"] = 160  # --views 4
+    cand = _write(tmp_path, "c.json", fewer)
+    assert cli(["compare-perception", "--base", base, "--candidate", cand]) == 2
+    assert "inspection differ" in capsys.readouterr().err
+
+
+def shifted(r, seeds, drop=0.05):
+    """``r`` as if read through the cameras of ``seeds`` too, each figure ``drop`` lower."""
+    from onionsort.stages.calibrate import shift_summary
+
+    lower = json.loads(json.dumps(r))
+    lower["map_by_view"]["camera"]["map50"] -= drop
+    return {**r, "camera_shift": {"seeds": seeds,
+                                  "figures": shift_summary(r, [lower] * len(seeds))}}
+
+
+def test_through_other_cameras_it_gives_each_models_drop_and_refuses_other_seeds(tmp_path,
+                                                                                  capsys):
+    base = _write(tmp_path, "a.json", shifted(result(), [11, 12], drop=0.06))
+    cand = _write(tmp_path, "b.json", shifted(result(), [11, 12], drop=0.03))
+    assert cli(["compare-perception", "--base", base, "--candidate", cand, "--json"]) == 0
+    rows = {x["figure"]: x for x in json.loads(capsys.readouterr().out)["camera_shift"]}
+    camera = rows["detector mAP@0.5, camera"]
+    assert camera["base_drop"] == pytest.approx(0.06)
+    assert camera["candidate_drop"] == pytest.approx(0.03)
+    assert camera["candidate_mean"] == pytest.approx(0.77)
+    other = _write(tmp_path, "c.json", shifted(result(), [11, 13]))
+    assert cli(["compare-perception", "--base", base, "--candidate", other]) == 2
+    assert "different seeds ([11, 13] against [11, 12])" in capsys.readouterr().err
+
+
+def test_the_notes_script_runs_the_same_comparison_and_writes_its_rows(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("compare_perception_script", SCRIPT)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    base, cand = _write(tmp_path, "a.json", result()), _write(tmp_path, "b.json",
+                                                              result(onion=0.8))
+    assert script.main(["--base", base, "--candidate", cand,
+                        "--json", str(tmp_path / "rows.json")]) == 0
+    assert "worse beyond the tolerance: 1 of" in capsys.readouterr().out
     rows = json.loads((tmp_path / "rows.json").read_text())["unchanged"]
     assert [r["figure"] for r in rows if r["verdict"] == "worse"] == ["state: onion"]
-    assert compare.main(["--base", str(base), "--base", str(base),
-                         "--candidate", str(cand)]) == 2
-    assert "as many --candidate" in capsys.readouterr().err
+    assert script.main(["--base", base, "--base", base, "--candidate", cand]) == 2
+    assert "one --candidate result per --base one" in capsys.readouterr().err
 
 
 def fused_result(precision, recall=1.0, blemished=20, called=None, counts=True):
@@ -77,30 +133,30 @@ def fused_result(precision, recall=1.0, blemished=20, called=None, counts=True):
     return r
 
 
-def test_precision_and_recall_are_sized_by_what_they_count(compare):
+def test_precision_and_recall_are_sized_by_what_they_count():
     """Precision counts the onions called blemished, recall the blemished ones; a result
     written before those counts is sized by its onions."""
     name = "inspection hard robot: fused by noisy-or, "
-    rows = {r["figure"]: r for r in compare.compare(
+    rows = {r["figure"]: r for r in compare_figures(
         [fused_result(20 / 21, called=21)], [fused_result(1.0, called=20)])}
     assert rows[name + "precision"]["n"] == 21
     assert rows[name + "recall"]["n"] == 20 and rows[name + "accuracy"]["n"] == 40
-    old = {r["figure"]: r for r in compare.compare(
+    old = {r["figure"]: r for r in compare_figures(
         [fused_result(1.0, counts=False)], [fused_result(1.0, counts=False)])}
     assert old[name + "precision"]["n"] == old[name + "recall"]["n"] == 40
-    mixed = {r["figure"]: r for r in compare.compare(  # an old baseline, a new candidate
+    mixed = {r["figure"]: r for r in compare_figures(  # an old baseline, a new candidate
         [fused_result(1.0, counts=False)], [fused_result(20 / 21, called=21)])}
     assert mixed[name + "precision"]["n"] == 21
 
 
-def test_one_onion_off_a_perfect_figure_is_within_and_three_are_worse(compare):
+def test_one_onion_off_a_perfect_figure_is_within_and_three_are_worse():
     """At a rate of 1.000 the plain standard error is 0, and the 0.02 floor is finer than one
     onion of 41: the tolerance is at Agresti and Coull's rate, which one count never exceeds."""
     name = "inspection hard robot: fused by noisy-or, precision"
-    one = {r["figure"]: r for r in compare.compare(
+    one = {r["figure"]: r for r in compare_figures(
         [fused_result(1.0, called=41)], [fused_result(40 / 41, called=41)])}[name]
     assert one["tolerance"] > 1 / 41 and one["verdict"] == "within"
-    three = {r["figure"]: r for r in compare.compare(
+    three = {r["figure"]: r for r in compare_figures(
         [fused_result(1.0, called=41)], [fused_result(38 / 41, called=41)])}[name]
     assert three["verdict"] == "worse"
-    assert compare.tolerance(0.5, 10_000) == 0.02  # the floor holds for large sets
+    assert tolerance(0.5, 10_000) == 0.02  # the floor holds for large sets

@@ -4,8 +4,11 @@ inspection spot), their ground truth kept aside to play the person who corrects 
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import glob
+import io
+import json
 import os
 import re
 import shutil
@@ -104,7 +107,12 @@ def test_every_command_of_the_lab_walk_runs(tmp_path, monkeypatch):
         if command.argv[0] == "import":
             continue
         argv = _expanded(_smaller(command.argv))
-        assert main(argv) == 0, command.text
+        target = re.search(r"\s>\s*(\S+)\s*$", command.text)  # `... --json > FILE`
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed) if target else contextlib.nullcontext():
+            assert main(argv) == 0, command.text
+        if target:
+            Path(target.group(1)).write_text(printed.getvalue())
         ran.append(" ".join(command.argv[:2]))
         if command.argv[:2] == ("label", "select"):  # a person labels what it chose
             use = next(u for u in USES if any(f"runs/{u}/" in a for a in command.argv))
@@ -113,6 +121,9 @@ def test_every_command_of_the_lab_walk_runs(tmp_path, monkeypatch):
     assert ran == ["import", "label select", "label import", "dataset --frames",
                    "train detector", "train state-classifier", "train inspection",
                    "label select", "label import", "calibrate --data",
-                   "perceive runs/line/*.mcap", "learn runs/line/*.mcap"]
+                   "eval-perception --data", "eval-perception --data",
+                   "compare-perception --base", "perceive runs/line/*.mcap",
+                   "learn runs/line/*.mcap"]
+    assert json.loads(Path("runs/heldout-lab.json").read_text())["n_steps"] > 0
     assert Path("runs/lab-learn/model.json").is_file()
     shutil.rmtree("runs")

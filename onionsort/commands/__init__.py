@@ -23,6 +23,7 @@ COMMAND_MODULES = [
     "onionsort.commands.perceive",
     "onionsort.commands.calibrate",
     "onionsort.commands.eval_perception",
+    "onionsort.commands.compare_perception",
     "onionsort.commands.eval_posterior",
     "onionsort.commands.learn",
     "onionsort.commands.evaluate",

@@ -1,5 +1,6 @@
 """The configs of stages ``calibrate`` and ``eval-perception``
-(:mod:`onionsort.stages.calibrate`)."""
+(:mod:`onionsort.stages.calibrate`), and ``compare-perception``
+(:mod:`onionsort.stages.compare_perception`)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from typing import ClassVar
 from onionsort.configs import common, documented, option
 from onionsort.configs.parallel import TORCH_THREADS, ParallelOptions
 
-__all__ = ["CalibrateConfig", "PerceptionEvalConfig", "camera_seeds", "check_camera_seeds",
-           "check_camera_shift"]
+__all__ = ["CalibrateConfig", "PerceptionCompareConfig", "PerceptionEvalConfig", "camera_seeds",
+           "check_camera_seeds", "check_camera_shift"]
 
 
 def check_camera_shift(seed, name: str = "camera_shift") -> None:
@@ -124,3 +125,30 @@ class PerceptionEvalConfig:
             raise ValueError("one_camera needs camera_shift: the seeds of the cameras")
         if self.views is not None and self.views < 1:
             raise ValueError(f"views must be >= 1; got {self.views}")
+
+
+@documented
+@dataclass(frozen=True, kw_only=True)
+class PerceptionCompareConfig:
+    """Two sets of models' ``eval-perception --json`` results, one file per dataset: the
+    baseline's (``base``) and the candidate's (``candidate``), on the same datasets in the same
+    order."""
+
+    base: tuple[Path, ...] = option(type=Path, action="append", metavar="FILE.json",
+                                    help="the baseline models' `eval-perception --json` result "
+                                         "on one dataset (repeat it, once per dataset)")
+    candidate: tuple[Path, ...] = option(type=Path, action="append", metavar="FILE.json",
+                                         help="the candidate models' result on the same "
+                                              "dataset (repeat it, in --base's order)")
+
+    def __post_init__(self) -> None:
+        for name in ("base", "candidate"):
+            value = getattr(self, name)
+            value = (value,) if isinstance(value, str | Path) else tuple(value or ())
+            if not value:
+                raise ValueError(f"{name} must name at least one result file; got none")
+            object.__setattr__(self, name, tuple(Path(v) for v in value))
+        if len(self.base) != len(self.candidate):
+            raise ValueError(f"give one --candidate result per --base one, in the same order; "
+                             f"got {len(self.base)} --base and {len(self.candidate)} "
+                             f"--candidate")

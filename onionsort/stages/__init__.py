@@ -11,6 +11,8 @@ train              ``ClassifierTrainConfig``,   ``train_state_classifier``, ``tr
                    ``DetectorTrainConfig``      (in :mod:`onionsort.stages.train`)
 perceive           :class:`PerceiveConfig`      :func:`perceive`
 calibrate          :class:`CalibrateConfig`     :func:`calibrate`, :func:`eval_perception`
+compare-perception ``PerceptionCompareConfig``  :func:`compare_perception`: a candidate's
+                                                figures against a baseline's
 learn              :class:`LearnConfig`         :func:`learn` -> model.json content
 evaluate           :class:`EvaluateConfig`      :func:`evaluate` (a simulated or a recorded
                                                 line-up: :mod:`onionsort.stages.lineup`)
@@ -33,6 +35,7 @@ from onionsort.stages.calibrate import (
     calibrate,
     eval_perception,
 )
+from onionsort.stages.compare_perception import PerceptionCompareConfig, compare_perception
 from onionsort.stages.dataset import DatasetConfig, make_dataset
 from onionsort.stages.demo import DemoConfig, demo
 from onionsort.stages.evaluate import EvaluateConfig, evaluate
@@ -57,6 +60,7 @@ __all__ = [
     "ImportConfig",
     "LearnConfig",
     "PerceiveConfig",
+    "PerceptionCompareConfig",
     "PerceptionEvalConfig",
     "PerceptionModels",
     "RecordConfig",
@@ -64,6 +68,7 @@ __all__ = [
     "ScoreConfig",
     "SuggestConfig",
     "calibrate",
+    "compare_perception",
     "demo",
     "eval_perception",
     "evaluate",

@@ -1,0 +1,201 @@
+"""Stage ``compare-perception``: a candidate's perception figures against a baseline's, figure by
+figure, with a tolerance the datasets resolve.
+
+Reads ``onionsort eval-perception --json`` results, one per dataset, of the baseline models and
+of the candidate on the same datasets (each pair must be readings of one dataset: the same
+split, steps and inspection views). For every figure :func:`perception_figures` names it gives
+the baseline's and the candidate's value, each the mean over the datasets; the candidate's gain
+(positive: better; for an ECE, lower is better); and the tolerance: two binomial standard
+errors at the figure's size, at least 0.02. The standard error is Agresti and Coull's, at the
+rate with two hits and two misses added (``(x + 2) / (n + 4)``): at a rate of 1.000 the plain
+estimate is 0, and a tolerance under one count of the figure is finer than its set resolves. A
+figure is ``worse`` when the candidate loses more than the tolerance, ``better`` when it gains
+more. What a calibrated model's ECE would be by chance is a reference, not a figure of the
+models, and is left out. Where both results were read through other cameras
+(``eval-perception --camera-shift``, the same seeds), it gives each figure's mean and drops
+there too.
+
+The size of a figure (summed over the datasets):
+
+- the detector's mAP and the state classifier's figures: the steps evaluated (``n_steps``);
+- an inspection figure per view (onion found, rot call, class call): the views;
+- a fused call: the onions for its accuracy and ECE, the onions it called blemished for its
+  precision and the blemished onions for its recall (in a result written before
+  ``eval-perception`` recorded those counts, the other model's; where neither has them, the
+  onions).
+
+The tolerance covers the onions a set happens to hold, not what a second training run of the
+same recipe changes, and each figure is judged on its own: with about 35 figures a difficulty
+level, one of them may move beyond its tolerance by chance.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from onionsort.configs.calibrate import PerceptionCompareConfig
+from onionsort.stages.calibrate import perception_figures, shift_summary
+
+__all__ = ["PerceptionCompareConfig", "compare_figures", "compare_perception", "figure_sizes",
+           "load_result", "shift_rows", "tolerance"]
+
+
+def tolerance(p: float, n: int) -> float:
+    """Two binomial standard errors of a rate ``p`` of ``n``, at Agresti and Coull's rate
+    (two hits and two misses added), at least 0.02."""
+    if not n:
+        return 0.02
+    q = (min(max(p, 0.0), 1.0) * n + 2) / (n + 4)
+    return max(0.02, 2 * math.sqrt(q * (1 - q) / n))
+
+
+def _fused_counts(f: dict) -> dict[str, int]:
+    """A fused call's sizes: its onions, and for its precision and recall the onions it
+    called blemished and the blemished ones (where the result lacks those: its onions)."""
+    n = f["onions"]
+    return {"accuracy": n, "ECE": n, "precision": f.get("called_blemished", n),
+            "recall": f.get("blemished", n)}
+
+
+def figure_sizes(r: dict, other: dict | None = None) -> dict[str, int]:
+    """Each figure's size (see the module's text) in one result; a fused call's counts that
+    ``r`` lacks (written before they were recorded) are ``other``'s, the same call on the same
+    onions by the other models, where it has them."""
+    sizes = dict.fromkeys(perception_figures(r), r["n_steps"])
+    levels = (other or {}).get("inspection_classifier", {}).get("levels", {})
+    for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items():
+        for source, m in sources.items():
+            who = f"inspection {level} {source}:"
+            for name in sizes:
+                if name.startswith(who):
+                    sizes[name] = m["views"]
+            for rule, f in m["fused"].items():
+                g = levels.get(level, {}).get(source, {}).get("fused", {}).get(rule, {})
+                if "blemished" not in f and g.get("onions") == f["onions"]:
+                    f = {**f, **{k: g[k] for k in ("blemished", "called_blemished") if k in g}}
+                for figure, n in _fused_counts(f).items():
+                    name = f"{who} fused by {rule}, {figure}"
+                    if name in sizes:
+                        sizes[name] = n
+    return sizes
+
+
+def load_result(path: Path | str) -> dict:
+    """One result as ``eval-perception --json`` prints it; a ``ValueError`` naming ``path``
+    where the file is not one. A file of unchanged figures and one result per camera seed
+    (``{"unchanged": ..., "11": ..., "12": ...}``) is put in that shape."""
+    path = Path(path)
+    try:
+        r = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path} is not JSON ({e}): give an `eval-perception --json` "
+                         f"result") from None
+    if isinstance(r, dict) and "unchanged" in r:
+        out = dict(r["unchanged"])
+        seeds = [k for k in r if k.isdigit()]
+        if seeds:
+            out["camera_shift"] = {"seeds": [int(k) for k in seeds],
+                                   "figures": shift_summary(out, [r[k] for k in seeds])}
+        r = out
+    missing = [k for k in ("map_by_view", "accuracy", "n_steps")
+               if not isinstance(r, dict) or k not in r]
+    if missing:
+        raise ValueError(f"{path} is not an `eval-perception --json` result: it lacks "
+                         f"{', '.join(repr(k) for k in missing)}")
+    return r
+
+
+def _dataset_key(r: dict) -> dict:
+    """What identifies the dataset a result read: its split, its steps and, per level and
+    source, the inspection's views and onions."""
+    levels = r.get("inspection_classifier", {}).get("levels", {})
+    return {"split": r.get("split"), "steps": r["n_steps"],
+            "inspection": {f"{level} {source}": (m.get("views"),
+                                                 next(iter(m.get("fused", {}).values()),
+                                                      {}).get("onions"))
+                           for level, sources in levels.items()
+                           for source, m in sources.items()}}
+
+
+def _check_pair(base: dict, cand: dict, base_path, cand_path) -> None:
+    """Refuse two results that are not readings of one dataset, or were read through other
+    cameras' different seeds."""
+    a, b = _dataset_key(base), _dataset_key(cand)
+    for key in ("split", "steps", "inspection"):
+        if a[key] != b[key]:
+            raise ValueError(f"{cand_path} and {base_path} are not readings of one dataset: "
+                             f"their {key} differ ({b[key]} against {a[key]})")
+    if "camera_shift" in base and "camera_shift" in cand:
+        sa, sb = base["camera_shift"]["seeds"], cand["camera_shift"]["seeds"]
+        if list(sa) != list(sb):
+            raise ValueError(f"{cand_path} and {base_path} went through other cameras of "
+                             f"different seeds ({sb} against {sa})")
+
+
+def compare_figures(base: list[dict], candidate: list[dict]) -> list[dict]:
+    """One row per figure: ``figure``, the two means (``base``, ``candidate``), the
+    candidate's ``gain``, the size ``n``, the ``tolerance`` and the ``verdict`` (``worse``,
+    ``within`` or ``better``)."""
+    rows = []
+    fb = [perception_figures(r) for r in base]
+    fc = [perception_figures(r) for r in candidate]
+    sizes = [figure_sizes(r, c) for r, c in zip(base, candidate, strict=True)]
+    for name in fb[0]:
+        a = [f.get(name) for f in fb]
+        b = [f.get(name) for f in fc]
+        if "by chance" in name or any(v is None for v in a + b):
+            continue  # what chance gives is a reference, not the models' figure
+        ma, mb = float(np.mean(a)), float(np.mean(b))
+        n = sum(s[name] for s in sizes)
+        tol = tolerance(ma, n)
+        gain = (ma - mb) if "ECE" in name else (mb - ma)
+        rows.append({"figure": name, "base": ma, "candidate": mb, "gain": gain, "n": n,
+                     "tolerance": tol, "verdict": ("worse" if gain < -tol else
+                                                   "better" if gain > tol else "within")})
+    return rows
+
+
+def shift_rows(base: list[dict], candidate: list[dict]) -> list[dict]:
+    """Through other cameras: each figure's mean through the cameras, its mean drop and its
+    worst drop for both, over the datasets where both results carry a ``camera_shift``."""
+    pairs = [(b, c) for b, c in zip(base, candidate, strict=True)
+             if "camera_shift" in b and "camera_shift" in c]
+
+    def drops(rs):
+        out = {}
+        for r in rs:
+            for name, f in r["camera_shift"]["figures"].items():
+                out.setdefault(name, []).append((f["mean"], f["mean_drop"], f["worst_drop"]))
+        return out
+    db, dc = drops([b for b, _ in pairs]), drops([c for _, c in pairs])
+    rows = []
+    for name in db:
+        values = db[name] + dc.get(name, [])
+        if "by chance" in name or name not in dc or any(v is None for t in values for v in t):
+            continue
+        rows.append({"figure": name,
+                     "base_mean": float(np.mean([t[0] for t in db[name]])),
+                     "candidate_mean": float(np.mean([t[0] for t in dc[name]])),
+                     "base_drop": float(np.mean([t[1] for t in db[name]])),
+                     "candidate_drop": float(np.mean([t[1] for t in dc[name]])),
+                     "base_worst_drop": float(max(t[2] for t in db[name])),
+                     "candidate_worst_drop": float(max(t[2] for t in dc[name]))})
+    return rows
+
+
+def compare_perception(config: PerceptionCompareConfig) -> dict:
+    """The candidate's figures against the baseline's (see the module's text):
+    ``{"datasets": n, "unchanged": rows, "worse": [figure, ...], "camera_shift": rows}``
+    (:func:`compare_figures`, :func:`shift_rows`)."""
+    base = [load_result(p) for p in config.base]
+    cand = [load_result(p) for p in config.candidate]
+    for b, c, pb, pc in zip(base, cand, config.base, config.candidate, strict=True):
+        _check_pair(b, c, pb, pc)
+    rows = compare_figures(base, cand)
+    return {"datasets": len(base), "unchanged": rows,
+            "worse": [r["figure"] for r in rows if r["verdict"] == "worse"],
+            "camera_shift": shift_rows(base, cand)}
