@@ -14,6 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from onionsort.cli import describe_error, is_bad_input
 from onionsort.commands.compare_perception import print_comparison
 from onionsort.stages.base import write_json
 from onionsort.stages.compare_perception import PerceptionCompareConfig, compare_perception
@@ -30,8 +31,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         r = compare_perception(PerceptionCompareConfig(base=args.base,
                                                        candidate=args.candidate))
-    except (OSError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
+    except Exception as e:
+        if not is_bad_input(e):
+            raise
+        print(f"error: {describe_error(e)}", file=sys.stderr)
         return 2
     print_comparison(r)
     if args.json:

@@ -9,9 +9,10 @@ baseline's and the candidate's value, each the mean over the datasets, the candi
 the gain passes the tolerance, two binomial standard errors at the figure's size (steps,
 views or onions, summed over the datasets), at least 0.02. Then the figures worse beyond the
 tolerance, and, where both were read through other cameras (``eval-perception --camera-shift``,
-the same seeds), each figure's mean there and its drop. With ``--json``, one JSON object.
-Results that are not readings of one dataset (another split, other steps or inspection views)
-are refused.
+the same seeds), each figure's mean there and its drop. With ``--json``, one JSON object. Two
+results that are not readings of one dataset read the same way (another dataset, split or
+``eval-perception --views``; through other cameras one and not the other) are
+refused.
 
 The tolerance covers the onions a set happens to hold, not what a second training run would
 change; with about 35 figures a difficulty level, one may pass its tolerance by chance, so
@@ -74,10 +75,12 @@ def print_comparison(r: dict) -> None:
     worse = r["worse"]
     print(f"\nworse beyond the tolerance: {len(worse)} of {len(rows)}"
           + (": " + "; ".join(worse) if worse else ""))
+    if r["not_compared"]:
+        print(f"not compared, lacking in some result: {'; '.join(r['not_compared'])}")
     if r["camera_shift"]:
         width = max(len(x["figure"]) for x in r["camera_shift"])
-        print(f"\nthrough other cameras, mean / its drop:\n{'figure':<{width}} "
-              f"{'base':>15} {'cand':>15}")
+        print(f"\nthrough other cameras, over {r['camera_shift_datasets']} dataset(s): the mean "
+              f"through the cameras / its drop\n{'figure':<{width}} {'base':>14} {'cand':>14}")
         for x in r["camera_shift"]:
             print(f"{x['figure']:<{width}} {x['base_mean']:7.3f}/{x['base_drop']:+.3f} "
                   f"{x['candidate_mean']:7.3f}/{x['candidate_drop']:+.3f}")

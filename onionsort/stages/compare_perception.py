@@ -2,18 +2,21 @@
 figure, with a tolerance the datasets resolve.
 
 Reads ``onionsort eval-perception --json`` results, one per dataset, of the baseline models and
-of the candidate on the same datasets (each pair must be readings of one dataset: the same
-split, steps and inspection views). For every figure :func:`perception_figures` names it gives
-the baseline's and the candidate's value, each the mean over the datasets; the candidate's gain
-(positive: better; for an ECE, lower is better); and the tolerance: two binomial standard
-errors at the figure's size, at least 0.02. The standard error is Agresti and Coull's, at the
-rate with two hits and two misses added (``(x + 2) / (n + 4)``): at a rate of 1.000 the plain
-estimate is 0, and a tolerance under one count of the figure is finer than its set resolves. A
-figure is ``worse`` when the candidate loses more than the tolerance, ``better`` when it gains
-more. What a calibrated model's ECE would be by chance is a reference, not a figure of the
-models, and is left out. Where both results were read through other cameras
-(``eval-perception --camera-shift``, the same seeds), it gives each figure's mean and drops
-there too.
+of the candidate on the same datasets, in the same order. Each pair must be readings of one
+dataset with the same options: the same dataset (its seed, frames and levels, where both
+results record them), split, steps and inspection views, and through other cameras both or
+neither, with the same seeds. For every figure :func:`perception_figures` names it gives the
+baseline's and the candidate's value, each the mean over the datasets; the candidate's gain
+(positive: better; for an ECE, lower is better); and the tolerance: two standard errors of
+that mean, at least 0.02. A set's standard error is binomial at the figure's size, at Agresti
+and Coull's rate, with two hits and two misses added (``(x + 2) / (n + 4)``): at a rate of
+1.000 the plain estimate is 0, and a tolerance under one count of the figure is finer than its
+set resolves. Over sets of one size it is two standard errors at their summed size. A figure is
+``worse`` when the candidate loses more than the tolerance, ``better`` when it gains more.
+What a calibrated model's ECE would be by chance is a reference, not a figure of the models,
+and is left out; a figure that some result lacks (a level another dataset does not hold) is
+listed as not compared. Where both results were read through other cameras
+(``eval-perception --camera-shift``), it gives each figure's mean and drops there too.
 
 The size of a figure (summed over the datasets):
 
@@ -41,7 +44,7 @@ from onionsort.configs.calibrate import PerceptionCompareConfig
 from onionsort.stages.calibrate import perception_figures, shift_summary
 
 __all__ = ["PerceptionCompareConfig", "compare_figures", "compare_perception", "figure_sizes",
-           "load_result", "shift_rows", "tolerance"]
+           "load_result", "mean_tolerance", "shift_rows", "tolerance"]
 
 
 def tolerance(p: float, n: int) -> float:
@@ -51,6 +54,18 @@ def tolerance(p: float, n: int) -> float:
         return 0.02
     q = (min(max(p, 0.0), 1.0) * n + 2) / (n + 4)
     return max(0.02, 2 * math.sqrt(q * (1 - q) / n))
+
+
+def mean_tolerance(p: float, sizes: list[int]) -> float:
+    """Two standard errors of the mean of one rate ``p`` over sets of ``sizes`` (Agresti and
+    Coull's rate at their summed size), at least 0.02: :func:`tolerance` at the summed size
+    where the sets are of one size."""
+    sizes = [n for n in sizes if n]
+    if not sizes:
+        return 0.02
+    total = sum(sizes)
+    q = (min(max(p, 0.0), 1.0) * total + 2) / (total + 4)
+    return max(0.02, 2 * math.sqrt(q * (1 - q) * sum(1 / n for n in sizes)) / len(sizes))
 
 
 def _fused_counts(f: dict) -> dict[str, int]:
@@ -95,11 +110,19 @@ def load_result(path: Path | str) -> dict:
         raise ValueError(f"{path} is not JSON ({e}): give an `eval-perception --json` "
                          f"result") from None
     if isinstance(r, dict) and "unchanged" in r:
-        out = dict(r["unchanged"])
         seeds = [k for k in r if k.isdigit()]
+        bad = next((k for k in ["unchanged", *seeds] if not isinstance(r[k], dict)), None)
+        if bad is not None:
+            raise ValueError(f"{path} is not an `eval-perception --json` result: its "
+                             f"{bad!r} is not an object")
+        out = dict(r["unchanged"])
         if seeds:
-            out["camera_shift"] = {"seeds": [int(k) for k in seeds],
-                                   "figures": shift_summary(out, [r[k] for k in seeds])}
+            try:
+                figures = shift_summary(out, [r[k] for k in seeds])
+            except (KeyError, TypeError) as e:
+                raise ValueError(f"{path} is not an `eval-perception --json` result: a "
+                                 f"camera seed's figures lack {e}") from None
+            out["camera_shift"] = {"seeds": [int(k) for k in seeds], "figures": figures}
         r = out
     missing = [k for k in ("map_by_view", "accuracy", "n_steps")
                if not isinstance(r, dict) or k not in r]
@@ -109,54 +132,87 @@ def load_result(path: Path | str) -> dict:
     return r
 
 
-def _dataset_key(r: dict) -> dict:
-    """What identifies the dataset a result read: its split, its steps and, per level and
-    source, the inspection's views and onions."""
-    levels = r.get("inspection_classifier", {}).get("levels", {})
-    return {"split": r.get("split"), "steps": r["n_steps"],
-            "inspection": {f"{level} {source}": (m.get("views"),
-                                                 next(iter(m.get("fused", {}).values()),
-                                                      {}).get("onions"))
-                           for level, sources in levels.items()
-                           for source, m in sources.items()}}
+def _views(r: dict) -> dict[str, tuple]:
+    """Per level and source (``"hard robot"``), the inspection's views and onions."""
+    return {f"{level} {source}": (m.get("views"),
+                                  next(iter(m.get("fused", {}).values()), {}).get("onions"))
+            for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items()
+            for source, m in sources.items()}
+
+
+def _identity(r: dict) -> dict | None:
+    """The dataset a result read, as far as it records it: its seed, frames and levels (and
+    its folder's name where it has no seed: a lab's own frames)."""
+    data = r.get("data")
+    if not isinstance(data, dict):
+        return None
+    keys = ("seed", "frames", "difficulty") + (("name",) if data.get("seed") is None else ())
+    return {k: data.get(k) for k in keys}
 
 
 def _check_pair(base: dict, cand: dict, base_path, cand_path) -> None:
-    """Refuse two results that are not readings of one dataset, or were read through other
-    cameras' different seeds."""
-    a, b = _dataset_key(base), _dataset_key(cand)
-    for key in ("split", "steps", "inspection"):
-        if a[key] != b[key]:
-            raise ValueError(f"{cand_path} and {base_path} are not readings of one dataset: "
-                             f"their {key} differ ({b[key]} against {a[key]})")
-    if "camera_shift" in base and "camera_shift" in cand:
-        sa, sb = base["camera_shift"]["seeds"], cand["camera_shift"]["seeds"]
-        if list(sa) != list(sb):
-            raise ValueError(f"{cand_path} and {base_path} went through other cameras of "
-                             f"different seeds ({sb} against {sa})")
+    """Refuse two results that are not readings of one dataset with the same options."""
+    both = f"{cand_path} and {base_path}"
+    a, b = _identity(base), _identity(cand)
+    if a is not None and b is not None and a != b:
+        raise ValueError(f"{both} are readings of different datasets ({b} against {a}): give "
+                         f"--candidate results in --base's order")
+    if base.get("split") != cand.get("split"):
+        raise ValueError(f"{both} read different splits ({cand.get('split')!r} against "
+                         f"{base.get('split')!r})")
+    if base["n_steps"] != cand["n_steps"]:
+        raise ValueError(f"{both} are not readings of one dataset: they hold "
+                         f"{cand['n_steps']} and {base['n_steps']} steps")
+    has = ["inspection_classifier" in r for r in (cand, base)]
+    if has[0] != has[1]:
+        without, other = (cand_path, base_path) if not has[0] else (base_path, cand_path)
+        raise ValueError(f"{without} was read without the inspection (`eval-perception "
+                         f"--no-inspection`) and {other} with it: read both the same way")
+    va, vb = _views(base), _views(cand)
+    if va != vb:
+        raise ValueError(f"{both} hold other inspection views and onions per level "
+                         f"({vb} against {va}): read both with the same `eval-perception --views`")
+    shifted = ["camera_shift" in r for r in (cand, base)]
+    if shifted[0] != shifted[1]:
+        lone, other = (cand_path, base_path) if shifted[0] else (base_path, cand_path)
+        raise ValueError(f"{lone} was read through other cameras (`eval-perception "
+                         f"--camera-shift`) and {other} was not: read both the same way")
+    if all(shifted):
+        sa, sb = base["camera_shift"], cand["camera_shift"]
+        if list(sa["seeds"]) != list(sb["seeds"]):
+            raise ValueError(f"{both} went through other cameras of different seeds "
+                             f"({sb['seeds']} against {sa['seeds']})")
+        if sa.get("one_camera", False) != sb.get("one_camera", False):
+            raise ValueError(f"{both} went through other cameras one with `eval-perception "
+                             f"--one-camera` and the other without it")
 
 
-def compare_figures(base: list[dict], candidate: list[dict]) -> list[dict]:
+def compare_figures(base: list[dict], candidate: list[dict]) -> tuple[list[dict], list[str]]:
     """One row per figure: ``figure``, the two means (``base``, ``candidate``), the
-    candidate's ``gain``, the size ``n``, the ``tolerance`` and the ``verdict`` (``worse``,
-    ``within`` or ``better``)."""
-    rows = []
+    candidate's ``gain``, the summed size ``n``, the ``tolerance`` (:func:`mean_tolerance`)
+    and the ``verdict`` (``worse``, ``within`` or ``better``); and the figures not compared,
+    which some result lacks or gives as None."""
+    rows, skipped = [], []
     fb = [perception_figures(r) for r in base]
     fc = [perception_figures(r) for r in candidate]
     sizes = [figure_sizes(r, c) for r, c in zip(base, candidate, strict=True)]
-    for name in fb[0]:
+    names = list(dict.fromkeys(name for f in fb + fc for name in f))
+    for name in names:
+        if "by chance" in name:
+            continue  # what chance gives is a reference, not the models' figure
         a = [f.get(name) for f in fb]
         b = [f.get(name) for f in fc]
-        if "by chance" in name or any(v is None for v in a + b):
-            continue  # what chance gives is a reference, not the models' figure
+        if any(v is None for v in a + b):
+            skipped.append(name)
+            continue
         ma, mb = float(np.mean(a)), float(np.mean(b))
-        n = sum(s[name] for s in sizes)
-        tol = tolerance(ma, n)
+        n = [s[name] for s in sizes]
+        tol = mean_tolerance(ma, n)
         gain = (ma - mb) if "ECE" in name else (mb - ma)
-        rows.append({"figure": name, "base": ma, "candidate": mb, "gain": gain, "n": n,
+        rows.append({"figure": name, "base": ma, "candidate": mb, "gain": gain, "n": sum(n),
                      "tolerance": tol, "verdict": ("worse" if gain < -tol else
                                                    "better" if gain > tol else "within")})
-    return rows
+    return rows, skipped
 
 
 def shift_rows(base: list[dict], candidate: list[dict]) -> list[dict]:
@@ -189,13 +245,15 @@ def shift_rows(base: list[dict], candidate: list[dict]) -> list[dict]:
 
 def compare_perception(config: PerceptionCompareConfig) -> dict:
     """The candidate's figures against the baseline's (see the module's text):
-    ``{"datasets": n, "unchanged": rows, "worse": [figure, ...], "camera_shift": rows}``
-    (:func:`compare_figures`, :func:`shift_rows`)."""
+    ``{"datasets": n, "unchanged": rows, "worse": [figure, ...], "not_compared": [figure,
+    ...], "camera_shift": rows}`` (:func:`compare_figures`, :func:`shift_rows`)."""
     base = [load_result(p) for p in config.base]
     cand = [load_result(p) for p in config.candidate]
     for b, c, pb, pc in zip(base, cand, config.base, config.candidate, strict=True):
         _check_pair(b, c, pb, pc)
-    rows = compare_figures(base, cand)
+    rows, skipped = compare_figures(base, cand)
     return {"datasets": len(base), "unchanged": rows,
             "worse": [r["figure"] for r in rows if r["verdict"] == "worse"],
+            "not_compared": skipped,
+            "camera_shift_datasets": sum("camera_shift" in r for r in base),
             "camera_shift": shift_rows(base, cand)}
