@@ -4,7 +4,8 @@ figure, with a tolerance the datasets resolve.
 Reads ``onionsort eval-perception --json`` results, one per dataset, of the baseline models and
 of the candidate on the same datasets, in the same order. Each pair must be readings of one
 dataset with the same options: the same dataset (its seed, frames and levels, where both
-results record them), split, steps and inspection views, and through other cameras both or
+results record them), split, steps and inspection views (the onions fused may differ: those
+each model found), and through other cameras both or
 neither, with the same seeds. For every figure :func:`perception_figures` names it gives the
 baseline's and the candidate's value, each the mean over the datasets; the candidate's gain
 (positive: better; for an ECE, lower is better); and the tolerance: two standard errors of
@@ -132,10 +133,10 @@ def load_result(path: Path | str) -> dict:
     return r
 
 
-def _views(r: dict) -> dict[str, tuple]:
-    """Per level and source (``"hard robot"``), the inspection's views and onions."""
-    return {f"{level} {source}": (m.get("views"),
-                                  next(iter(m.get("fused", {}).values()), {}).get("onions"))
+def _views(r: dict) -> dict[str, int]:
+    """Per level and source (``"hard robot"``), the inspection's views: the dataset's, where
+    the onions fused are those the models found, which two models may count apart."""
+    return {f"{level} {source}": m.get("views")
             for level, sources in r.get("inspection_classifier", {}).get("levels", {}).items()
             for source, m in sources.items()}
 
@@ -170,7 +171,7 @@ def _check_pair(base: dict, cand: dict, base_path, cand_path) -> None:
                          f"--no-inspection`) and {other} with it: read both the same way")
     va, vb = _views(base), _views(cand)
     if va != vb:
-        raise ValueError(f"{both} hold other inspection views and onions per level "
+        raise ValueError(f"{both} hold other inspection views per level "
                          f"({vb} against {va}): read both with the same `eval-perception --views`")
     shifted = ["camera_shift" in r for r in (cand, base)]
     if shifted[0] != shifted[1]:
