@@ -49,6 +49,7 @@ __all__ = [
     "measure_perception",
     "perception_figures",
     "shift_summary",
+    "worse_when_higher",
 ]
 
 logger = logging.getLogger(__name__)
@@ -322,6 +323,7 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
         check_output_folder(config.plots, "--plots")
     models = PerceptionModels.load(config.models, config.device) if models is None else models
     out = _eval_figures(models, config, None)
+    out = {"data": dataset_identity(config.data), **out}
     if config.inspection and config.plots is not None:
         from onionsort.plots import precision_recall_figure
 
@@ -366,7 +368,7 @@ def perception_figures(r: dict) -> dict[str, float | None]:
     return out
 
 
-def _worse_when_higher(name: str) -> bool:
+def worse_when_higher(name: str) -> bool:
     """Whether a figure of :func:`perception_figures` (or the sessions read backwards) is
     worse when higher: a calibration error, a count of sessions read backwards."""
     return "ECE" in name or name == "sessions read backwards"
@@ -389,7 +391,7 @@ def shift_summary(unchanged: dict, shifted: list[dict]) -> dict[str, dict]:
     out = {}
     for name, value in before.items():
         changed = [a.get(name) for a in afters]
-        sign = -1.0 if _worse_when_higher(name) else 1.0
+        sign = -1.0 if worse_when_higher(name) else 1.0
         known = [v for v in changed if v is not None]
         full = len(known) == len(changed) and bool(known)
         mean = float(np.mean(known)) if full else None
@@ -409,8 +411,7 @@ def _eval_figures(models: PerceptionModels, config: PerceptionEvalConfig, image_
     _, metrics = measure_perception(models, config.data, config.split, depth=config.depth,
                                     inspection=config.inspection, image_map=image_map)
     maps = detector_map(models, config.data, config.split, image_map=image_map)
-    out = {"data": dataset_identity(config.data),
-           "map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
+    out = {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
            "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
            "occlusion_precision": metrics["occlusion_precision"],
            "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from onionsort.configs.calibrate import PerceptionCompareConfig
-from onionsort.stages.calibrate import perception_figures, shift_summary
+from onionsort.stages.calibrate import perception_figures, shift_summary, worse_when_higher
 
 __all__ = ["PerceptionCompareConfig", "compare_figures", "compare_perception", "figure_sizes",
            "load_result", "mean_tolerance", "shift_rows", "tolerance"]
@@ -51,10 +51,7 @@ __all__ = ["PerceptionCompareConfig", "compare_figures", "compare_perception", "
 def tolerance(p: float, n: int) -> float:
     """Two binomial standard errors of a rate ``p`` of ``n``, at Agresti and Coull's rate
     (two hits and two misses added), at least 0.02."""
-    if not n:
-        return 0.02
-    q = (min(max(p, 0.0), 1.0) * n + 2) / (n + 4)
-    return max(0.02, 2 * math.sqrt(q * (1 - q) / n))
+    return mean_tolerance(p, [n])
 
 
 def mean_tolerance(p: float, sizes: list[int]) -> float:
@@ -209,7 +206,7 @@ def compare_figures(base: list[dict], candidate: list[dict]) -> tuple[list[dict]
         ma, mb = float(np.mean(a)), float(np.mean(b))
         n = [s[name] for s in sizes]
         tol = mean_tolerance(ma, n)
-        gain = (ma - mb) if "ECE" in name else (mb - ma)
+        gain = (ma - mb) if worse_when_higher(name) else (mb - ma)
         rows.append({"figure": name, "base": ma, "candidate": mb, "gain": gain, "n": sum(n),
                      "tolerance": tol, "verdict": ("worse" if gain < -tol else
                                                    "better" if gain > tol else "within")})
