@@ -323,7 +323,6 @@ def eval_perception(config: PerceptionEvalConfig, models: PerceptionModels | Non
         check_output_folder(config.plots, "--plots")
     models = PerceptionModels.load(config.models, config.device) if models is None else models
     out = _eval_figures(models, config, None)
-    out = {"data": dataset_identity(config.data), **out}
     if config.inspection and config.plots is not None:
         from onionsort.plots import precision_recall_figure
 
@@ -411,7 +410,8 @@ def _eval_figures(models: PerceptionModels, config: PerceptionEvalConfig, image_
     _, metrics = measure_perception(models, config.data, config.split, depth=config.depth,
                                     inspection=config.inspection, image_map=image_map)
     maps = detector_map(models, config.data, config.split, image_map=image_map)
-    out = {"map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
+    out = {"data": dataset_identity(config.data),
+           "map50": maps["all"]["map50"], "map50_95": maps["all"]["map50_95"],
            "accuracy": metrics["accuracy"], "occlusion_recall": metrics["occlusion_recall"],
            "occlusion_precision": metrics["occlusion_precision"],
            "prediction_after_first_inspection": metrics["prediction_after_first_inspection"],
